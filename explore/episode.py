@@ -1,0 +1,163 @@
+"""One episode on a rig: rest pose, context, DMP at the control rate, settle, outcome.
+
+All positions in metres (arena frame: origin at the arm's base, z up), angles in radians,
+durations in seconds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from explore.dmp import Dmp
+from explore.rig import Rig
+
+
+@dataclass(frozen=True)
+class EpisodeConfig:
+    """Timing of an episode.
+
+    Attributes:
+        rate_hz: control rate (40 Hz: the DMP's 40 points last 1 s, as in the paper's rig).
+        reset_s: time to go back to the rest pose (1 s, original implementation).
+        settle_speed: the ball counts as still below this speed, m/s (guess: 1 cm/s).
+        settle_max_s: longest wait for the ball to settle (the original waited 3 s).
+        settle_check_s: interval between two settle checks.
+        obs_size: side of the square observation the representation sees, pixels (64, paper).
+    """
+
+    rate_hz: float = 40.0
+    reset_s: float = 1.0
+    settle_speed: float = 0.01
+    settle_max_s: float = 3.0
+    settle_check_s: float = 0.1
+    obs_size: int = 64
+
+
+@dataclass
+class Observation:
+    """What the rig sees at one moment.
+
+    Attributes:
+        ball: ball centre (x, y) in metres, shape (2,); NaN when not seen.
+        image: square observation, shape (obs_size, obs_size, 3), BGR uint8; None if not rendered.
+        frame: full overhead frame, shape (H, W, 3), BGR uint8; None if not rendered.
+    """
+
+    ball: np.ndarray
+    image: np.ndarray | None = None
+    frame: np.ndarray | None = None
+
+
+@dataclass
+class EpisodeResult:
+    """Everything an episode produced.
+
+    Attributes:
+        targets: commands actually sent during the DMP, shape (T, 6), rad.
+        measured: joint positions read at each tick, shape (T, 6), rad.
+        end_effector: tool tip at each tick, shape (T, 3), m (NaN where unknown).
+        outcome: the observation after the ball settled.
+        settle_s: how long the ball took to settle (or the cap).
+        ball_moved: whether the ball moved by more than ``moved_threshold`` m.
+    """
+
+    targets: np.ndarray
+    measured: np.ndarray
+    end_effector: np.ndarray
+    outcome: Observation
+    settle_s: float
+    ball_moved: bool
+    extras: dict[str, float] = field(default_factory=dict)
+
+
+MOVED_THRESHOLD = 0.01  # m: a ball displacement under 1 cm is not "moved" (guess: tracker noise)
+
+
+def square_observation(frame: np.ndarray, size: int) -> np.ndarray:
+    """Centre square crop of a frame resized to (size, size, 3) with area averaging."""
+    h, w = frame.shape[:2]
+    s = min(h, w)
+    y0, x0 = (h - s) // 2, (w - s) // 2
+    crop = frame[y0 : y0 + s, x0 : x0 + s]
+    return cv2.resize(crop, (size, size), interpolation=cv2.INTER_AREA)
+
+
+class EpisodeRunner:
+    """Runs episodes on a rig with a DMP."""
+
+    def __init__(self, rig: Rig, dmp: Dmp | None = None, config: EpisodeConfig | None = None):
+        self.rig = rig
+        self.dmp = dmp or Dmp()
+        self.config = config or EpisodeConfig()
+        self.dt = 1.0 / self.config.rate_hz
+
+    # ---- phases --------------------------------------------------------------------------
+    def go_rest(self) -> None:
+        """Move to the rest pose by linear interpolation over ``reset_s`` at the control rate."""
+        arm, clock = self.rig.arm, self.rig.clock
+        start = arm.last_sent
+        if start is None:
+            start = arm.read().positions
+        rest = arm.spec.rest
+        n = max(1, round(self.config.reset_s / self.dt))
+        for i in range(1, n + 1):
+            arm.command(start + (rest - start) * (i / n))
+            clock.advance(self.dt)
+
+    def observe(self, render: bool = True) -> Observation:
+        """Locate the ball (twin ground truth for now) and optionally take a frame."""
+        twin = self.rig.twin
+        ball = twin.ball_position()[:2] if twin is not None else np.full(2, np.nan)
+        if not render:
+            return Observation(ball=ball)
+        frame = self.rig.camera.read().image
+        return Observation(
+            ball=ball, image=square_observation(frame, self.config.obs_size), frame=frame
+        )
+
+    def play(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Play the DMP of ``theta`` (48,) at the control rate.
+
+        Returns:
+            targets (T, 6) rad, measured (T, 6) rad, end-effector (T, 3) m.
+        """
+        traj = self.dmp.trajectory(theta)
+        arm, clock, twin = self.rig.arm, self.rig.clock, self.rig.twin
+        t = len(traj)
+        sent = np.empty((t, 6))
+        measured = np.empty((t, 6))
+        ee = np.full((t, 3), np.nan)
+        for i, q in enumerate(traj):
+            sent[i] = arm.command(q)
+            clock.advance(self.dt)
+            measured[i] = arm.read().positions
+            if twin is not None:
+                ee[i] = twin.end_effector_position()
+        return sent, measured, ee
+
+    def settle(self) -> float:
+        """Wait until the ball is still (twin: true speed; hardware: fixed ``settle_max_s``)."""
+        cfg, clock, twin = self.config, self.rig.clock, self.rig.twin
+        waited = 0.0
+        while waited < cfg.settle_max_s:
+            if twin is not None and twin.ball_speed() < cfg.settle_speed:
+                break
+            clock.advance(cfg.settle_check_s)
+            waited += cfg.settle_check_s
+        return waited
+
+    # ---- the whole episode -----------------------------------------------------------------
+    def run(self, theta: np.ndarray, context: Observation) -> EpisodeResult:
+        """Play ``theta`` from the rest pose (``context`` seen there), then observe the outcome."""
+        targets, measured, ee = self.play(theta)
+        settle_s = self.settle()
+        outcome = self.observe(render=True)
+        moved = bool(
+            np.all(np.isfinite(context.ball))
+            and np.all(np.isfinite(outcome.ball))
+            and np.linalg.norm(outcome.ball - context.ball) > MOVED_THRESHOLD
+        )
+        return EpisodeResult(targets, measured, ee, outcome, settle_s, moved)

@@ -1,0 +1,21 @@
+"""Hardware abstraction: the ``Arm`` interface, joint specs and safety. Imports no other
+package of the project."""
+
+from robot.arm import Arm, JointState
+from robot.errors import BusError, NotConnectedError, RobotError, SafetyStop
+from robot.safety import Watchdog, torque_off_on_signals
+from robot.spec import ArmSpec, JointSpec, ergo_jr_spec
+
+__all__ = [
+    "Arm",
+    "ArmSpec",
+    "BusError",
+    "JointSpec",
+    "JointState",
+    "NotConnectedError",
+    "RobotError",
+    "SafetyStop",
+    "Watchdog",
+    "ergo_jr_spec",
+    "torque_off_on_signals",
+]

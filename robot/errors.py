@@ -1,0 +1,17 @@
+"""Typed errors of the hardware layer. Each message is one line naming what went wrong."""
+
+
+class RobotError(RuntimeError):
+    """Base class of every hardware-layer error."""
+
+
+class NotConnectedError(RobotError):
+    """An operation needed a connected arm."""
+
+
+class BusError(RobotError):
+    """The bus (serial port, CAN adapter) failed: unplugged, busy, wrong settings."""
+
+
+class SafetyStop(RobotError):
+    """The arm was stopped for safety (overload, overheat, lost node); torque is off."""

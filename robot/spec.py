@@ -1,0 +1,140 @@
+"""Joint specifications of the arm and the safety clamp every command goes through.
+
+Units: radians for positions, radians per tick for the step bound.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class JointSpec:
+    """One revolute joint.
+
+    Attributes:
+        name: joint name (``m1`` .. ``m6`` on the Ergo Jr).
+        servo_id: bus id of its servo (Dynamixel id or CANopen node id).
+        lower, upper: position limits in radians.
+        rest: rest position in radians (inside the limits).
+    """
+
+    name: str
+    servo_id: int
+    lower: float
+    upper: float
+    rest: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not self.lower < self.upper:
+            raise ValueError(f"joint {self.name}: lower limit {self.lower} >= upper {self.upper}")
+        if not self.lower <= self.rest <= self.upper:
+            raise ValueError(f"joint {self.name}: rest {self.rest} outside its limits")
+
+
+@dataclass(frozen=True)
+class ArmSpec:
+    """The arm's joints plus the maximum step a single command may move any joint.
+
+    Attributes:
+        joints: the joints in command order.
+        max_step: largest change of any joint between two consecutive commands, rad.
+    """
+
+    joints: tuple[JointSpec, ...]
+    max_step: float = field(default=0.15)
+
+    @property
+    def names(self) -> list[str]:
+        return [j.name for j in self.joints]
+
+    @property
+    def ids(self) -> list[int]:
+        return [j.servo_id for j in self.joints]
+
+    @property
+    def lower(self) -> np.ndarray:
+        """Lower limits, shape (n,), rad."""
+        return np.array([j.lower for j in self.joints])
+
+    @property
+    def upper(self) -> np.ndarray:
+        """Upper limits, shape (n,), rad."""
+        return np.array([j.upper for j in self.joints])
+
+    @property
+    def rest(self) -> np.ndarray:
+        """Rest pose, shape (n,), rad."""
+        return np.array([j.rest for j in self.joints])
+
+    @property
+    def n(self) -> int:
+        return len(self.joints)
+
+    def with_limits(self, lower: np.ndarray, upper: np.ndarray) -> ArmSpec:
+        """A copy with narrowed limits (e.g. from a joint calibration), never widened."""
+        joints = tuple(
+            replace(
+                j,
+                lower=max(j.lower, float(lo)),
+                upper=min(j.upper, float(hi)),
+                rest=min(max(j.rest, float(lo)), float(hi)),
+            )
+            for j, lo, hi in zip(self.joints, lower, upper, strict=True)
+        )
+        return replace(self, joints=joints)
+
+    def clamp(self, target: np.ndarray, previous: np.ndarray | None) -> np.ndarray:
+        """Clamp a command to the limits and to ``max_step`` from the previous command.
+
+        Args:
+            target: wanted positions, shape (n,), rad. NaN is refused.
+            previous: last positions sent (or measured), shape (n,), rad; None skips the step
+                bound (only for the very first command after connect, which callers should
+                avoid by seeding it with the measured positions).
+
+        Returns:
+            positions that are safe to send, shape (n,), rad.
+        """
+        target = np.asarray(target, dtype=float).reshape(-1)
+        if target.shape != (self.n,):
+            raise ValueError(f"command has shape {target.shape}, expected ({self.n},)")
+        if not np.all(np.isfinite(target)):
+            raise ValueError(f"command has non-finite values: {target}")
+        out = target
+        if previous is not None:
+            prev = np.asarray(previous, dtype=float).reshape(self.n)
+            out = prev + np.clip(out - prev, -self.max_step, self.max_step)
+        return np.clip(out, self.lower, self.upper)
+
+
+def _deg(lo: float, hi: float) -> tuple[float, float]:
+    return math.radians(lo), math.radians(hi)
+
+
+# Poppy Ergo Jr joint limits in degrees (shared/ARCHITECTURE.md, from the Poppy Ergo Jr config).
+ERGO_JR_LIMITS_DEG: dict[str, tuple[float, float]] = {
+    "m1": (-150.0, 150.0),
+    "m2": (-90.0, 125.0),
+    "m3": (-90.0, 90.0),
+    "m4": (-150.0, 150.0),
+    "m5": (-90.0, 90.0),
+    "m6": (-110.0, 90.0),
+}
+
+# Maximum step per command: 0.15 rad at the 40 Hz control rate is 6 rad/s, about half the
+# XL-320's no-load speed (114 rpm = 11.9 rad/s at 7.4 V, ROBOTIS datasheet). Guess, on the
+# safe side.
+ERGO_JR_MAX_STEP = 0.15
+
+
+def ergo_jr_spec(max_step: float = ERGO_JR_MAX_STEP) -> ArmSpec:
+    """The Poppy Ergo Jr: joints m1..m6, servo ids 1..6, rest pose all zeros."""
+    joints = tuple(
+        JointSpec(name, i + 1, *_deg(*lim), rest=0.0)
+        for i, (name, lim) in enumerate(ERGO_JR_LIMITS_DEG.items())
+    )
+    return ArmSpec(joints=joints, max_step=max_step)

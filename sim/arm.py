@@ -1,0 +1,48 @@
+"""``SimArm``: the ``robot.Arm`` interface on the twin, in-process."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from robot.arm import Arm, JointState
+from robot.safety import Watchdog
+from robot.spec import ArmSpec, ergo_jr_spec
+from sim.twin import Twin
+
+
+class SimArm(Arm):
+    """The twin's arm. Commands become actuator targets; physics advances only when the rig's
+    clock steps the twin (never in ``command``). With torque off the joints go limp."""
+
+    def __init__(self, twin: Twin, spec: ArmSpec | None = None, watchdog: Watchdog | None = None):
+        super().__init__(spec or ergo_jr_spec(), watchdog)
+        self.twin = twin
+
+    def _connect(self) -> None:
+        self._torque = self.twin.torque_enabled()
+
+    def _disconnect(self) -> None:
+        pass
+
+    def _read(self) -> JointState:
+        t = self.twin
+        with t.lock:
+            tau = t.joint_torques()
+            return JointState.from_positions(
+                t.joint_positions(),
+                t.time,
+                velocities=t.joint_velocities(),
+                loads=tau / t.max_torques(),
+                temperatures=np.full(6, 25.0),  # the twin does not heat (constant, room temp)
+            )
+
+    def _send(self, positions: np.ndarray) -> None:
+        self.twin.set_targets(positions)
+
+    def _set_torque(self, enabled: bool) -> None:
+        self.twin.set_torque(enabled)
+
+    def _initial_command(self) -> np.ndarray:
+        # The twin's actuator targets are part of its saved state: after a restore, the next
+        # command is bounded from them exactly as in the uninterrupted run.
+        return self.twin.targets()

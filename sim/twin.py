@@ -1,0 +1,188 @@
+"""The MuJoCo twin of the rig: the Ergo Jr, the arena, the ball and the overhead camera.
+
+``Twin`` is plain physics with named queries (dm_control style); robots and cameras wrap it
+(``SimArm``, ``SimCamera``) and bus emulators serve it over a wire protocol. A ``threading.RLock``
+(``Twin.lock``) guards it for emulators that read and step from several threads.
+
+Units: metres, radians, seconds. Images are BGR uint8 (OpenCV order).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+from pathlib import Path
+
+from sim.headless import ensure_headless_gl
+
+ensure_headless_gl()
+
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+
+MODELS = Path(__file__).parent / "models"
+SCENE = MODELS / "scene.xml"
+JOINTS = ("m1", "m2", "m3", "m4", "m5", "m6")
+
+
+class TwinError(RuntimeError):
+    """The twin's model could not be loaded or its state restored."""
+
+
+class Twin:
+    """MuJoCo model and data of the arena scene.
+
+    Args:
+        scene: MJCF file to load (default: ``sim/models/scene.xml``).
+        render_size: (height, width) of overhead renders, pixels.
+    """
+
+    def __init__(
+        self, scene: str | Path = SCENE, render_size: tuple[int, int] = (240, 240)
+    ) -> None:
+        try:
+            self.model = mujoco.MjModel.from_xml_path(str(scene))
+        except (ValueError, FileNotFoundError) as exc:
+            raise TwinError(f"cannot load twin scene {scene}: {exc}") from exc
+        self.data = mujoco.MjData(self.model)
+        self.lock = threading.RLock()
+        m = self.model
+        self._qpos_idx = np.array([m.joint(j).qposadr[0] for j in JOINTS])
+        self._qvel_idx = np.array([m.joint(j).dofadr[0] for j in JOINTS])
+        self._act_idx = np.array([m.actuator(j).id for j in JOINTS])
+        ball = m.joint("ball")
+        self._ball_qpos = int(ball.qposadr[0])
+        self._ball_qvel = int(ball.dofadr[0])
+        self.ball_radius = float(m.geom("ball").size[0])
+        self._tip_site = m.site("tip").id
+        self._kp = self.model.actuator_gainprm[self._act_idx, 0].copy()
+        self._bias = self.model.actuator_biasprm[self._act_idx, :3].copy()
+        self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
+        self.render_size = render_size
+        self.reset()
+
+    # ---- state -----------------------------------------------------------------------------
+    @property
+    def timestep(self) -> float:
+        """Physics step, s."""
+        return float(self.model.opt.timestep)
+
+    @property
+    def time(self) -> float:
+        """Simulated time since reset, s."""
+        return float(self.data.time)
+
+    def reset(self, ball_xy: tuple[float, float] | None = None) -> None:
+        """Back to the ``home`` keyframe (arm at rest); ball placed at ``ball_xy`` (m) if given."""
+        with self.lock:
+            self.set_torque(True)
+            mujoco.mj_resetDataKeyframe(self.model, self.data, self.model.key("home").id)
+            if ball_xy is not None:
+                self.data.qpos[self._ball_qpos : self._ball_qpos + 2] = ball_xy
+            mujoco.mj_forward(self.model, self.data)
+
+    def get_state(self) -> np.ndarray:
+        """Full integration state (positions, velocities, controls, warm-start), shape (k,)."""
+        with self.lock:
+            spec = mujoco.mjtState.mjSTATE_INTEGRATION
+            state = np.empty(mujoco.mj_stateSize(self.model, spec))
+            mujoco.mj_getState(self.model, self.data, state, spec)
+            return state
+
+    def set_state(self, state: np.ndarray) -> None:
+        """Restore a state from ``get_state`` exactly (same model only)."""
+        spec = mujoco.mjtState.mjSTATE_INTEGRATION
+        size = mujoco.mj_stateSize(self.model, spec)
+        state = np.asarray(state, dtype=float)
+        if state.shape != (size,):
+            raise TwinError(f"twin state has shape {state.shape}, expected ({size},): other model?")
+        with self.lock:
+            mujoco.mj_setState(self.model, self.data, state, spec)
+            mujoco.mj_forward(self.model, self.data)
+
+    # ---- actuation -------------------------------------------------------------------------
+    def set_targets(self, q: np.ndarray) -> None:
+        """Position targets of the six actuators, shape (6,), rad."""
+        with self.lock:
+            self.data.ctrl[self._act_idx] = q
+
+    def set_torque(self, enabled: bool) -> None:
+        """Servo power: off zeroes the position actuators' gains, so the arm is limp (joint
+        damping only), as an XL-320 with torque disabled."""
+        with self.lock:
+            m = self.model
+            m.actuator_gainprm[self._act_idx, 0] = self._kp if enabled else 0.0
+            m.actuator_biasprm[self._act_idx, :3] = self._bias if enabled else 0.0
+
+    def torque_enabled(self) -> bool:
+        return bool(np.all(self.model.actuator_gainprm[self._act_idx, 0] > 0))
+
+    def targets(self) -> np.ndarray:
+        """Current position targets, shape (6,), rad."""
+        return self.data.ctrl[self._act_idx].copy()
+
+    def step(self, seconds: float | None = None) -> None:
+        """Advance physics by ``seconds`` (rounded to whole steps; one step if None)."""
+        n = 1 if seconds is None else max(1, round(seconds / self.timestep))
+        with self.lock:
+            mujoco.mj_step(self.model, self.data, nstep=n)
+
+    # ---- queries ---------------------------------------------------------------------------
+    def joint_positions(self) -> np.ndarray:
+        """Shape (6,), rad."""
+        return self.data.qpos[self._qpos_idx].copy()
+
+    def joint_velocities(self) -> np.ndarray:
+        """Shape (6,), rad/s."""
+        return self.data.qvel[self._qvel_idx].copy()
+
+    def joint_torques(self) -> np.ndarray:
+        """Actuator torques, shape (6,), N.m."""
+        return self.data.actuator_force[self._act_idx].copy()
+
+    def max_torques(self) -> np.ndarray:
+        """Actuator force limits, shape (6,), N.m."""
+        return self.model.actuator_forcerange[self._act_idx, 1].copy()
+
+    def ball_position(self) -> np.ndarray:
+        """Ball centre, shape (3,), m (world frame, z up, origin at the arm's base)."""
+        return self.data.qpos[self._ball_qpos : self._ball_qpos + 3].copy()
+
+    def ball_speed(self) -> float:
+        """Linear speed of the ball, m/s."""
+        return float(np.linalg.norm(self.data.qvel[self._ball_qvel : self._ball_qvel + 3]))
+
+    def end_effector_position(self) -> np.ndarray:
+        """Tool tip, shape (3,), m."""
+        return self.data.site_xpos[self._tip_site].copy()
+
+    def warnings(self) -> dict[str, int]:
+        """MuJoCo warnings raised since the last reset: name -> count (empty when clean)."""
+        out = {}
+        for i, w in enumerate(self.data.warning):
+            if w.number > 0:
+                out[mujoco.mjtWarning(i).name] = int(w.number)
+        return out
+
+    # ---- rendering -------------------------------------------------------------------------
+    def render(self, camera: str = "overhead", size: tuple[int, int] | None = None) -> np.ndarray:
+        """Render a named camera, shape (H, W, 3), BGR uint8."""
+        h, w = size or self.render_size
+        with self.lock:
+            renderer = self._renderers.get((h, w))
+            if renderer is None:
+                renderer = mujoco.Renderer(self.model, h, w)
+                self._renderers[(h, w)] = renderer
+            renderer.update_scene(self.data, camera=camera)
+            rgb = renderer.render()
+        return np.ascontiguousarray(rgb[:, :, ::-1])
+
+    def close(self) -> None:
+        """Free the renderers' GL contexts."""
+        for r in self._renderers.values():
+            r.close()
+        self._renderers.clear()
+
+    def __del__(self) -> None:
+        with contextlib.suppress(Exception):
+            self.close()
