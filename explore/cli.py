@@ -25,8 +25,23 @@ class CliError(Exception):
     """A user error: printed as one line ``ergo: error: ...`` with exit code 2."""
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse with a one-line error (no usage dump) for bad flags."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _user_errors() -> tuple[type[BaseException], ...]:
+    """Exceptions that are the user's input or the hardware's state, not bugs: one line."""
+    from robot.errors import RobotError
+    from vision.camera import CameraError
+
+    return (CliError, RobotError, CameraError, FileNotFoundError, PermissionError)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="ergo",
         description="Intrinsically motivated goal exploration on a Poppy Ergo Jr and its twin.",
     )
@@ -47,13 +62,12 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    logging.basicConfig(
-        level=logging.DEBUG if args.verbose else logging.INFO,
-        format="%(levelname)s %(name)s: %(message)s",
-    )
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    for pkg in ("robot", "vision", "explore", "sim", "calibration"):
+        logging.getLogger(pkg).setLevel(logging.DEBUG if args.verbose else logging.INFO)
     try:
         return int(args.func(args) or 0)
-    except CliError as exc:
+    except _user_errors() as exc:
         print(f"ergo: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

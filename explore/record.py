@@ -1,0 +1,83 @@
+"""The record of one episode, as stored in a run's history.
+
+Shapes and units: theta (48,) in [-1, 1]; goal (g,) in the strategy's goal space (g may be 0);
+context_ball, ball (2,) m (NaN when not seen); targets, measured (T, 6) rad; end_effector
+(T, 3) m; image (64, 64, 3) BGR uint8; sim_state (k,) the twin's integration state after the
+episode (empty on hardware); settle_s, duration_s seconds.
+"""
+
+from __future__ import annotations
+
+import io
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+_ARRAY_FIELDS = (
+    "theta", "goal", "context_ball", "ball", "targets", "measured", "end_effector", "image",
+    "sim_state",
+)  # fmt: skip
+_SCALAR_FIELDS = {
+    "episode": int, "module": int, "kind": str, "ball_moved": bool, "settle_s": float,
+    "duration_s": float,
+}  # fmt: skip
+
+
+class RecordError(ValueError):
+    """A stored record could not be decoded (wrong fields or types)."""
+
+
+@dataclass
+class EpisodeRecord:
+    episode: int
+    theta: np.ndarray
+    goal: np.ndarray
+    module: int
+    kind: str
+    context_ball: np.ndarray
+    ball: np.ndarray
+    ball_moved: bool
+    targets: np.ndarray
+    measured: np.ndarray
+    end_effector: np.ndarray
+    image: np.ndarray
+    sim_state: np.ndarray
+    settle_s: float
+    duration_s: float
+
+    @property
+    def final_end_effector(self) -> np.ndarray:
+        """Tool tip at the end of the movement, shape (3,), m."""
+        return self.end_effector[-1]
+
+    def to_bytes(self) -> bytes:
+        """Serialise as a compressed ``.npz`` (no pickle)."""
+        buf = io.BytesIO()
+        arrays = {name: np.asarray(getattr(self, name)) for name in _ARRAY_FIELDS}
+        scalars = {name: np.asarray(getattr(self, name)) for name in _SCALAR_FIELDS}
+        np.savez_compressed(buf, **arrays, **scalars)
+        return buf.getvalue()
+
+    @classmethod
+    def from_bytes(cls, data: bytes) -> EpisodeRecord:
+        try:
+            with np.load(io.BytesIO(data), allow_pickle=False) as z:
+                kw: dict[str, object] = {name: z[name] for name in _ARRAY_FIELDS}
+                for name, typ in _SCALAR_FIELDS.items():
+                    kw[name] = typ(z[name].item())
+        except (KeyError, ValueError, OSError) as exc:
+            raise RecordError(f"episode record is not readable: {exc}") from exc
+        return cls(**kw)  # type: ignore[arg-type]
+
+    def equals(self, other: EpisodeRecord, ignore: tuple[str, ...] = ("duration_s",)) -> bool:
+        """Field-by-field equality (arrays exactly), ignoring wall-clock fields."""
+        for f in fields(self):
+            if f.name in ignore:
+                continue
+            a, b = getattr(self, f.name), getattr(other, f.name)
+            if isinstance(a, np.ndarray):
+                if not np.array_equal(a, b, equal_nan=a.dtype.kind == "f"):
+                    return False
+            elif a != b:
+                return False
+        return True

@@ -1,0 +1,132 @@
+"""Exploration runs: determinism, crash safety and resume, the metric, the CLI."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from explore.cli import main
+from explore.metrics import CellCounter, read_metrics
+from explore.store import RunStore
+
+N = 50
+
+
+def ergo(*args: str) -> int:
+    return main([*args, "--no-progress"]) if args[0] == "explore" else main(list(args))
+
+
+@pytest.fixture(scope="module")
+def reference_run(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("ref") / "run"
+    assert ergo("explore", "--episodes", str(N), "--seed", "3", "--out", str(out)) == 0
+    return out
+
+
+def histories_equal(a: Path, b: Path) -> bool:
+    ra, rb = RunStore.open(a).records, RunStore.open(b).records
+    return len(ra) == len(rb) and all(x.equals(y) for x, y in zip(ra, rb, strict=True))
+
+
+def test_rpe_run_is_deterministic_for_a_seed(reference_run, tmp_path):
+    assert ergo("explore", "--episodes", str(N), "--seed", "3", "--out", str(tmp_path / "b")) == 0
+    assert histories_equal(reference_run, tmp_path / "b")
+    other = tmp_path / "c"
+    assert ergo("explore", "--episodes", "5", "--seed", "4", "--out", str(other)) == 0
+    assert not np.array_equal(
+        RunStore.open(other).records[0].theta, RunStore.open(reference_run).records[0].theta
+    )
+
+
+def test_a_run_writes_history_metrics_and_a_coverage_curve(reference_run):
+    assert (reference_run / "history.bin").stat().st_size > 0
+    m = read_metrics(reference_run / "metrics.csv")
+    assert list(m["episode"]) == list(range(N))
+    assert np.all(np.diff(m["ball_cells"]) >= 0) and m["ball_cells"][-1] >= 1
+    assert (reference_run / "coverage.png").stat().st_size > 1000
+    rec = RunStore.open(reference_run).records[0]
+    assert rec.image.shape == (64, 64, 3) and rec.image.dtype == np.uint8
+    assert rec.targets.shape == (40, 6) and rec.end_effector.shape == (40, 3)
+
+
+def test_a_run_killed_with_sigkill_resumes_to_the_same_history(reference_run, tmp_path):
+    out = tmp_path / "killed"
+    cmd = [sys.executable, "-m", "explore.cli", "explore", "--episodes", str(N), "--seed", "3",
+           "--out", str(out), "--no-progress"]  # fmt: skip
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    hist = out / "history.bin"
+    deadline = time.monotonic() + 120
+    # kill at some point in the middle of the run (several records written)
+    while time.monotonic() < deadline and (not hist.exists() or hist.stat().st_size < 60_000):
+        time.sleep(0.01)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    done = len(RunStore.open(out))
+    assert 0 < done < N, f"kill landed outside the run ({done} episodes)"
+    assert ergo("explore", "--resume", str(out)) == 0
+    assert histories_equal(reference_run, out)
+    m = read_metrics(out / "metrics.csv")
+    assert list(m["episode"]) == list(range(N))  # metrics rebuilt, nothing duplicated
+
+
+def test_resume_can_extend_a_run_and_refuses_to_change_its_config(tmp_path, capsys):
+    out = tmp_path / "r"
+    assert ergo("explore", "--episodes", "3", "--out", str(out), "--resume-or-new") == 0
+    assert ergo("explore", "--episodes", "5", "--out", str(out), "--resume-or-new") == 0
+    assert len(RunStore.open(out)) == 5
+    assert ergo("explore", "--resume", str(out), "--seed", "9") == 2
+    assert "--seed 9 differs" in capsys.readouterr().err
+
+
+def test_cell_counter_on_hand_made_points():
+    c = CellCounter(half_width=0.2, n_bins=30)  # cells of 0.4/30 m
+    w = 0.4 / 30
+    pts = np.array([
+        [0.0, 0.0], [w / 3, w / 3],  # the same cell
+        [-0.2, -0.2],  # first cell
+        [0.2, 0.2],  # the far corner belongs to the last cell
+        [0.25, 0.0],  # outside: ignored
+        [np.nan, 0.1],  # not seen: ignored
+        [-0.2 + w, -0.2],  # the next cell along x
+    ])  # fmt: skip
+    assert c.add(pts) == 4
+    assert c.add(np.array([0.0, 0.0])) == 4  # already counted
+    idx = c.cells_of(np.array([[-0.2, -0.2], [0.2 - 1e-9, 0.0]]))
+    assert idx.tolist() == [[0, 0], [29, 15]]
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["explore", "--episodes", "0"], "--episodes must be at least 1"),
+        (["explore", "--strategy", "nope", "--episodes", "1"], "unknown strategy 'nope'"),
+        (["explore", "--bogus"], "unrecognized arguments: --bogus"),
+        (["explore", "--rig", "sim", "--rig-option", "novalue"], "expected KEY=VALUE"),
+    ],
+)
+def test_bad_flags_get_a_one_line_error(args, message, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    try:
+        code = main(args)
+    except SystemExit as exc:  # argparse's own errors
+        code = exc.code
+    assert code == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1, err
+    assert not (tmp_path / "runs").exists()  # nothing half-made left behind
+
+
+def test_every_command_has_help(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    for command in ("explore", "sim", "twin", "bus"):
+        assert command in out

@@ -1,0 +1,93 @@
+"""The run store: durable appends, torn tails cut, corruption and foreign folders refused."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from explore.record import EpisodeRecord
+from explore.store import RunStore, RunStoreError
+
+
+def make_record(k: int) -> EpisodeRecord:
+    rng = np.random.default_rng(k)
+    return EpisodeRecord(
+        episode=k, theta=rng.uniform(-1, 1, 48), goal=np.zeros(0), module=-1, kind="random",
+        context_ball=np.array([0.15, 0.0]), ball=np.array([np.nan, 0.1]), ball_moved=bool(k % 2),
+        targets=rng.normal(size=(40, 6)), measured=rng.normal(size=(40, 6)),
+        end_effector=rng.normal(size=(40, 3)),
+        image=rng.integers(0, 255, (64, 64, 3), dtype=np.uint8), sim_state=rng.normal(size=30),
+        settle_s=0.5, duration_s=0.01,
+    )  # fmt: skip
+
+
+def test_records_round_trip(tmp_path):
+    with RunStore.create(tmp_path / "run", {"seed": 1}) as s:
+        for k in range(3):
+            s.append(make_record(k))
+    again = RunStore.open(tmp_path / "run")
+    assert len(again) == 3 and again.config == {"seed": 1}
+    assert all(a.equals(make_record(k)) for k, a in enumerate(again))
+
+
+@pytest.mark.parametrize("cut", [1, 7, 12, 200])
+def test_a_torn_last_record_is_cut_and_the_rest_kept(tmp_path, cut):
+    with RunStore.create(tmp_path / "run", {}) as s:
+        for k in range(3):
+            s.append(make_record(k))
+    hist = tmp_path / "run" / "history.bin"
+    data = hist.read_bytes()
+    hist.write_bytes(data[:-cut])
+    s = RunStore.open(tmp_path / "run")
+    assert len(s) == 2 and s.truncated_bytes > 0
+    s.append(make_record(2))  # appending continues cleanly after the cut
+    s.close()
+    assert len(RunStore.open(tmp_path / "run")) == 3
+
+
+def test_corruption_in_the_middle_is_refused_and_nothing_is_written(tmp_path):
+    with RunStore.create(tmp_path / "run", {}) as s:
+        for k in range(3):
+            s.append(make_record(k))
+    hist = tmp_path / "run" / "history.bin"
+    data = bytearray(hist.read_bytes())
+    data[100] ^= 0xFF  # inside the first payload
+    hist.write_bytes(bytes(data))
+    with pytest.raises(RunStoreError, match="corrupt at byte 0: checksum"):
+        RunStore.open(tmp_path / "run")
+    assert hist.read_bytes() == bytes(data)
+
+
+def test_appending_out_of_order_is_refused(tmp_path):
+    with RunStore.create(tmp_path / "run", {}) as s, pytest.raises(RunStoreError, match="after 0"):
+        s.append(make_record(1))
+
+
+def test_foreign_old_and_broken_folders_get_one_line_errors(tmp_path):
+    with pytest.raises(RunStoreError, match="no such directory"):
+        RunStore.open(tmp_path / "missing")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(RunStoreError, match=r"no run\.json"):
+        RunStore.open(tmp_path / "empty")
+    (tmp_path / "foreign").mkdir()
+    (tmp_path / "foreign" / "run.json").write_text(json.dumps({"app": "other"}))
+    with pytest.raises(RunStoreError, match="field 'app'"):
+        RunStore.open(tmp_path / "foreign")
+    (tmp_path / "old").mkdir()
+    (tmp_path / "old" / "run.json").write_text(json.dumps({"app": "ergo-explore", "format": 0}))
+    with pytest.raises(RunStoreError, match="field 'format'"):
+        RunStore.open(tmp_path / "old")
+    (tmp_path / "bad").mkdir()
+    (tmp_path / "bad" / "run.json").write_text("{nope")
+    with pytest.raises(RunStoreError, match="not valid JSON"):
+        RunStore.open(tmp_path / "bad")
+
+
+def test_create_refuses_a_non_empty_folder(tmp_path):
+    (tmp_path / "x").mkdir()
+    (tmp_path / "x" / "keep.txt").write_text("mine")
+    with pytest.raises(RunStoreError, match="not empty"):
+        RunStore.create(tmp_path / "x", {})
+    assert (tmp_path / "x" / "keep.txt").read_text() == "mine"
