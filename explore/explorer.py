@@ -91,13 +91,7 @@ class Explorer:
                 self.rig.arm.resync()
             start = time.perf_counter()
             for k in range(done, n_episodes):
-                rec = self.episode(k)
-                self.store.append(rec)
-                self.strategy.update(rec)
-                row = self.metrics.update(rec)
-                self.metrics.append_last()
-                if self.on_record is not None:
-                    self.on_record(rec)
+                row = self.step(k)
                 if self.on_episode is not None:
                     rate = (k - done + 1) / max(time.perf_counter() - start, 1e-9)
                     self.on_episode(
@@ -112,6 +106,18 @@ class Explorer:
                     )
             # leave the arm at rest before torque goes off
             self.runner.go_rest()
+
+    def step(self, k: int) -> dict[str, object]:
+        """Run episode ``k`` (the rig connected), store it durably, then learn from it and
+        count it. Returns the episode's metrics row."""
+        rec = self.episode(k)
+        self.store.append(rec)
+        self.strategy.update(rec)
+        row = self.metrics.update(rec)
+        self.metrics.append_last()
+        if self.on_record is not None:
+            self.on_record(rec)
+        return row
 
     def episode(self, k: int) -> EpisodeRecord:
         """Run episode ``k``: rest pose, context, proposal, movement, outcome."""

@@ -80,7 +80,7 @@ def scene_xml() -> str:
             friction="0.8 0.01 0.004" contype="3" conaffinity="1" rgba="0.78 0.95 0.12 1"/>
     </body>
     <camera name="overhead" pos="0 0 {CAMERA_HEIGHT}" xyaxes="1 0 0 0 1 0" fovy="{CAMERA_FOVY}"/>
-    <camera name="side" pos="0.62 -0.62 0.5" xyaxes="1 1 0 -0.4 0.4 0.82" fovy="45"/>
+    <camera name="side" pos="0.36 -0.36 0.34" xyaxes="1 1 0 -0.45 0.45 0.77" fovy="45"/>
   </worldbody>
 
   <keyframe>
