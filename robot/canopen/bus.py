@@ -1,0 +1,158 @@
+"""CAN bus configuration by python-can's conventions: ``INTERFACE:CHANNEL`` plus a bitrate.
+
+Examples: ``socketcan:can0`` (Linux SocketCAN; the bitrate is set with ``ip link``, not here),
+``slcan:/dev/ttyACM0`` (CANable and other SLCAN USB adapters, or a pty), ``virtual:NAME``
+(python-can's in-process bus, for tests).
+
+Every failure to parse or open becomes a ``CanBusError`` with a one-line message.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import Any
+
+from robot.errors import BusError
+
+# Interfaces that take a bitrate argument when the bus is opened (python-can docs, per
+# interface). socketcan takes it from the kernel (``ip link set can0 type can bitrate ...``),
+# virtual has none.
+TAKES_BITRATE = frozenset(
+    {
+        "slcan",
+        "pcan",
+        "kvaser",
+        "gs_usb",
+        "seeedstudio",
+        "ixxat",
+        "vector",
+        "canalystii",
+        "cantact",
+        "systec",
+        "usb2can",
+        "neovi",
+        "nican",
+        "iscan",
+        "etas",
+        "robotell",
+        "serial",
+    }
+)
+# Interfaces that talk over an IP network: refused (this project never uses the network for
+# CAN, and never UDP multicast).
+NETWORK_INTERFACES = frozenset({"udp_multicast", "socketcand"})
+# Bitrates an SLCAN adapter can be set to with the ``Sn`` command (Lawicel protocol;
+# python-can ``slcanBus._BITRATES``).
+SLCAN_BITRATES = (
+    10_000,
+    20_000,
+    50_000,
+    100_000,
+    125_000,
+    250_000,
+    500_000,
+    750_000,
+    1_000_000,
+    83_300,
+)
+# CANopen's usual bitrate for drives (CiA 301 lists 10 k .. 1 M; servo drives run 1 Mbit/s).
+DEFAULT_BITRATE = 1_000_000
+# python-can waits 2 s after opening an SLCAN serial port (for boards that reset on open);
+# a pty does not reset, so we skip the wait there.
+PTY_SLEEP_AFTER_OPEN_S = 0.0
+
+# What to try when an interface fails to open (python-can and Linux SocketCAN docs).
+HINTS = {
+    "socketcan": " (is the adapter plugged in and up? sudo ip link set can0 up type can bitrate"
+    " 1000000)",
+    "slcan": " (is the adapter plugged in? is another program using the port?)",
+}
+
+EXAMPLES = "e.g. socketcan:can0, slcan:/dev/ttyACM0, virtual:test"
+
+
+class CanBusError(BusError):
+    """The CAN bus spec is malformed or the adapter could not be opened."""
+
+
+@dataclass(frozen=True)
+class CanBusSpec:
+    """Where the CAN bus is.
+
+    Attributes:
+        interface: python-can interface name (``socketcan``, ``slcan``, ``virtual``, ...).
+        channel: interface-specific channel (``can0``, ``/dev/ttyACM0``, a virtual name).
+        bitrate: bit/s, or None where the interface does not take one.
+    """
+
+    interface: str
+    channel: str
+    bitrate: int | None = None
+
+    def __str__(self) -> str:
+        return f"{self.interface}:{self.channel}"
+
+    def bus_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments for ``can.Bus``."""
+        kw: dict[str, Any] = {"interface": self.interface, "channel": self.channel}
+        if self.bitrate is not None:
+            kw["bitrate"] = self.bitrate
+        if self.interface == "slcan" and self.channel.startswith("/dev/pts/"):
+            kw["sleep_after_open"] = PTY_SLEEP_AFTER_OPEN_S
+        return kw
+
+
+def parse_can_spec(spec: str, bitrate: int | None = DEFAULT_BITRATE) -> CanBusSpec:
+    """Parse ``INTERFACE:CHANNEL``; the bitrate is kept only for interfaces that take one.
+
+    Raises:
+        CanBusError: empty parts, unknown interface, network interface, bad bitrate.
+    """
+    from can.interfaces import VALID_INTERFACES
+
+    if not isinstance(spec, str) or ":" not in spec:
+        raise CanBusError(f"bad CAN bus {spec!r}: expected INTERFACE:CHANNEL, {EXAMPLES}")
+    interface, channel = (part.strip() for part in spec.split(":", 1))
+    if not interface or not channel:
+        raise CanBusError(f"bad CAN bus {spec!r}: expected INTERFACE:CHANNEL, {EXAMPLES}")
+    if interface in NETWORK_INTERFACES:
+        raise CanBusError(f"CAN interface {interface!r} runs over the network: not allowed here")
+    if interface not in VALID_INTERFACES:
+        known = ", ".join(sorted(VALID_INTERFACES - NETWORK_INTERFACES))
+        raise CanBusError(f"unknown CAN interface {interface!r} in {spec!r}; known: {known}")
+    if interface not in TAKES_BITRATE:
+        return CanBusSpec(interface, channel, None)
+    if bitrate is None:
+        bitrate = DEFAULT_BITRATE
+    if not isinstance(bitrate, int) or isinstance(bitrate, bool) or bitrate <= 0:
+        raise CanBusError(f"bad CAN bitrate {bitrate!r}: expected a positive integer in bit/s")
+    if interface == "slcan" and bitrate not in SLCAN_BITRATES:
+        allowed = ", ".join(str(b) for b in sorted(SLCAN_BITRATES))
+        raise CanBusError(f"SLCAN cannot run at {bitrate} bit/s; choose one of {allowed}")
+    return CanBusSpec(interface, channel, bitrate)
+
+
+def open_bus(spec: CanBusSpec | str, bitrate: int | None = DEFAULT_BITRATE) -> Any:
+    """Open a python-can bus (``can.BusABC``); a missing adapter is a one-line ``CanBusError``.
+
+    Args:
+        spec: a ``CanBusSpec`` or an ``INTERFACE:CHANNEL`` string.
+        bitrate: used when ``spec`` is a string, bit/s.
+    """
+    if isinstance(spec, str):
+        spec = parse_can_spec(spec, bitrate)
+    if (
+        spec.interface in ("slcan", "serial")
+        and spec.channel.startswith("/")
+        and not (os.path.exists(spec.channel.split("@", 1)[0]))
+    ):
+        raise CanBusError(f"cannot open CAN bus {spec}: no such device {spec.channel}")
+    import can
+
+    try:
+        return can.Bus(**spec.bus_kwargs())
+    except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as exc:
+        detail = " ".join(str(exc).split()) or type(exc).__name__
+        hint = HINTS.get(spec.interface, "")
+        raise CanBusError(f"cannot open CAN bus {spec}: {detail}{hint}") from exc
