@@ -1,0 +1,269 @@
+"""``ergo twin serve --bus canopen``: the twin as six CiA 402 drives on a CAN bus, reached
+through an SLCAN adapter emulated on a pseudo-terminal (and its camera as an MJPEG stream).
+
+    $ ergo twin serve --bus canopen
+    canopen bus (slcan) on /dev/pts/7
+    camera on http://127.0.0.1:41234/stream.mjpg
+
+The pty behaves like a CANable (SLCAN firmware) on /dev/ttyACM0: any python-can program opens
+it as ``slcan:/dev/pts/7``, e.g. ``ergo bus scan --can slcan:/dev/pts/7`` or a ``canopen`` rig
+with ``can: slcan:/dev/pts/7`` and ``camera: http://127.0.0.1:41234/stream.mjpg``.
+
+Inside, the SLCAN adapter (``sim.slcan``) is bridged to python-can's in-process ``virtual`` bus
+on which the emulated drives (``sim.canopen_drives``) live; the twin runs in real time
+(``sim.realtime.RealtimeLoop``). Faults come from the flags of ``sim/cli.py``:
+``--drop-rate`` loses PDO/SYNC frames, ``--delay-ms`` delays the TPDOs, ``--overload-servo ID``
+makes that node fault with a following error (EMCY 0x8611) after some time enabled.
+``--corrupt-rate`` does not apply: on CAN a corrupted frame fails its CRC and is retransmitted
+by the controller (ISO 11898-1), so the host never sees it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+import os
+import select
+import sys
+import termios
+import threading
+import time
+import tty
+from typing import Any
+
+from sim.slcan import CanFrame, LineSplitter, SlcanAdapter, SlcanError, encode_frame
+
+log = logging.getLogger(__name__)
+
+# How often the threads wake up to check for stop, s (not a protocol figure).
+POLL_S = 0.05
+# Seconds a node stays in OPERATION ENABLED before ``--overload-servo`` trips it (guess: long
+# enough for a connect and a few moves).
+DEFAULT_OVERLOAD_AFTER_S = 2.0
+
+
+class SlcanPtyBridge:
+    """An SLCAN adapter on a new pseudo-terminal, bridged to a python-can bus.
+
+    The host writes SLCAN lines to ``path``; frames it transmits go onto ``bus``; frames on
+    ``bus`` are written back as SLCAN lines while the adapter is open. The bridge keeps its own
+    slave descriptor open, so clients may come and go; stale bytes left by a client that died
+    are flushed when the next one sends ``C`` or ``O``.
+
+    Args:
+        bus: a python-can bus (the emulated drives' side).
+    """
+
+    def __init__(self, bus: Any) -> None:
+        self.bus = bus
+        self.adapter = SlcanAdapter()
+        self._splitter = LineSplitter()
+        self._master, self._slave = os.openpty()
+        tty.setraw(self._slave, termios.TCSANOW)  # no echo, no CR/NL translation
+        tty.setraw(self._master, termios.TCSANOW)
+        self.path = os.ttyname(self._slave)
+        self._write_lock = threading.Lock()
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self.frames_in = 0  # host -> bus
+        self.frames_out = 0  # bus -> host
+        self.frames_dropped = 0  # bus -> host, pty full or adapter closed
+
+    # ---- lifecycle -------------------------------------------------------------------------
+    def start(self) -> None:
+        if self._threads:
+            return
+        self._stop.clear()
+        for target, name in ((self._host_to_bus, "slcan-rx"), (self._bus_to_host, "slcan-tx")):
+            t = threading.Thread(target=target, name=name, daemon=True)
+            t.start()
+            self._threads.append(t)
+
+    def stop(self) -> None:
+        self._stop.set()
+        for t in self._threads:
+            t.join(timeout=2.0)
+        self._threads.clear()
+
+    def close(self) -> None:
+        self.stop()
+        for fd in (self._master, self._slave):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+
+    def __enter__(self) -> SlcanPtyBridge:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ---- threads ---------------------------------------------------------------------------
+    def _write(self, data: bytes, drop_if_full: bool) -> bool:
+        """Write whole lines to the host; with ``drop_if_full`` give up (whole) when the pty is
+        full, so a host that stopped reading never blocks the bus."""
+        with self._write_lock:
+            if drop_if_full:
+                _, writable, _ = select.select([], [self._master], [], 0)
+                if not writable:
+                    return False
+            try:
+                os.write(self._master, data)
+            except OSError:
+                return False
+        return True
+
+    def _host_to_bus(self) -> None:
+        import can
+
+        while not self._stop.is_set():
+            ready, _, _ = select.select([self._master], [], [], POLL_S)
+            if not ready:
+                continue
+            try:
+                chunk = os.read(self._master, 4096)
+            except OSError:
+                time.sleep(POLL_S)
+                continue
+            for line in self._splitter.feed(chunk):
+                if line is not None and line[:1] in (b"C", b"O", b"L"):
+                    termios.tcflush(self._slave, termios.TCIFLUSH)  # stale bytes to the host
+                reply, frame = self.adapter.handle(line)
+                if frame is not None:
+                    msg = can.Message(
+                        arbitration_id=frame.can_id,
+                        data=frame.data,
+                        is_extended_id=frame.extended,
+                        is_remote_frame=frame.remote,
+                        dlc=frame.dlc,
+                    )
+                    try:
+                        self.bus.send(msg)
+                        self.frames_in += 1
+                    except can.CanError as exc:
+                        log.warning("slcan bridge: frame not sent: %s", exc)
+                        reply = b"\a"
+                self._write(reply, drop_if_full=False)
+
+    def _bus_to_host(self) -> None:
+        while not self._stop.is_set():
+            msg = self.bus.recv(timeout=POLL_S)
+            if msg is None or msg.is_error_frame:
+                continue
+            if not self.adapter.is_open:
+                self.frames_dropped += 1
+                continue
+            try:
+                frame = CanFrame(
+                    msg.arbitration_id,
+                    b"" if msg.is_remote_frame else bytes(msg.data),
+                    msg.is_extended_id,
+                    msg.is_remote_frame,
+                    msg.dlc,
+                )
+            except SlcanError as exc:
+                log.warning("slcan bridge: frame not representable: %s", exc)
+                continue
+            if self._write(encode_frame(frame), drop_if_full=True):
+                self.frames_out += 1
+            else:
+                self.frames_dropped += 1
+
+
+def serve(args: argparse.Namespace) -> int:
+    """Serve until interrupted (SIGINT/SIGTERM); returns the exit code. Prints the pty path and
+    the camera URL, one line each, flushed, so that a parent process can read them."""
+    import signal
+
+    import can
+
+    from sim.canopen_drives import EmulatedDrives
+    from sim.realtime import RealtimeLoop
+    from sim.twin import Twin
+
+    drop_rate = float(getattr(args, "drop_rate", 0.0) or 0.0)
+    delay_ms = float(getattr(args, "delay_ms", 0.0) or 0.0)
+    overload = getattr(args, "overload_servo", None)
+    if not 0.0 <= drop_rate < 1.0:
+        print(f"ergo: error: --drop-rate {drop_rate} is not in [0, 1)", file=sys.stderr)
+        return 2
+    if delay_ms < 0:
+        print(f"ergo: error: --delay-ms {delay_ms} is negative", file=sys.stderr)
+        return 2
+    if overload is not None and not 1 <= overload <= 6:
+        print(f"ergo: error: --overload-servo {overload} is not a node id in 1..6", file=sys.stderr)
+        return 2
+    if float(getattr(args, "corrupt_rate", 0.0) or 0.0) > 0:
+        print(
+            "ergo: warning: --corrupt-rate ignored on CAN (the CRC rejects a corrupted frame and "
+            "the controller retransmits it)",
+            file=sys.stderr,
+        )
+
+    def _terminate(signum: int, _frame: object) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, _terminate)
+    channel = f"ergo-canopen-{os.getpid()}"
+    twin = Twin()
+    drives = EmulatedDrives(
+        twin,
+        f"virtual:{channel}",
+        drop_rate=drop_rate,
+        tpdo_delay_s=delay_ms / 1000.0,
+        seed=int(getattr(args, "seed", 0) or 0),
+    )
+    if overload is not None:
+        after = float(getattr(args, "overload_after_s", DEFAULT_OVERLOAD_AFTER_S))
+        drives.schedule_following_error(int(overload), after)
+    bridge_bus = can.Bus(interface="virtual", channel=channel)
+    camera = None
+    try:
+        with (
+            RealtimeLoop(twin, speed=float(getattr(args, "speed", 1.0) or 1.0)),
+            drives,
+            SlcanPtyBridge(bridge_bus) as bridge,
+        ):
+            print(f"canopen bus (slcan) on {bridge.path}", flush=True)
+            if not getattr(args, "no_camera", False):
+                from sim.mjpeg_server import MjpegServer
+
+                camera = MjpegServer(twin.render, port=int(getattr(args, "camera_port", 0) or 0))
+                try:
+                    camera.start()
+                except OSError as exc:
+                    print(f"ergo: error: {exc}", file=sys.stderr)
+                    return 2
+                print(f"camera on {camera.url}", flush=True)
+            try:
+                while True:
+                    time.sleep(1.0)
+            except KeyboardInterrupt:
+                pass
+    finally:
+        if camera is not None:
+            camera.stop()
+        bridge_bus.shutdown()
+        signal.signal(signal.SIGTERM, previous)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m sim.canopen_server [--speed S] [--drop-rate P] ...`` without the ``ergo``
+    command (tests and benchmarks start it like this)."""
+    p = argparse.ArgumentParser(prog="python -m sim.canopen_server")
+    p.add_argument("--speed", type=float, default=1.0)
+    p.add_argument("--drop-rate", type=float, default=0.0)
+    p.add_argument("--delay-ms", type=float, default=0.0)
+    p.add_argument("--overload-servo", type=int, default=None)
+    p.add_argument("--overload-after-s", type=float, default=DEFAULT_OVERLOAD_AFTER_S)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--camera-port", type=int, default=0)
+    p.add_argument("--no-camera", action="store_true")
+    return serve(p.parse_args(argv))
+
+
+if __name__ == "__main__":
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    sys.exit(main())
