@@ -1,0 +1,405 @@
+"""The arena plane: a homography from camera pixels to metres on the arena floor, the camera's
+position above it, the arena's centre and radius, and the ball's colour range.
+
+Two ways to give the plane:
+- four (or more) ArUco markers lying flat at known positions (``MarkerLayout``), detected in an
+  undistorted frame; all their corners are used (16 points for 4 markers);
+- four clicked points: pixel coordinates (e.g. of the arena's corners, read off a saved frame)
+  and their known arena positions.
+
+Arena coordinates: metres, origin at the arm's base, x to the image's right and y up it when
+the camera looks straight down (the twin's convention). A marker is laid so that its top edge
+(as printed) faces +y.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from calibration.store import CalibrationError
+from vision.rectify import (
+    ArenaModel,
+    apply_homography,
+    estimate_camera_position,
+    fit_homography,
+    pixels_to_arena,
+    undistort_image,
+    undistort_points,
+)
+from vision.tracker import HSVRange
+
+# The twin's layout (and a suggestion for the rig): 30 mm DICT_4X4_50 markers 0..3 on the
+# floor's corners outside the wall (wall inner radius 0.20 m, sim/models/make_scene.py), where
+# the 0.55 m high 45-degree camera still sees them. A choice, not a standard.
+DEFAULT_MARKERS: dict[int, tuple[float, float]] = {
+    0: (-0.19, 0.19),
+    1: (0.19, 0.19),
+    2: (0.19, -0.19),
+    3: (-0.19, -0.19),
+}
+DEFAULT_MARKER_SIZE_M = 0.03
+DEFAULT_RADIUS_M = 0.20  # the twin's arena (OUTER_RADIUS in sim/models/make_scene.py)
+MAX_RESIDUAL_MM = 5.0  # refuse an arena whose points disagree with the fit by more (guess)
+
+
+@dataclass(frozen=True)
+class MarkerLayout:
+    """ArUco markers lying on the arena floor.
+
+    Attributes:
+        markers: id -> centre (x, y), metres.
+        size_m: side of each marker's black square, metres.
+        dictionary: ``cv2.aruco`` predefined dictionary name.
+    """
+
+    markers: dict[int, tuple[float, float]] = field(default_factory=lambda: dict(DEFAULT_MARKERS))
+    size_m: float = DEFAULT_MARKER_SIZE_M
+    dictionary: str = "DICT_4X4_50"
+
+    def corners(self, marker_id: int) -> np.ndarray:
+        """Arena positions of a marker's corners in ArUco order (top-left, top-right,
+        bottom-right, bottom-left as printed), shape (4, 2), metres."""
+        x, y = self.markers[marker_id]
+        h = self.size_m / 2
+        return np.array([[x - h, y + h], [x + h, y + h], [x + h, y - h], [x - h, y - h]])
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "markers": {str(k): list(v) for k, v in self.markers.items()},
+            "size_m": self.size_m,
+            "dictionary": self.dictionary,
+        }
+
+
+def parse_markers(text: str) -> dict[int, tuple[float, float]]:
+    """``"0:-0.19,0.19;1:0.19,0.19;..."`` -> {id: (x, y)} (metres)."""
+    out: dict[int, tuple[float, float]] = {}
+    for item in text.replace(" ", "").split(";"):
+        if not item:
+            continue
+        try:
+            key, xy = item.split(":")
+            x, y = (float(v) for v in xy.split(","))
+            out[int(key)] = (x, y)
+        except ValueError:
+            raise CalibrationError(f"bad marker {item!r}: expected ID:X,Y in metres") from None
+    if len(out) < 1:
+        raise CalibrationError("no markers given")
+    return out
+
+
+def detect_markers(
+    image: np.ndarray, layout: MarkerLayout, camera_matrix: np.ndarray, dist_coeffs: np.ndarray
+) -> dict[int, np.ndarray]:
+    """Find the layout's markers in a raw frame.
+
+    The frame is undistorted first (corner refinement works on straight edges); returned
+    corners are undistorted pixels of the same camera matrix.
+
+    Returns:
+        id -> corners, shape (4, 2), for each marker of the layout that was found.
+    """
+    import cv2
+
+    und = undistort_image(image, camera_matrix, dist_coeffs)
+    grey = und if und.ndim == 2 else cv2.cvtColor(und, cv2.COLOR_BGR2GRAY)
+    dico = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, layout.dictionary))
+    params = cv2.aruco.DetectorParameters()
+    params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+    corners, ids, _ = cv2.aruco.ArucoDetector(dico, params).detectMarkers(grey)
+    found: dict[int, np.ndarray] = {}
+    if ids is None:
+        return found
+    for c, i in zip(corners, np.asarray(ids).reshape(-1), strict=True):
+        if int(i) in layout.markers:
+            found[int(i)] = np.asarray(c, np.float64).reshape(4, 2)
+    return found
+
+
+@dataclass
+class ArenaFit:
+    """An arena calibration and how well its points agree.
+
+    Attributes:
+        model: the arena model.
+        residuals_mm: distance between each calibration point's known position and where the
+            model maps its pixel, shape (N,), millimetres.
+        points_used: N.
+    """
+
+    model: ArenaModel
+    residuals_mm: np.ndarray
+    points_used: int
+
+
+def fit_arena(
+    undistorted_px: np.ndarray,
+    arena_xy: np.ndarray,
+    camera_matrix: np.ndarray,
+    dist_coeffs: np.ndarray,
+    image_size: tuple[int, int],
+    centre: tuple[float, float] = (0.0, 0.0),
+    radius: float = DEFAULT_RADIUS_M,
+    with_camera_position: bool = True,
+) -> ArenaFit:
+    """Fit the arena model to point pairs.
+
+    Args:
+        undistorted_px: shape (N, 2), undistorted pixels (N >= 4, not collinear).
+        arena_xy: shape (N, 2), metres on the floor.
+        camera_matrix: (3, 3); dist_coeffs: (k,): the camera's intrinsics.
+        image_size: (width, height), pixels.
+        centre: arena centre (x, y), metres; radius: metres.
+        with_camera_position: solve for the camera's position (needs trustworthy intrinsics;
+            without it, points above the floor cannot be corrected for parallax).
+    """
+    px = np.asarray(undistorted_px, np.float64).reshape(-1, 2)
+    xy = np.asarray(arena_xy, np.float64).reshape(-1, 2)
+    if len(px) < 4:
+        raise CalibrationError(f"need >= 4 points on the arena plane, got {len(px)}")
+    try:
+        h = fit_homography(px, xy)
+    except ValueError as exc:
+        raise CalibrationError(str(exc)) from None
+    position = None
+    if with_camera_position:
+        try:
+            position = estimate_camera_position(px, xy, camera_matrix, np.zeros(5))
+        except ValueError as exc:
+            raise CalibrationError(str(exc)) from None
+    model = ArenaModel(
+        camera_matrix=camera_matrix,
+        dist_coeffs=dist_coeffs,
+        image_size=image_size,
+        homography=h,
+        centre=np.asarray(centre, np.float64),
+        radius=radius,
+        camera_position=position,
+    )
+    residuals = np.linalg.norm(apply_homography(h, px) - xy, axis=1) * 1000.0
+    return ArenaFit(model, residuals, len(px))
+
+
+def arena_from_markers(
+    image: np.ndarray,
+    layout: MarkerLayout,
+    camera_matrix: np.ndarray,
+    dist_coeffs: np.ndarray,
+    centre: tuple[float, float] = (0.0, 0.0),
+    radius: float = DEFAULT_RADIUS_M,
+    min_markers: int = 4,
+) -> ArenaFit:
+    """Arena calibration from a frame showing the layout's markers.
+
+    Raises:
+        CalibrationError: fewer than ``min_markers`` markers found, or residuals above
+            ``MAX_RESIDUAL_MM``.
+    """
+    found = detect_markers(image, layout, camera_matrix, dist_coeffs)
+    if len(found) < min_markers:
+        missing = sorted(set(layout.markers) - set(found))
+        raise CalibrationError(
+            f"found {len(found)} of the arena markers (need >= {min_markers}); missing ids "
+            f"{missing}: check lighting, the dictionary ({layout.dictionary}) and that they "
+            "are in view"
+        )
+    ids = sorted(found)
+    px = np.concatenate([found[i] for i in ids])
+    xy = np.concatenate([layout.corners(i) for i in ids])
+    size = (image.shape[1], image.shape[0])
+    fit = fit_arena(px, xy, camera_matrix, dist_coeffs, size, centre, radius)
+    _check_residuals(fit)
+    return fit
+
+
+def arena_from_points(
+    raw_px: np.ndarray,
+    arena_xy: np.ndarray,
+    camera_matrix: np.ndarray,
+    dist_coeffs: np.ndarray,
+    image_size: tuple[int, int],
+    centre: tuple[float, float] = (0.0, 0.0),
+    radius: float = DEFAULT_RADIUS_M,
+) -> ArenaFit:
+    """Arena calibration from clicked points: raw pixels (N, 2) and their arena positions
+    (N, 2) in metres (N >= 4)."""
+    und = undistort_points(np.asarray(raw_px, np.float64), camera_matrix, dist_coeffs)
+    fit = fit_arena(und, arena_xy, camera_matrix, dist_coeffs, image_size, centre, radius)
+    if len(und) > 4:
+        _check_residuals(fit)
+    return fit
+
+
+def _check_residuals(fit: ArenaFit) -> None:
+    worst = float(fit.residuals_mm.max())
+    if worst > MAX_RESIDUAL_MM:
+        raise CalibrationError(
+            f"arena points disagree with the plane fit by up to {worst:.1f} mm "
+            f"(> {MAX_RESIDUAL_MM} mm): a marker moved, is not flat, or its position is wrong"
+        )
+
+
+# ---- the ball's colour -------------------------------------------------------------------
+def find_saturated_blob(
+    image: np.ndarray,
+    model: ArenaModel | None = None,
+    ball_radius_m: float = 0.03,
+    min_saturation: int = 90,
+) -> tuple[float, float]:
+    """Pixel (u, v) of the most ball-like saturated blob whose hue differs from the floor's.
+
+    The floor's hue is the most common hue among saturated pixels; a blob must differ from it
+    by more than 15 hue units (guess). With an arena model the blob whose area is closest to
+    the expected ball's is chosen (the arm's orange tip is smaller), else the largest round
+    one.
+    """
+    import cv2
+
+    hsv = cv2.cvtColor(image, cv2.COLOR_BGR2HSV)
+    sat = (hsv[..., 1] >= min_saturation) & (hsv[..., 2] >= 60)
+    if not sat.any():
+        raise CalibrationError("no saturated colour in the frame: is the ball in view?")
+    hist = np.bincount(hsv[..., 0][sat].ravel(), minlength=180)
+    floor_hue = int(np.argmax(hist))
+    dh = np.abs(hsv[..., 0].astype(int) - floor_hue)
+    dh = np.minimum(dh, 180 - dh)
+    mask = (sat & (dh > 15)).astype(np.uint8) * 255
+    mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+    n, _, stats, centroids = cv2.connectedComponentsWithStats(mask)
+    expected = None
+    if model is not None and model.camera_position is not None:
+        height = model.camera_position[2] - ball_radius_m
+        f = float(model.camera_matrix[0, 0])
+        expected = np.pi * (f * ball_radius_m / height) ** 2
+    best, best_score = None, np.inf
+    for i in range(1, n):
+        area = float(stats[i, cv2.CC_STAT_AREA])
+        if area < 20:
+            continue
+        w, h = stats[i, cv2.CC_STAT_WIDTH], stats[i, cv2.CC_STAT_HEIGHT]
+        fill = area / (np.pi * (max(w, h) / 2) ** 2)
+        if fill < 0.6:
+            continue
+        score = abs(np.log(area / expected)) if expected else -area
+        if score < best_score:
+            best, best_score = i, score
+    if best is None:
+        raise CalibrationError(
+            f"no round saturated blob apart from the floor (hue {floor_hue}): give --ball-pixel"
+        )
+    return float(centroids[best][0]), float(centroids[best][1])
+
+
+GROW_HUE = 12  # hue units around the sampled mean when growing to the whole ball (guess)
+
+
+def _circular_mean_hue(hue: np.ndarray) -> int:
+    """Mean of OpenCV hues (0..179, a circle), as an int in 0..179."""
+    ang = hue.astype(float) * (2 * np.pi / 180)
+    deg = float(np.degrees(np.arctan2(np.sin(ang).mean(), np.cos(ang).mean())))
+    return round(deg / 2) % 180
+
+
+def _dilated_disc(disc: np.ndarray, radius: float) -> np.ndarray:
+    """Pixels within ``radius`` of the disc's centre: caps how far the region may grow."""
+    ys, xs = np.nonzero(disc)
+    cu, cv_ = xs.mean(), ys.mean()
+    yy, xx = np.mgrid[0 : disc.shape[0], 0 : disc.shape[1]]
+    return (xx - cu) ** 2 + (yy - cv_) ** 2 <= radius**2
+
+
+def sample_ball_hsv(
+    image: np.ndarray,
+    pixel: tuple[float, float],
+    radius_px: float = 8.0,
+    hue_margin: int = 4,
+) -> list[HSVRange]:
+    """HSV range(s) of the ball from a disc of pixels around ``pixel`` (on the ball).
+
+    The disc gives the hue family and the saturation and value lower bounds (half and 0.3
+    times their 2nd percentiles, floored at 40 and 50; upper bounds 255 for highlights); the
+    sample then grows over the connected region of that colour around the pixel (the whole
+    ball, rim included, up to six disc radii) and the hue range spans its 1st to 99th
+    percentile widened by ``hue_margin``. A hue range crossing 0/179 (red) is split in two.
+    Margins are guesses checked on the twin.
+
+    Args:
+        image: BGR frame (H, W, 3).
+        pixel: (u, v) on the ball, raw pixels.
+        radius_px: sampling disc radius, pixels (keep it inside the ball).
+    """
+    import cv2
+
+    hsv = cv2.cvtColor(image, cv2.COLOR_BGR2HSV)
+    h, w = hsv.shape[:2]
+    u, v = pixel
+    if not (0 <= u < w and 0 <= v < h):
+        raise CalibrationError(f"ball pixel ({u:.0f}, {v:.0f}) is outside the {w}x{h} frame")
+    yy, xx = np.mgrid[0:h, 0:w]
+    disc = (xx - u) ** 2 + (yy - v) ** 2 <= radius_px**2
+    px = hsv[disc].astype(int)
+    if len(px) < 5:
+        raise CalibrationError("too few pixels sampled around the ball pixel")
+    if np.percentile(px[:, 1], 50) < 60:
+        raise CalibrationError(
+            f"the pixels around ({u:.0f}, {v:.0f}) are not saturated (S median "
+            f"{np.percentile(px[:, 1], 50):.0f}): is that the ball?"
+        )
+    # The disc sees the ball's lit middle; its rim is darker (same hue family, lower value),
+    # so the lower bounds are generous fractions of what was sampled (guesses checked on the
+    # twin).
+    s_lo = max(40, int(0.5 * np.percentile(px[:, 1], 2)))
+    v_lo = max(50, int(0.3 * np.percentile(px[:, 2], 2)))
+    mean = _circular_mean_hue(px[:, 0])
+    # Grow the sample to the whole ball: the connected region around the pixel whose hue is
+    # within GROW_HUE of the disc's mean and that passes the S and V bounds.
+    dh = np.abs(hsv[..., 0].astype(int) - mean)
+    dh = np.minimum(dh, 180 - dh)
+    loose = ((dh <= GROW_HUE) & (hsv[..., 1] >= s_lo) & (hsv[..., 2] >= v_lo)).astype(np.uint8)
+    _, labels = cv2.connectedComponents(loose)
+    label = labels[min(h - 1, int(v + 0.5)), min(w - 1, int(u + 0.5))]
+    region = (labels == label) & (label > 0) & (disc | _dilated_disc(disc, radius_px * 6))
+    hue = hsv[..., 0][region | disc].astype(int)
+    shifted = (hue - mean + 90) % 180  # the sample's mean at 90, away from the 0/180 seam
+    lo = int(np.floor(np.percentile(shifted, 1))) - hue_margin + mean - 90
+    hi = int(np.ceil(np.percentile(shifted, 99))) + hue_margin + mean - 90
+    if hi - lo >= 179:
+        return [HSVRange((0, s_lo, v_lo), (179, 255, 255))]
+    lo_m, hi_m = lo % 180, hi % 180
+    if lo_m <= hi_m:
+        return [HSVRange((lo_m, s_lo, v_lo), (hi_m, 255, 255))]
+    return [
+        HSVRange((0, s_lo, v_lo), (hi_m, 255, 255)),
+        HSVRange((lo_m, s_lo, v_lo), (179, 255, 255)),
+    ]
+
+
+def arena_payload(
+    fit: ArenaFit,
+    ranges: list[HSVRange] | None,
+    ball_radius_m: float,
+    source: str,
+    layout: MarkerLayout | None = None,
+) -> dict[str, Any]:
+    """The ``arena`` calibration file's data."""
+    d = fit.model.to_dict()
+    d["residual_max_mm"] = float(fit.residuals_mm.max())
+    d["points_used"] = int(fit.points_used)
+    d["ball_radius_m"] = float(ball_radius_m)
+    d["source"] = source
+    if ranges:
+        d["ball_hsv_ranges"] = [r.to_list() for r in ranges]
+    if layout is not None:
+        d["markers"] = layout.to_dict()
+    return d
+
+
+def ball_position_check(
+    model: ArenaModel, pixel: tuple[float, float], ball_radius_m: float
+) -> np.ndarray:
+    """Where the model puts a ball seen at ``pixel`` (raw), shape (2,), metres."""
+    height = ball_radius_m if model.camera_position is not None else 0.0
+    return pixels_to_arena(model, np.asarray(pixel, np.float64), height=height)[0]

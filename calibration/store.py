@@ -1,0 +1,278 @@
+"""Calibration files: one versioned JSON file per kind (camera, arena, joints) per rig id.
+
+Layout: ``<root>/<rig_id>/<kind>.json`` where ``root`` is, in order of precedence, the
+``--dir`` option, the ``ERGO_CALIBRATION_DIR`` environment variable, or
+``~/.config/ergo-explore/calibration``.
+
+Each file is ``{"schema": "ergo-explore/calibration", "kind": ..., "version": N, "rig_id": ...,
+"created": ISO-8601 UTC, "data": {...}}``. Payloads are validated before they are written (a bad
+one never replaces a good file) and after they are read; a validation error is one line that
+names the file and the bad field. Writes are atomic: a temporary file in the same folder, fsync,
+then ``os.replace``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import tempfile
+from collections.abc import Callable
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+SCHEMA = "ergo-explore/calibration"
+ENV_DIR = "ERGO_CALIBRATION_DIR"
+DEFAULT_DIR = Path("~/.config/ergo-explore/calibration")
+KINDS = ("camera", "arena", "joints")
+# Current payload version per kind; bump when a payload's fields change meaning.
+VERSIONS = {"camera": 1, "arena": 1, "joints": 1}
+_RIG_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
+
+
+class CalibrationError(ValueError):
+    """A calibration could not be made, read or written; the message is one line."""
+
+
+# ---- where files live --------------------------------------------------------------------
+def calibration_root(directory: str | Path | None = None) -> Path:
+    """The folder holding one subfolder per rig id (see the module docstring)."""
+    if directory is not None:
+        return Path(directory).expanduser()
+    env = os.environ.get(ENV_DIR)
+    if env:
+        return Path(env).expanduser()
+    return DEFAULT_DIR.expanduser()
+
+
+def check_rig_id(rig_id: str) -> str:
+    if not isinstance(rig_id, str) or not _RIG_ID.match(rig_id):
+        raise CalibrationError(
+            f"rig id {rig_id!r} must be 1-64 letters, digits, '.', '_' or '-' (no slash)"
+        )
+    return rig_id
+
+
+def calibration_path(kind: str, rig_id: str, directory: str | Path | None = None) -> Path:
+    """``<root>/<rig_id>/<kind>.json``."""
+    if kind not in KINDS:
+        raise CalibrationError(f"unknown calibration kind {kind!r}; known: {', '.join(KINDS)}")
+    return calibration_root(directory) / check_rig_id(rig_id) / f"{kind}.json"
+
+
+# ---- validation --------------------------------------------------------------------------
+class _Checker:
+    """Field checks that raise one-line ``CalibrationError``s naming the field."""
+
+    def __init__(self, where: str, data: Any) -> None:
+        self.where = where
+        if not isinstance(data, dict):
+            self.fail("data", f"must be an object, got {type(data).__name__}")
+        self.data = data
+
+    def fail(self, name: str, why: str) -> None:
+        raise CalibrationError(f"{self.where}: field '{name}' {why}")
+
+    def get(self, name: str, optional: bool = False) -> Any:
+        if name not in self.data:
+            if optional:
+                return None
+            self.fail(name, "is missing")
+        return self.data[name]
+
+    def number(self, name: str, lo: float = -math.inf, hi: float = math.inf, **kw) -> Any:
+        v = self.get(name, **kw)
+        if v is None and kw.get("optional"):
+            return None
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+            self.fail(name, f"must be a finite number, got {v!r}")
+        if not lo <= v <= hi:
+            self.fail(name, f"must be in [{lo:g}, {hi:g}], got {v!r}")
+        return v
+
+    def matrix(self, name: str, shape: tuple[int, ...], optional: bool = False) -> Any:
+        v = self.get(name, optional=optional)
+        if v is None and optional:
+            return None
+        if not _is_matrix(v, shape):
+            dims = "x".join("N" if s < 0 else str(s) for s in shape)
+            self.fail(name, f"must be a {dims} array of finite numbers")
+        return v
+
+    def string(self, name: str, optional: bool = False) -> Any:
+        v = self.get(name, optional=optional)
+        if v is None and optional:
+            return None
+        if not isinstance(v, str) or not v:
+            self.fail(name, f"must be a non-empty string, got {v!r}")
+        return v
+
+
+def _is_matrix(v: Any, shape: tuple[int, ...]) -> bool:
+    """Whether ``v`` is nested lists of finite numbers of this shape (-1: any length >= 1)."""
+    if not shape:
+        return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+    if not isinstance(v, list) or not v:
+        return False
+    if shape[0] >= 0 and len(v) != shape[0]:
+        return False
+    return all(_is_matrix(x, shape[1:]) for x in v)
+
+
+def _validate_camera(c: _Checker) -> None:
+    c.matrix("camera_matrix", (3, 3))
+    k = c.data["camera_matrix"]
+    if not (k[0][0] > 0 and k[1][1] > 0 and k[2] == [0, 0, 1]):
+        c.fail("camera_matrix", "must have positive focal lengths and last row [0, 0, 1]")
+    c.matrix("dist_coeffs", (-1,))
+    if len(c.data["dist_coeffs"]) not in (4, 5, 8, 12, 14):
+        c.fail("dist_coeffs", "must have 4, 5, 8, 12 or 14 values")
+    c.matrix("image_size", (2,))
+    if any(int(s) != s or s <= 0 for s in c.data["image_size"]):
+        c.fail("image_size", "must be two positive integers (width, height)")
+    c.number("rms_px", 0.0, 100.0)
+    c.number("n_views", 1, 10_000)
+
+
+def _validate_arena(c: _Checker) -> None:
+    _validate_camera_like(c)
+    c.matrix("homography", (3, 3))
+    c.matrix("centre", (2,))
+    c.number("radius", 1e-3, 10.0)
+    pos = c.matrix("camera_position", (3,), optional=True)
+    if pos is not None and not pos[2] > 0:
+        c.fail("camera_position", "must be above the floor (z > 0)")
+    ranges = c.get("ball_hsv_ranges", optional=True)
+    if ranges is not None:
+        if not isinstance(ranges, list) or not ranges:
+            c.fail("ball_hsv_ranges", "must be a non-empty list of [lower, upper] HSV triples")
+        for i, r in enumerate(ranges):
+            if not _is_matrix(r, (2, 3)):
+                c.fail(f"ball_hsv_ranges[{i}]", "must be [[h, s, v], [h, s, v]]")
+            lo, hi = r
+            if not (0 <= lo[0] <= hi[0] <= 179 and all(0 <= lo[j] <= hi[j] <= 255 for j in (1, 2))):
+                c.fail(f"ball_hsv_ranges[{i}]", f"bounds out of order or range: {r}")
+    c.number("ball_radius_m", 1e-3, 1.0, optional=True)
+    c.number("residual_max_mm", 0.0, 1e4, optional=True)
+
+
+def _validate_camera_like(c: _Checker) -> None:
+    c.matrix("camera_matrix", (3, 3))
+    c.matrix("dist_coeffs", (-1,))
+    c.matrix("image_size", (2,))
+
+
+def _validate_joints(c: _Checker) -> None:
+    names = c.get("names")
+    if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
+        c.fail("names", "must be a non-empty list of joint names")
+    n = len(names)
+    for key in ("offsets", "lower", "upper"):
+        c.matrix(key, (n,))
+    dirs = c.matrix("directions", (n,))
+    if any(d not in (1, -1) for d in dirs):
+        c.fail("directions", f"must be +1 or -1 per joint, got {dirs}")
+    for i, name in enumerate(names):
+        if not c.data["lower"][i] < c.data["upper"][i]:
+            c.fail("lower", f"of joint {name} must be below its upper limit")
+
+
+VALIDATORS: dict[str, Callable[[_Checker], None]] = {
+    "camera": _validate_camera,
+    "arena": _validate_arena,
+    "joints": _validate_joints,
+}
+
+
+def validate(kind: str, data: Any, where: str | None = None) -> dict[str, Any]:
+    """Check a payload of the given kind; returns it or raises a one-line ``CalibrationError``."""
+    if kind not in VALIDATORS:
+        raise CalibrationError(f"unknown calibration kind {kind!r}; known: {', '.join(KINDS)}")
+    checker = _Checker(where or f"{kind} calibration", data)
+    VALIDATORS[kind](checker)
+    return data
+
+
+def _json_safe(value: Any) -> Any:
+    """numpy arrays and scalars to plain lists and numbers (without importing numpy)."""
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    if isinstance(value, dict):
+        return {str(k): _json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_safe(v) for v in value]
+    return value
+
+
+# ---- reading and writing -----------------------------------------------------------------
+def save(kind: str, rig_id: str, data: dict[str, Any], directory: str | Path | None = None) -> Path:
+    """Validate and atomically write a calibration; returns the file's path.
+
+    A payload that fails validation raises before anything is written, so an existing good
+    file is never replaced by a bad one.
+    """
+    path = calibration_path(kind, rig_id, directory)
+    payload = _json_safe(data)
+    validate(kind, payload, where=f"{path.name} (not written)")
+    doc = {
+        "schema": SCHEMA,
+        "kind": kind,
+        "version": VERSIONS[kind],
+        "rig_id": rig_id,
+        "created": datetime.now(UTC).isoformat(timespec="seconds"),
+        "data": payload,
+    }
+    text = json.dumps(doc, indent=2, allow_nan=False) + "\n"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{kind}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def load(kind: str, rig_id: str, directory: str | Path | None = None) -> dict[str, Any]:
+    """Read and validate a calibration's payload (the ``data`` object)."""
+    return load_file(calibration_path(kind, rig_id, directory), kind)
+
+
+def load_file(path: str | Path, kind: str | None = None) -> dict[str, Any]:
+    """Read and validate one calibration file; ``kind`` None accepts any kind."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise CalibrationError(f"no calibration file {path}") from None
+    except OSError as exc:
+        raise CalibrationError(f"cannot read {path}: {exc.strerror}") from None
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise CalibrationError(
+            f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})"
+        ) from None
+    where = str(path)
+    top = _Checker(where, doc)
+    if top.get("schema") != SCHEMA:
+        top.fail("schema", f"must be {SCHEMA!r}, got {doc.get('schema')!r}")
+    file_kind = top.string("kind")
+    if file_kind not in VERSIONS or (kind is not None and file_kind != kind):
+        top.fail("kind", f"must be {kind or ' or '.join(KINDS)!r}, got {file_kind!r}")
+    version = top.get("version")
+    if not isinstance(version, int) or isinstance(version, bool) or version < 1:
+        top.fail("version", f"must be a positive integer, got {version!r}")
+    if version > VERSIONS[file_kind]:
+        top.fail(
+            "version",
+            f"is {version}, newer than this program reads ({VERSIONS[file_kind]}): upgrade",
+        )
+    top.string("rig_id")
+    return validate(file_kind, top.get("data"), where=f"{where}: data")
