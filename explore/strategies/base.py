@@ -61,6 +61,12 @@ class Strategy(ABC):
 # name -> "module:Class"
 STRATEGIES: dict[str, str] = {
     "rpe": "explore.strategies.rpe:RandomParameterExploration",
+    "rge-efr": "explore.strategies.goal_exploration:EngineeredGoalExploration",
+    "mge-efr": "explore.strategies.goal_exploration:ModularEngineeredGoalExploration",
+    "rge-vae": "explore.strategies.goal_exploration:LatentGoalExploration",
+    "rge-betavae": "explore.strategies.goal_exploration:BetaLatentGoalExploration",
+    "mge-vae": "explore.strategies.goal_exploration:ModularLatentGoalExploration",
+    "mge-betavae": "explore.strategies.goal_exploration:ModularBetaLatentGoalExploration",
 }
 
 

@@ -1,0 +1,40 @@
+"""``ergo experiment``: a tiny campaign writes its summary and resumes without re-running."""
+
+from __future__ import annotations
+
+import csv
+
+from explore.cli import main
+
+
+def _summary(out):
+    with open(out / "summary.csv", newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def test_tiny_campaign_writes_summary_and_skips_finished_runs(tmp_path, capsys):
+    out = tmp_path / "campaign"
+    args = ["experiment", "--strategies", "rpe,rge-efr", "--seeds", "0", "--episodes", "20",
+            "--out", str(out), "--option", "bootstrap=10", "--no-progress"]  # fmt: skip
+    assert main(args) == 0
+    rows = _summary(out)
+    assert [r["strategy"] for r in rows] == ["rpe", "rge-efr"]
+    assert all(int(r["episodes"]) == 20 and float(r["cells_mean"]) >= 1 for r in rows)
+    assert "rge-efr" in capsys.readouterr().out
+    hist = out / "rge-efr" / "seed-0" / "history.bin"
+    stamp = hist.stat().st_mtime_ns, hist.stat().st_size
+    assert main(args) == 0  # finished: skipped
+    assert (hist.stat().st_mtime_ns, hist.stat().st_size) == stamp
+    # an unfinished run is resumed (extended), the finished one is not touched
+    assert main([*args[:6], "25", *args[7:]]) == 0
+    rows = _summary(out)
+    assert all(int(r["episodes"]) == 25 for r in rows)
+
+
+def test_a_vae_strategy_without_a_model_names_the_command(tmp_path, capsys):
+    code = main(["experiment", "--strategies", "rge-vae", "--episodes", "5",
+                 "--out", str(tmp_path / "c"), "--no-progress"])  # fmt: skip
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "ergo vae train" in err and "ergo dataset outcomes" in err and err[-1] == "\n"
+    assert err.count("\n") == 1

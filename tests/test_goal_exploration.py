@@ -1,0 +1,74 @@
+"""Goal exploration on the twin: RGE-EFR runs, and a resumed run replays to the same history."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from explore.cli_experiment import run_one
+from explore.episode import Observation
+from explore.store import RunStore
+from explore.strategies import StrategyError, make_strategy
+
+N, BOOT = 150, 50
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("rge") / "run"
+    run_one(str(out), "rge-efr", {"bootstrap": BOOT}, 5, N, False)
+    return out
+
+
+def test_rge_efr_bootstraps_then_aims_at_goals(reference):
+    recs = RunStore.open(reference).records
+    assert len(recs) == N
+    assert all(r.kind == "random" and len(r.goal) == 0 for r in recs[:BOOT])
+    goal_directed = recs[BOOT:]
+    assert all(
+        r.kind == "explore" and r.module == 0 and r.goal.shape == (3,) for r in goal_directed
+    )
+    assert all(np.all(np.abs(r.theta) <= 1) for r in recs)
+    # goals lie within the bounds of the outcomes seen before them
+    seen = np.array([[np.hypot(*r.ball[:2])] for r in recs[:BOOT]])
+    r_n = (seen - 0.15) / 0.02
+    assert r_n.min() - 1e-9 <= goal_directed[0].goal[0] <= r_n.max() + 1e-9
+
+
+def test_resumed_goal_exploration_replays_to_the_same_history(reference, tmp_path):
+    out = tmp_path / "resumed"
+    run_one(str(out), "rge-efr", {"bootstrap": BOOT}, 5, 100, False)
+    assert len(RunStore.open(out)) == 100
+    run_one(str(out), "rge-efr", {"bootstrap": BOOT}, 5, N, False)  # resumes from the history
+    a, b = RunStore.open(reference).records, RunStore.open(out).records
+    assert len(a) == len(b) == N
+    assert all(x.equals(y) for x, y in zip(a, b, strict=True))
+
+
+def test_strategy_state_is_rebuilt_by_update(reference):
+    recs = RunStore.open(reference).records
+    s1 = make_strategy("mge-efr", bootstrap=BOOT)
+    s2 = make_strategy("mge-efr", bootstrap=BOOT)
+    for r in recs:
+        s1.update(r)
+    for r in recs:
+        s2.update(r)
+    ctx = Observation(ball=recs[-1].ball[:2])
+    for k in range(20):
+        p1 = s1.propose(ctx, np.random.default_rng([1, k]))
+        p2 = s2.propose(ctx, np.random.default_rng([1, k]))
+        assert np.array_equal(p1.theta, p2.theta) and np.array_equal(p1.goal, p2.goal)
+        assert p1.kind == p2.kind and p1.module == p2.module
+    kinds = {s1.propose(ctx, np.random.default_rng([2, k])).kind for k in range(50)}
+    assert kinds == {"explore", "exploit"}
+
+
+def test_bad_options_are_one_line_errors():
+    with pytest.raises(StrategyError, match="unknown option"):
+        make_strategy("rge-efr", bootstap=3)
+    with pytest.raises(StrategyError, match="goals must be"):
+        make_strategy("rge-efr", goals="gaussian")
+    with pytest.raises(StrategyError, match="needs option vae"):
+        make_strategy("rge-vae")

@@ -1,0 +1,99 @@
+"""Engineered goal-space features and MGE module choice by interest."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from explore.goal_spaces import (
+    R_MAX,
+    R_MIN,
+    EngineeredGoalSpace,
+    kl_ranked_modules,
+    polar_features,
+    wrap_safe_features,
+)
+from explore.strategies.interest import ModuleInterest
+
+
+def test_polar_features_normalise_the_ring_to_minus_one_one():
+    xy = np.array([[R_MIN, 0.0], [0.0, R_MAX], [-(R_MIN + R_MAX) / 2, 1e-12], [0.0, -R_MIN]])
+    f = polar_features(xy)
+    np.testing.assert_allclose(f[:, 0], [-1, 1, 0, -1], atol=1e-9)
+    np.testing.assert_allclose(f[:, 1], [0, 0.5, 1, -0.5], atol=1e-9)
+    assert np.all(np.abs(f) <= 1 + 1e-9)
+
+
+def test_wrap_safe_features_are_continuous_across_plus_minus_pi():
+    eps = 1e-6
+    r = 0.15
+    above = np.array([r * np.cos(np.pi - eps), r * np.sin(np.pi - eps)])
+    below = np.array([r * np.cos(-np.pi + eps), r * np.sin(-np.pi + eps)])
+    # the paper's polar angle jumps by ~2 across the negative x axis; the wrap-safe form does not
+    assert abs(polar_features(above)[1] - polar_features(below)[1]) > 1.9
+    assert np.linalg.norm(wrap_safe_features(above) - wrap_safe_features(below)) < 1e-5
+    # and it is continuous all around: small steps in angle give small steps in features
+    t = np.linspace(-np.pi, np.pi, 721)
+    f = wrap_safe_features(np.stack([r * np.cos(t), r * np.sin(t)], axis=1))
+    assert np.max(np.linalg.norm(np.diff(f, axis=0), axis=1)) < 0.01
+
+
+class _Rec:
+    def __init__(self, ball, context_ball, tip=(0.1, 0.0)):
+        self.ball = np.asarray(ball, float)
+        self.context_ball = np.asarray(context_ball, float)
+        self.end_effector = np.array([[0.0, 0.0, 0.0], [*tip, 0.05]])
+
+
+def test_engineered_space_outcomes_contexts_and_modules():
+    space = EngineeredGoalSpace("wrap-safe", hand_module=True)
+    rec = _Rec([0.15, 0.0], [0.0, 0.15], tip=(0.15, -0.3))
+    o = space.outcome(rec)
+    np.testing.assert_allclose(o, [0, 1, 0, 0.5, -1], atol=1e-12)
+    np.testing.assert_allclose(space.context(rec), [0, 0, 1], atol=1e-12)
+    parts = space.module_outcomes(o)
+    assert [len(p) for p in parts] == [3, 2]
+    assert space.outcome(_Rec([np.nan, np.nan], [0.15, 0])) is None
+    rec_no_tip = _Rec([0.15, 0.0], [0.15, 0.0], tip=(np.nan, np.nan))
+    assert space.module_outcomes(space.outcome(rec_no_tip))[1] is None
+    with pytest.raises(ValueError, match="unknown polar form"):
+        EngineeredGoalSpace("cartesian")
+
+
+def test_latent_modules_are_pairs_ranked_by_kl():
+    kl = [0.1, 5.0, 0.2, 3.0, 0.0, 4.0, 0.3, 2.0, 0.05, 1.0]
+    mods = kl_ranked_modules(kl)
+    assert len(mods) == 5
+    assert [list(m) for m in mods[:2]] == [[1, 5], [3, 7]]
+    assert sorted(np.concatenate(mods).tolist()) == list(range(10))
+
+
+def test_module_choice_follows_interest_with_a_random_floor():
+    mi = ModuleInterest([2, 2, 2, 2], random_choice=0.1)
+    rng = np.random.default_rng(0)
+    # no interest yet: uniform
+    np.testing.assert_allclose(mi.probabilities(), 0.25)
+    # module 0 makes progress, module 1 a little, 2 and 3 none
+    for k, c_new in ((0, 0.0), (1, -0.5), (2, -1.0), (3, -1.0)):
+        mi.update(k, np.zeros(2), np.full(2, 1.0), exploit=False, scale=2**0.5)
+        mi.update(k, np.zeros(2), np.zeros(2) if c_new == 0 else np.full(2, -c_new), True, 2**0.5)
+    interest = mi.interests()
+    assert interest[0] == pytest.approx(1.0) and interest[1] == pytest.approx(0.5)
+    assert interest[2] == 0 and interest[3] == 0
+    expected = 0.1 / 4 + 0.9 * interest / interest.sum()
+    np.testing.assert_allclose(mi.probabilities(), expected)
+    n = 20000
+    counts = np.bincount([mi.choose(rng) for _ in range(n)], minlength=4) / n
+    sd = np.sqrt(expected * (1 - expected) / n)
+    assert np.all(np.abs(counts - expected) < 5 * sd)
+    assert counts[2] > 0.02 and counts[3] > 0.02  # the 10% random floor (2.5% each)
+
+
+def test_competence_progress_uses_the_nearest_previous_goal():
+    mi = ModuleInterest([1], window=3)
+    assert mi.update(0, np.array([0.0]), np.array([1.0]), exploit=True, scale=1.0) == 0.0
+    mi.update(0, np.array([5.0]), np.array([5.0]), exploit=False, scale=1.0)
+    # nearest previous goal to 0.2 is 0.0, which reached 1.0: c_old = -0.8; now reached 0.2
+    assert mi.update(0, np.array([0.2]), np.array([0.2]), True, 1.0) == pytest.approx(0.8)
+    assert mi.update(0, np.array([0.2]), None, True, 1.0) == pytest.approx(-1.0)
+    assert mi.interests()[0] == pytest.approx(abs(0.0 + 0.8 - 1.0) / 3)
