@@ -1,0 +1,58 @@
+"""``ergo bus scan --port PORT [--baud B] [--ids ...]``: PING each id, print what answers."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from robot.dynamixel.bus import DynamixelBus, DynamixelError, NoStatusError, PingReply
+from robot.dynamixel.control_table import MODELS
+from robot.dynamixel.protocol import MAX_SERVO_ID
+from robot.errors import BusError
+
+# Slack per PING while scanning, s: a missing id costs this long, so it is short (the FTDI
+# default latency timer of 16 ms plus a little; guess). 253 ids take about 5 s.
+SCAN_LATENCY_S = 0.02
+
+
+def scan(bus: DynamixelBus, ids: list[int]) -> list[PingReply]:
+    """PING each id once (no retries); the servos that answered, in id order."""
+    found = []
+    for sid in ids:
+        try:
+            found.append(bus.ping(sid, retries=0))
+        except NoStatusError:
+            continue
+    return found
+
+
+def format_reply(reply: PingReply) -> str:
+    model = MODELS.get(reply.model_number)
+    name = model.name if model else "unknown model"
+    return f"{reply.id:>3}  {name} (model {reply.model_number})  firmware {reply.firmware}"
+
+
+def scan_cli(args: argparse.Namespace) -> int:
+    """Print one line per servo found; exit 0 if any answered, 1 if none, 2 on a bus error."""
+    ids = list(range(MAX_SERVO_ID + 1)) if not args.ids else list(args.ids)
+    bad = [i for i in ids if not 0 <= i <= MAX_SERVO_ID]
+    if bad:
+        print(f"ergo: error: ids must be in 0..{MAX_SERVO_ID}, got {bad[0]}", file=sys.stderr)
+        return 2
+    baud = int(getattr(args, "baud", 1_000_000))
+    try:
+        with DynamixelBus(args.port, baud, retries=0, latency_s=SCAN_LATENCY_S) as bus:
+            found = scan(bus, ids)
+    except (BusError, DynamixelError) as exc:
+        print(f"ergo: error: {exc}", file=sys.stderr)
+        return 2
+    if not found:
+        print(
+            f"no servo answered on {args.port} at {baud} baud "
+            f"(check power, wiring and the baud rate)"
+        )
+        return 1
+    print(f" id  model  firmware   ({len(found)} on {args.port} at {baud} baud)")
+    for reply in found:
+        print(format_reply(reply))
+    return 0

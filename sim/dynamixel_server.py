@@ -1,0 +1,162 @@
+"""``ergo twin serve --bus dynamixel``: the twin behind a real serial port (a pseudo-terminal)
+speaking Dynamixel Protocol 2.0 as six XL-320, and its overhead camera as an MJPEG stream.
+
+    $ ergo twin serve --bus dynamixel
+    dynamixel bus on /dev/pts/7
+    camera on http://127.0.0.1:41234/stream.mjpg
+
+Any program that drives a real Ergo Jr through a serial port then drives the twin, e.g.
+``ergo bus scan --port /dev/pts/7`` or a ``dynamixel`` rig with ``port: /dev/pts/7`` and
+``camera: http://127.0.0.1:41234/stream.mjpg``. The twin runs in real time
+(``sim.realtime.RealtimeLoop``); faults are injected from the flags (see ``sim/cli.py``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+import os
+import select
+import sys
+import termios
+import threading
+import time
+import tty
+
+from sim.dynamixel_emulator import DEFAULT_OVERLOAD_AFTER_S, DynamixelEmulator, FaultConfig
+
+log = logging.getLogger(__name__)
+
+# How often the serving loop wakes up to check for stop, s (not a protocol figure).
+POLL_S = 0.05
+
+
+class PtyBusServer:
+    """Serves a ``DynamixelEmulator`` on a new pseudo-terminal.
+
+    ``path`` is the slave side to open with pyserial (e.g. ``/dev/pts/7``). The server keeps its
+    own slave descriptor open, so clients may come and go without the pty closing.
+
+    Args:
+        emulator: who answers.
+    """
+
+    def __init__(self, emulator: DynamixelEmulator) -> None:
+        self.emulator = emulator
+        self._master, self._slave = os.openpty()
+        tty.setraw(self._slave, termios.TCSANOW)  # no echo, no line discipline: bytes as sent
+        tty.setraw(self._master, termios.TCSANOW)
+        self.path = os.ttyname(self._slave)
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.bytes_in = 0
+        self.bytes_out = 0
+
+    def serve_forever(self) -> None:
+        """Answer packets until ``stop()`` (call from any thread) or KeyboardInterrupt."""
+        master = self._master
+        while not self._stop.is_set():
+            ready, _, _ = select.select([master], [], [], POLL_S)
+            if not ready:
+                continue
+            try:
+                data = os.read(master, 4096)
+            except OSError:  # EIO when no slave is open on some systems: wait for one
+                time.sleep(POLL_S)
+                continue
+            if not data:
+                continue
+            t0 = time.monotonic()
+            self.bytes_in += len(data)
+            for delay, wire in self.emulator.handle_bytes(data):
+                wait = t0 + delay - time.monotonic()
+                if wait > 0:
+                    time.sleep(wait)
+                os.write(master, wire)
+                self.bytes_out += len(wire)
+
+    def start(self) -> None:
+        """Serve in a daemon thread."""
+        if self._thread is None:
+            self._thread = threading.Thread(
+                target=self.serve_forever, name="dynamixel-pty", daemon=True
+            )
+            self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+
+    def close(self) -> None:
+        self.stop()
+        for fd in (self._master, self._slave):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+
+    def __enter__(self) -> PtyBusServer:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def faults_from_args(args: argparse.Namespace) -> FaultConfig:
+    """The ``--drop-rate --corrupt-rate --delay-ms --overload-servo --seed`` flags."""
+    return FaultConfig(
+        drop_rate=float(getattr(args, "drop_rate", 0.0) or 0.0),
+        corrupt_rate=float(getattr(args, "corrupt_rate", 0.0) or 0.0),
+        extra_delay_s=float(getattr(args, "delay_ms", 0.0) or 0.0) / 1000.0,
+        overload_servo=getattr(args, "overload_servo", None),
+        overload_after_s=float(getattr(args, "overload_after_s", DEFAULT_OVERLOAD_AFTER_S)),
+        seed=int(getattr(args, "seed", 0) or 0),
+    )
+
+
+def serve(args: argparse.Namespace) -> int:
+    """Serve until interrupted; returns the exit code. Prints the pty path and the camera URL
+    (one line each, flushed) so that a parent process can read them."""
+    from sim.realtime import RealtimeLoop
+    from sim.twin import Twin
+
+    try:
+        faults = faults_from_args(args)
+    except ValueError as exc:
+        print(f"ergo: error: {exc}", file=sys.stderr)
+        return 2
+    if faults.overload_servo is not None and not 1 <= faults.overload_servo <= 6:
+        print(
+            f"ergo: error: --overload-servo {faults.overload_servo} is not in 1..6", file=sys.stderr
+        )
+        return 2
+    twin = Twin()
+    emulator = DynamixelEmulator(twin, faults=faults)
+    camera = None
+    with (
+        RealtimeLoop(twin, speed=float(getattr(args, "speed", 1.0))),
+        PtyBusServer(emulator) as server,
+    ):
+        print(f"dynamixel bus on {server.path}", flush=True)
+        if not getattr(args, "no_camera", False):
+            from sim.mjpeg_server import MjpegServer, TwinFrames
+
+            port = int(getattr(args, "camera_port", 0) or 0)
+            camera = MjpegServer(TwinFrames(twin), port=port)
+            try:
+                camera.start()
+            except OSError as exc:
+                print(f"ergo: error: {exc}", file=sys.stderr)
+                return 2
+            print(f"camera on {camera.url}", flush=True)
+        try:
+            while True:
+                time.sleep(1.0)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            if camera is not None:
+                camera.stop()
+    return 0
