@@ -1,0 +1,379 @@
+"""``ergo calibrate camera | arena | joints | show``: make and check the calibration files of a
+rig (``calibration.store``). Heavy imports (OpenCV, robot backends) happen inside commands."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+# --port / --can -> "module:Class" of the arm backend used by ``calibrate joints``.
+ARM_BACKENDS: dict[str, str] = {
+    "port": "robot.dynamixel.arm:DynamixelArm",
+    "can": "robot.canopen.arm:CanArm",
+}
+DEFAULT_VIEWS = 15  # views to collect from a live camera (OpenCV's guide: 10-15, REFERENCE.md)
+MIN_VIEW_SHIFT_PX = 25.0  # a live view is kept only if the corners moved this much (guess)
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("calibrate", help="camera intrinsics, arena plane, joint offsets")
+    cal = p.add_subparsers(dest="calibrate_command", metavar="SUBCOMMAND")
+    cal.required = True
+
+    def common(q: argparse.ArgumentParser) -> None:
+        q.add_argument("--rig", default="default", help="rig id (a folder per rig)")
+        q.add_argument(
+            "--dir",
+            type=Path,
+            default=None,
+            help="calibration root (default $ERGO_CALIBRATION_DIR or "
+            "~/.config/ergo-explore/calibration)",
+        )
+
+    cam = cal.add_parser("camera", help="intrinsics from ChArUco board views")
+    common(cam)
+    src = cam.add_mutually_exclusive_group()
+    src.add_argument("--images", type=Path, help="folder of board images")
+    src.add_argument("--camera", help="live camera: device index or URL")
+    cam.add_argument("--views", type=int, default=DEFAULT_VIEWS, help="live views to collect")
+    cam.add_argument("--max-frames", type=int, default=3000, help="live frames to look at")
+    cam.add_argument("--squares", type=int, nargs=2, default=(7, 5), metavar=("COLS", "ROWS"))
+    cam.add_argument("--square-m", type=float, default=0.030, help="measured square side, m")
+    cam.add_argument("--marker-m", type=float, default=0.022, help="measured marker side, m")
+    cam.add_argument("--dictionary", default="DICT_5X5_100", help="cv2.aruco dictionary")
+    cam.add_argument("--fit-k3", action="store_true", help="also fit the k3 radial term")
+    cam.add_argument("--print-board", type=Path, metavar="OUT.png", help="write the board")
+    cam.add_argument("--dpi", type=float, default=300.0, help="--print-board resolution")
+    cam.set_defaults(func=_camera)
+
+    arena = cal.add_parser("arena", help="arena plane, centre, radius and ball colour")
+    common(arena)
+    asrc = arena.add_mutually_exclusive_group(required=True)
+    asrc.add_argument("--image", type=Path, help="a saved frame of the arena")
+    asrc.add_argument("--camera", help="live camera: device index, URL or video file")
+    arena.add_argument(
+        "--markers",
+        default=None,
+        help='ArUco marker centres "ID:X,Y;ID:X,Y;..." in metres (default: the twin layout)',
+    )
+    arena.add_argument("--marker-size", type=float, default=None, help="marker side, m")
+    arena.add_argument("--dictionary", default="DICT_4X4_50", help="cv2.aruco dictionary")
+    arena.add_argument(
+        "--corners",
+        nargs=4,
+        metavar="U,V",
+        help="instead of markers: four clicked pixels (raw frame) ...",
+    )
+    arena.add_argument(
+        "--corner-xy", nargs=4, metavar="X,Y", help="... and their arena positions, m"
+    )
+    arena.add_argument("--centre", default="0,0", metavar="X,Y", help="arena centre, m")
+    arena.add_argument("--radius", type=float, default=None, help="arena radius, m")
+    arena.add_argument("--ball-pixel", metavar="U,V", help="a pixel on the ball (default: find)")
+    arena.add_argument("--no-ball", action="store_true", help="do not sample the ball's colour")
+    arena.add_argument("--ball-radius", type=float, default=0.03, help="ball radius, m")
+    arena.add_argument(
+        "--fovy",
+        type=float,
+        default=None,
+        help="no camera calibration: assume an ideal pinhole of this vertical FOV, deg",
+    )
+    arena.set_defaults(func=_arena)
+
+    joints = cal.add_parser("joints", help="joint offsets, directions and ranges, by hand")
+    common(joints)
+    bus = joints.add_mutually_exclusive_group(required=True)
+    bus.add_argument("--port", help="Dynamixel serial port, e.g. /dev/ttyUSB0")
+    bus.add_argument("--can", help="python-can bus, e.g. socketcan:can0")
+    joints.add_argument("--baud", type=int, default=1_000_000, help="serial baud rate")
+    joints.add_argument("--model", default="XL-320", help="Dynamixel model")
+    joints.add_argument("--joints", nargs="*", default=None, help="joint names (default all)")
+    joints.set_defaults(func=_joints)
+
+    show = cal.add_parser("show", help="validate and summarise a rig's calibration files")
+    common(show)
+    show.set_defaults(func=_show)
+
+
+def _error(message: str) -> int:
+    print(f"ergo: error: {message}", file=sys.stderr)
+    return 2
+
+
+def _pair(text: str, what: str) -> tuple[float, float]:
+    from calibration.store import CalibrationError
+
+    try:
+        a, b = (float(v) for v in text.split(","))
+    except ValueError:
+        raise CalibrationError(f"bad {what} {text!r}: expected two numbers A,B") from None
+    return a, b
+
+
+def _run(func, args: argparse.Namespace) -> int:
+    from calibration.store import CalibrationError
+    from vision.camera import CameraError
+
+    try:
+        return int(func(args) or 0)
+    except (CalibrationError, CameraError) as exc:
+        return _error(str(exc))
+
+
+# ---- camera ------------------------------------------------------------------------------
+def _camera(args: argparse.Namespace) -> int:
+    return _run(_camera_impl, args)
+
+
+def _camera_impl(args: argparse.Namespace) -> int:
+    import cv2
+
+    from calibration import charuco, store
+
+    spec = charuco.BoardSpec(tuple(args.squares), args.square_m, args.marker_m, args.dictionary)
+    if args.print_board is not None:
+        px_per_m = args.dpi / 0.0254
+        image = spec.image(px_per_m, margin_px=round(spec.square_m * px_per_m))
+        args.print_board.parent.mkdir(parents=True, exist_ok=True)
+        if not cv2.imwrite(str(args.print_board), image):
+            raise store.CalibrationError(f"cannot write {args.print_board}")
+        w, h = spec.size_m
+        print(
+            f"wrote {args.print_board}: {spec.squares[0]}x{spec.squares[1]} squares of "
+            f"{spec.square_m * 1000:g} mm ({w * 1000:g} x {h * 1000:g} mm) at {args.dpi:g} dpi; "
+            "print at 100% and measure a square"
+        )
+        if args.images is None and args.camera is None:
+            return 0
+    if args.images is not None:
+        views, size, missed = charuco.views_from_folder(args.images, spec)
+        if missed:
+            print(f"board not found in {len(missed)} image(s): {', '.join(missed[:10])}")
+    elif args.camera is not None:
+        views, size = _live_views(args, spec)
+    else:
+        raise store.CalibrationError("give --images FOLDER or --camera SOURCE (or --print-board)")
+    result = charuco.calibrate(views, size, fit_k3=args.fit_k3)
+    path = store.save("camera", args.rig, result.to_dict(spec), args.dir)
+    k = result.camera_matrix
+    print(
+        f"camera: {result.n_views} views, RMS reprojection error {result.rms_px:.3f} px; "
+        f"fx {k[0, 0]:.1f} fy {k[1, 1]:.1f} cx {k[0, 2]:.1f} cy {k[1, 2]:.1f} px; "
+        f"dist {', '.join(f'{d:+.4f}' for d in result.dist_coeffs)}"
+    )
+    if result.rms_px > 0.5:
+        print("warning: RMS above 0.5 px: check focus, motion blur and the board's flatness")
+    print(f"saved {path}")
+    return 0
+
+
+def _live_views(args: argparse.Namespace, spec) -> tuple[list, tuple[int, int]]:
+    import numpy as np
+
+    from calibration import charuco
+    from vision.opencv_camera import OpenCVCamera
+
+    views: list = []
+    size = (0, 0)
+    last = None
+    print(f"show the board at {args.views} places and tilts; Ctrl-C to stop early")
+    with OpenCVCamera(args.camera) as cam:
+        for n in range(args.max_frames):
+            if len(views) >= args.views:
+                break
+            image = cam.read().image
+            size = (image.shape[1], image.shape[0])
+            view = charuco.detect_view(image, spec, f"frame{n}")
+            if view is None:
+                continue
+            centre = view.image_points.mean(axis=0)
+            if last is not None and np.linalg.norm(centre - last) < MIN_VIEW_SHIFT_PX:
+                continue
+            last = centre
+            views.append(view)
+            print(f"view {len(views)}/{args.views}: {len(view.image_points)} corners")
+    return views, size
+
+
+# ---- arena -------------------------------------------------------------------------------
+def _arena(args: argparse.Namespace) -> int:
+    return _run(_arena_impl, args)
+
+
+def _read_frame(args: argparse.Namespace):
+    import cv2
+
+    from calibration.store import CalibrationError
+
+    if args.image is not None:
+        image = cv2.imread(str(args.image), cv2.IMREAD_COLOR)
+        if image is None:
+            raise CalibrationError(f"cannot read image {args.image}")
+        return image
+    from vision.cli import open_source
+
+    with open_source(args.camera) as cam:
+        for _ in range(5):  # let auto-exposure settle on a live camera (guess: 5 frames)
+            image = cam.read().image
+    return image
+
+
+def _intrinsics(args: argparse.Namespace, size: tuple[int, int]):
+    import numpy as np
+
+    from calibration import store
+
+    try:
+        data = store.load("camera", args.rig, args.dir)
+    except store.CalibrationError as exc:
+        if args.fovy is None:
+            raise store.CalibrationError(
+                f"{exc}: run `ergo calibrate camera --rig {args.rig}` first, or pass --fovy "
+                "for an ideal pinhole camera"
+            ) from None
+        w, h = size
+        f = (h / 2.0) / math.tan(math.radians(args.fovy) / 2.0)
+        k = np.array([[f, 0.0, (w - 1) / 2.0], [0.0, f, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
+        return k, np.zeros(5), f"ideal pinhole, fovy {args.fovy:g} deg"
+    if tuple(data["image_size"]) != tuple(size):
+        raise store.CalibrationError(
+            f"the camera was calibrated at {data['image_size'][0]}x{data['image_size'][1]}, "
+            f"this frame is {size[0]}x{size[1]}: recalibrate or use the same resolution"
+        )
+    return (
+        np.asarray(data["camera_matrix"], float),
+        np.asarray(data["dist_coeffs"], float),
+        "camera calibration",
+    )
+
+
+def _arena_impl(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from calibration import arena as ar
+    from calibration import store
+
+    image = _read_frame(args)
+    size = (image.shape[1], image.shape[0])
+    k, dist, k_source = _intrinsics(args, size)
+    centre = _pair(args.centre, "--centre")
+    radius = args.radius if args.radius is not None else ar.DEFAULT_RADIUS_M
+    layout = None
+    if args.corners:
+        if not args.corner_xy:
+            raise store.CalibrationError("--corners needs --corner-xy (their arena positions)")
+        px = np.array([_pair(c, "--corners") for c in args.corners])
+        xy = np.array([_pair(c, "--corner-xy") for c in args.corner_xy])
+        fit = ar.arena_from_points(px, xy, k, dist, size, centre, radius)
+        source = "clicked points"
+    else:
+        layout = ar.MarkerLayout(
+            markers=ar.parse_markers(args.markers) if args.markers else dict(ar.DEFAULT_MARKERS),
+            size_m=args.marker_size or ar.DEFAULT_MARKER_SIZE_M,
+            dictionary=args.dictionary,
+        )
+        fit = ar.arena_from_markers(image, layout, k, dist, centre, radius)
+        source = f"{len(layout.markers)} ArUco markers"
+    ranges = None
+    if not args.no_ball:
+        if args.ball_pixel:
+            pixel = _pair(args.ball_pixel, "--ball-pixel")
+        else:
+            pixel = ar.find_saturated_blob(image, fit.model, args.ball_radius)
+        ranges = ar.sample_ball_hsv(image, pixel)
+        xy = ar.ball_position_check(fit.model, pixel, args.ball_radius)
+        print(
+            f"ball at pixel ({pixel[0]:.0f}, {pixel[1]:.0f}) -> arena ({xy[0] * 1000:+.1f}, "
+            f"{xy[1] * 1000:+.1f}) mm; colour ranges "
+            + " + ".join(f"{r.lower}-{r.upper}" for r in ranges)
+        )
+    payload = ar.arena_payload(fit, ranges, args.ball_radius, f"{source}; {k_source}", layout)
+    path = store.save("arena", args.rig, payload, args.dir)
+    pos = fit.model.camera_position
+    height = f"camera {pos[2] * 1000:.0f} mm above the floor" if pos is not None else ""
+    print(
+        f"arena from {source} ({fit.points_used} points): residual max "
+        f"{fit.residuals_mm.max():.2f} mm; {height}"
+    )
+    print(f"saved {path}")
+    return 0
+
+
+# ---- joints ------------------------------------------------------------------------------
+def _joints(args: argparse.Namespace) -> int:
+    return _run(_joints_impl, args)
+
+
+def _make_arm(args: argparse.Namespace):
+    import importlib
+
+    key = "port" if args.port else "can"
+    module_name, cls_name = ARM_BACKENDS[key].split(":")
+    cls = getattr(importlib.import_module(module_name), cls_name)
+    if key == "port":
+        # Raw servo angles: directions +1 and offsets 0, so that the result applies directly.
+        return cls(args.port, baud=args.baud, model=args.model)
+    return cls(args.can)
+
+
+def _joints_impl(args: argparse.Namespace) -> int:
+    from calibration import store
+    from calibration.joints import calibrate_joints, interactive_prompt
+
+    store.check_rig_id(args.rig)
+    arm = _make_arm(args)
+    print("torque goes off: hold the arm. Move each joint as asked, then press Enter.")
+    with arm:
+        result = calibrate_joints(arm, interactive_prompt, joints=args.joints)
+    path = store.save("joints", args.rig, result.to_dict(), args.dir)
+    for i, name in enumerate(result.names):
+        print(
+            f"{name}: offset {math.degrees(result.offsets[i]):+.1f} deg, direction "
+            f"{int(result.directions[i]):+d}, range {math.degrees(result.lower[i]):+.0f}.."
+            f"{math.degrees(result.upper[i]):+.0f} deg"
+        )
+    print(f"saved {path}")
+    return 0
+
+
+# ---- show --------------------------------------------------------------------------------
+def _show(args: argparse.Namespace) -> int:
+    return _run(_show_impl, args)
+
+
+def _summary(kind: str, data: dict[str, Any]) -> str:
+    if kind == "camera":
+        k = data["camera_matrix"]
+        return (
+            f"{data['image_size'][0]}x{data['image_size'][1]}, {data['n_views']} views, RMS "
+            f"{data['rms_px']:.3f} px, fx {k[0][0]:.1f} fy {k[1][1]:.1f}"
+        )
+    if kind == "arena":
+        c = data["centre"]
+        return (
+            f"centre ({c[0]:+.3f}, {c[1]:+.3f}) m, radius {data['radius']:.3f} m, ball ranges "
+            f"{data.get('ball_hsv_ranges')}"
+        )
+    return f"joints {', '.join(data['names'])}"
+
+
+def _show_impl(args: argparse.Namespace) -> int:
+    from calibration import store
+
+    bad = 0
+    for kind in store.KINDS:
+        path = store.calibration_path(kind, args.rig, args.dir)
+        if not path.exists():
+            print(f"{kind}: none ({path})")
+            continue
+        try:
+            data = store.load_file(path, kind)
+        except store.CalibrationError as exc:
+            print(f"{kind}: INVALID: {exc}")
+            bad += 1
+            continue
+        print(f"{kind}: {_summary(kind, data)} ({path})")
+    return 1 if bad else 0

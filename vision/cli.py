@@ -1,0 +1,168 @@
+"""``ergo find-cameras`` (device indices that open, with their resolution) and ``ergo track``
+(the ball tracker on any camera source, one line per frame).
+
+Imports nothing heavy at module level: OpenCV is imported inside the commands.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+MAX_INDEX = 10  # device indices probed by default (/dev/video0..9): a convention
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    find = sub.add_parser("find-cameras", help="list camera device indices that open")
+    find.add_argument("--max-index", type=int, default=MAX_INDEX, help="probe 0..N-1")
+    find.set_defaults(func=_find_cameras)
+
+    track = sub.add_parser("track", help="track the ball, one line per frame")
+    track.add_argument(
+        "--camera",
+        required=True,
+        help="device index, video file, folder of images, or stream URL (127.0.0.1 only)",
+    )
+    track.add_argument("--frames", type=int, default=None, help="stop after N frames")
+    track.add_argument(
+        "--arena",
+        type=Path,
+        default=None,
+        help="arena calibration file (from `ergo calibrate arena`): positions in metres",
+    )
+    track.add_argument(
+        "--hsv",
+        action="append",
+        default=None,
+        metavar="H,S,V:H,S,V",
+        help="ball colour range lower:upper (repeat for red); default: the arena file's or the "
+        "original rig's",
+    )
+    track.add_argument("--width", type=int, default=None, help="requested width, px")
+    track.add_argument("--height", type=int, default=None, help="requested height, px")
+    track.add_argument("--fps", type=float, default=None, help="requested frame rate")
+    track.add_argument("--fourcc", default=None, help="requested pixel format, e.g. MJPG")
+    track.set_defaults(func=_track)
+
+
+def _error(message: str) -> int:
+    print(f"ergo: error: {message}", file=sys.stderr)
+    return 2
+
+
+def open_source(
+    source: str,
+    width: int | None = None,
+    height: int | None = None,
+    fps: float | None = None,
+    fourcc: str | None = None,
+):
+    """A camera for a source string: a folder or a video file replays every frame
+    (``FileCamera``); a device index or a URL is a live ``OpenCVCamera``."""
+    from vision.file_camera import FileCamera
+    from vision.opencv_camera import OpenCVCamera
+
+    if not source.isdigit() and "://" not in source:
+        return FileCamera(source, fps=fps)
+    return OpenCVCamera(source, width=width, height=height, fps=fps, fourcc=fourcc)
+
+
+def parse_hsv(text: str):
+    """``"27,45,70:38,255,255"`` -> ``HSVRange``."""
+    from vision.tracker import HSVRange
+
+    try:
+        lo, hi = text.split(":")
+        return HSVRange(tuple(int(v) for v in lo.split(",")), tuple(int(v) for v in hi.split(",")))
+    except ValueError as exc:
+        raise ValueError(f"bad --hsv {text!r} ({exc}): expected H,S,V:H,S,V") from None
+
+
+def load_arena_file(path: Path):
+    """(ArenaModel, list of HSVRange or None, ball radius m or None) from an arena file.
+
+    The file's format belongs to ``calibration.store`` (which validates it when writing);
+    only its ``data`` object is read here, since ``vision`` imports no other package.
+    """
+    from vision.rectify import ArenaModel
+    from vision.tracker import HSVRange
+
+    try:
+        data = json.loads(path.read_text())["data"]
+        model = ArenaModel.from_dict(data)
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ValueError(f"cannot read arena calibration {path}: {exc}") from None
+    ranges = data.get("ball_hsv_ranges")
+    ranges = [HSVRange.from_list(r) for r in ranges] if ranges else None
+    return model, ranges, data.get("ball_radius_m")
+
+
+def _find_cameras(args: argparse.Namespace) -> int:
+    import cv2
+
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+    found = 0
+    for index in range(args.max_index):
+        cap = cv2.VideoCapture(index, cv2.CAP_V4L2)
+        if not cap.isOpened():
+            cap = cv2.VideoCapture(index)
+        if not cap.isOpened():
+            continue
+        ok, image = cap.read()
+        fps = cap.get(cv2.CAP_PROP_FPS)
+        backend = cap.getBackendName()
+        cap.release()
+        if ok and image is not None:
+            h, w = image.shape[:2]
+            print(f"{index}: {w}x{h} at {fps:g} fps ({backend})")
+        else:
+            print(f"{index}: opens but delivers no frame ({backend})")
+        found += 1
+    if not found:
+        print(f"no camera among device indices 0..{args.max_index - 1}")
+    return 0
+
+
+def _track(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    from vision.camera import CameraError
+    from vision.tracker import BallTracker, TrackerConfig
+
+    arena, ranges, ball_radius = None, None, None
+    try:
+        if args.arena is not None:
+            arena, ranges, ball_radius = load_arena_file(args.arena)
+        if args.hsv:
+            ranges = [parse_hsv(h) for h in args.hsv]
+    except ValueError as exc:
+        return _error(str(exc))
+    config = TrackerConfig()
+    if ranges:
+        config = dataclasses.replace(config, ranges=tuple(ranges))
+    if ball_radius:
+        config = dataclasses.replace(config, ball_radius_m=float(ball_radius))
+    tracker = BallTracker(config, arena)
+    camera = open_source(args.camera, args.width, args.height, args.fps, args.fourcc)
+    n = 0
+    try:
+        with camera:
+            for warning in getattr(camera, "settings_warnings", []):
+                print(f"warning: camera ignored a setting: {warning}", file=sys.stderr)
+            while args.frames is None or n < args.frames:
+                try:
+                    frame = camera.read()
+                except CameraError as exc:
+                    if n and "end of replay" in str(exc):
+                        break
+                    raise
+                obs = tracker.track(frame.image)
+                print(f"frame {n} t={frame.timestamp:.3f}s: {obs.describe()}", flush=True)
+                n += 1
+    except CameraError as exc:
+        return _error(str(exc))
+    except KeyboardInterrupt:
+        pass
+    return 0
