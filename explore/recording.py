@@ -63,6 +63,28 @@ JPEG_QUALITY = 80  # 64x64 frames: about 2 kB each
 DEFAULT_RATE_HZ = 40.0
 DEFAULT_RESET_S = 1.0
 
+# Entity paths every recording has (the documented layout; docs/viewing.md).
+STATIC_ENTITIES = ("arena/bounds", "arm/bounds")
+EPISODE_ENTITIES = (
+    "arena/ball",
+    "arena/ball_track",
+    "arena/end_effector_final",
+    "strategy/module",
+    "strategy/kind",
+    "stats/ball_cells",
+    "stats/ee_cells",
+    "stats/moved_fraction",
+    "stats/settle_s",
+    "stats/episode_wall_s",
+)
+STRIDE_ENTITIES = (
+    "arena/end_effector",
+    "arm/end_effector",
+    "camera/outcome",
+    *(f"joints/{name}" for name in JOINT_NAMES),
+)
+GOAL_ENTITIES = ("goal/target", "goal/reached", "goal/error")
+
 MOVED_COLOR = (255, 140, 0)
 STILL_COLOR = (150, 150, 150)
 EE_COLOR = (60, 120, 220)
@@ -471,7 +493,7 @@ def make_recorder(
     """
     mode = getattr(args, "rerun", "save")
     url = getattr(args, "rerun_connect", None)
-    stride = int(getattr(args, "rerun_stride", 1) or 1)
+    stride = int(getattr(args, "rerun_stride", 1))
     if stride < 1:
         from explore.cli import CliError
 

@@ -180,13 +180,18 @@ def coverage_figure(run: RunData, out: Path) -> Path:
     fig, ax = _new_figure()
     f = run.final()
     ax.plot(
-        run.episode + 1, run.ball_cells, lw=2, label=f"ball cells (final {f['ball_cells']:.0f})"
+        run.episode + 1,
+        run.ball_cells,
+        lw=2,
+        drawstyle="steps-post",
+        label=f"ball cells (final {f['ball_cells']:.0f})",
     )
     ax.plot(
         run.episode + 1,
         run.ee_cells,
         lw=1.5,
         alpha=0.8,
+        drawstyle="steps-post",
         label=f"end-effector cells (final {f['ee_cells']:.0f})",
     )
     moved = run.episode[run.ball_moved] + 1
@@ -209,11 +214,19 @@ def coverage_figure(run: RunData, out: Path) -> Path:
     return _save(fig, out)
 
 
-def _scatter_pair(axes: Any, ee: np.ndarray, ball: np.ndarray, moved: np.ndarray, c: Any) -> Any:
-    """End-effector (left) and ball (right) scatter; returns the last mappable."""
+def _scatter_pair(
+    axes: Any, ee: np.ndarray, ball: np.ndarray, moved: np.ndarray, episode: np.ndarray | None
+) -> Any:
+    """End-effector (left) and ball (right) scatter, coloured by ``episode`` (N,) when given,
+    else one colour; returns the end-effector scatter (for a colour bar)."""
     ax_ee, ax_ball = axes
     _square(ax_ee, REACH_HALF_WIDTH, f"end-effector grid (+-{REACH_HALF_WIDTH} m)")
-    sc = ax_ee.scatter(ee[:, 0], ee[:, 1], c=c, s=6, cmap="viridis")
+    colour: dict[str, Any] = {"color": "tab:blue"}
+    colour_moved: dict[str, Any] = {"color": "tab:orange"}
+    if episode is not None:
+        colour = {"c": episode, "cmap": "viridis"}
+        colour_moved = {"c": episode[np.all(np.isfinite(ball), axis=1) & moved], "cmap": "viridis"}
+    sc = ax_ee.scatter(ee[:, 0], ee[:, 1], s=6, **colour)
     _square(ax_ball, ARENA_HALF_WIDTH, f"arena square (+-{ARENA_HALF_WIDTH} m)")
     ok = np.all(np.isfinite(ball), axis=1)
     ax_ball.scatter(
@@ -223,9 +236,8 @@ def _scatter_pair(axes: Any, ee: np.ndarray, ball: np.ndarray, moved: np.ndarray
         ball[ok & moved, 0],
         ball[ok & moved, 1],
         s=14,
-        c=np.asarray(c)[ok & moved] if np.ndim(c) else c,
-        cmap="viridis",
         label="ball moved",
+        **colour_moved,
     )
     return sc
 
@@ -332,7 +344,7 @@ def campaign_scatter_figure(groups: dict[str, list[RunData]], out: Path) -> Path
         ee = np.concatenate([r.ee_final for r in runs])
         ball = np.concatenate([r.ball for r in runs])
         moved = np.concatenate([r.ball_moved for r in runs])
-        _scatter_pair((axes[0][c], axes[1][c]), ee, ball, moved, "tab:blue")
+        _scatter_pair((axes[0][c], axes[1][c]), ee, ball, moved, None)
         axes[0][c].set_title(f"{name}: end-effector ({len(runs)} seeds)", fontsize=10)
         axes[1][c].set_title(f"{name}: ball ({int(moved.sum())} moved)", fontsize=10)
     axes[1][0].legend(loc="upper right", fontsize=7)

@@ -1,0 +1,96 @@
+"""``ergo report``: figures of the documented size and the summaries, for a run and a campaign."""
+
+from __future__ import annotations
+
+import dataclasses
+import shutil
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from explore.cli import main
+from explore.report import FIG_PX, goals_figure, load_run, markdown_to_html
+
+N = 10
+
+
+def png_size(path: Path) -> tuple[int, int]:
+    """(width, height) from a PNG's IHDR chunk."""
+    head = path.read_bytes()[:24]
+    assert head[:8] == b"\x89PNG\r\n\x1a\n", f"{path} is not a PNG"
+    return struct.unpack(">II", head[16:24])
+
+
+def explore(out: Path, seed: int) -> Path:
+    args = ["explore", "--episodes", str(N), "--seed", str(seed), "--out", str(out)]
+    assert main([*args, "--no-progress"]) == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory) -> list[Path]:
+    base = tmp_path_factory.mktemp("runs")
+    return [explore(base / f"seed-{s}", s) for s in (0, 1)]
+
+
+def test_report_of_a_run_writes_figures_and_summaries(runs, tmp_path, capsys):
+    out = tmp_path / "report"
+    assert main(["report", str(runs[0]), "--out", str(out)]) == 0
+    printed = capsys.readouterr().out.split()
+    for name in ("coverage.png", "scatter.png"):
+        path = out / name
+        assert str(path) in printed
+        assert png_size(path) == FIG_PX
+        assert path.stat().st_size > 10_000  # something drawn, not a blank canvas
+    assert not (out / "goals.png").exists()  # RPE sets no goals
+    md = (out / "summary.md").read_text()
+    assert "ball cells reached" in md and f"| episodes | {N} (planned {N}) |" in md
+    assert "episodes that moved the ball" in md and "![coverage](coverage.png)" in md
+    page = (out / "summary.html").read_text()
+    assert page.count("data:image/png;base64,") == 2 and "<table>" in page
+
+
+def test_report_default_folder_is_inside_the_run(runs):
+    assert main(["report", str(runs[1])]) == 0
+    assert (runs[1] / "report" / "summary.html").is_file()
+
+
+def test_campaign_report_has_mean_and_spread(runs, tmp_path):
+    campaign = tmp_path / "campaign"
+    for strategy in ("rpe", "rpe-copy"):
+        for run in runs:
+            shutil.copytree(
+                run, campaign / strategy / run.name, ignore=shutil.ignore_patterns("report")
+            )
+    out = tmp_path / "creport"
+    assert main(["report", str(campaign), "--out", str(out)]) == 0
+    for name in ("campaign_coverage.png", "campaign_scatter.png"):
+        assert png_size(out / name) == FIG_PX
+        assert (out / name).stat().st_size > 10_000
+    md = (out / "summary.md").read_text()
+    assert "| rpe | 2 |" in md and "| rpe-copy | 2 |" in md
+    assert "+-" in md  # mean +- std over seeds
+
+
+def test_report_refuses_a_folder_without_runs(tmp_path):
+    assert main(["report", str(tmp_path)]) == 2
+
+
+def test_goals_figure_when_goals_exist(runs, tmp_path):
+    run = load_run(runs[0])
+    rng = np.random.default_rng(0)
+    run = dataclasses.replace(run, goals=rng.normal(size=(run.n, 4)))
+    run.reached = run.goals + 0.1
+    path = goals_figure(run, tmp_path / "goals.png")
+    assert path is not None and png_size(path) == FIG_PX
+
+
+def test_markdown_to_html_escapes_and_embeds(tmp_path):
+    (tmp_path / "a.png").write_bytes(b"\x89PNG fake")
+    page = markdown_to_html(
+        "# T <x>\n\n| a | b |\n|---|---|\n| 1 | `c` |\n\n![a](a.png)\n", tmp_path
+    )
+    assert "<h1>T &lt;x&gt;</h1>" in page and "<code>c</code>" in page
+    assert "data:image/png;base64," in page
