@@ -98,6 +98,7 @@ class EmulatedServo:
         for name, value in model.defaults.items():
             self.poke(name, value)
         self.poke("id", servo_id)
+        self.poke("position", self.peek("goal"))  # at rest on its goal until physics says
         self.hardware_error = 0
         self.torque_on_since: float | None = None
 

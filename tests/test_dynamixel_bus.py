@@ -6,10 +6,13 @@ fake serial port backed by the packet logic of the emulator (no twin, no pty).""
 from __future__ import annotations
 
 import argparse
+import os
 
+import numpy as np
 import pytest
 
 from robot.dynamixel import protocol as proto
+from robot.dynamixel.arm import DynamixelArm
 from robot.dynamixel.bus import (
     CorruptPacketError,
     DynamixelBus,
@@ -17,7 +20,7 @@ from robot.dynamixel.bus import (
     NoStatusError,
     ServoError,
 )
-from robot.dynamixel.control_table import XL320
+from robot.dynamixel.control_table import XL320, XL330_M288
 from robot.dynamixel.scan import scan, scan_cli
 from robot.errors import BusError
 from sim.dynamixel_emulator import DynamixelEmulator, EmulatedSerial, FaultConfig
@@ -146,3 +149,40 @@ def test_scan_cli_reports_a_bad_port_in_one_line(capsys) -> None:
     assert scan_cli(args) == 2
     err = capsys.readouterr().err
     assert err.startswith("ergo: error: cannot open Dynamixel bus") and err.count("\n") == 1
+
+
+def test_busy_port_is_a_one_line_bus_error() -> None:
+    master, slave = os.openpty()
+    try:
+        path = os.ttyname(slave)
+        with DynamixelBus(path, retries=0), pytest.raises(BusError, match="port busy"):
+            DynamixelBus(path, retries=0).open()
+    finally:
+        os.close(master)
+        os.close(slave)
+
+
+def test_arm_refuses_servos_of_another_model() -> None:
+    emulator = DynamixelEmulator(None, model=XL330_M288)
+    arm = DynamixelArm("fake", connection=EmulatedSerial(emulator), latency_s=LATENCY_S)
+    with pytest.raises(BusError, match=r"model 1200 \(XL-330-M288\), expected 350"):
+        arm.connect()
+
+
+def test_arm_on_xl330_servos_round_trips_positions() -> None:
+    emulator = DynamixelEmulator(None, model=XL330_M288)
+    arm = DynamixelArm(
+        "fake",
+        model="XL-330-M288",
+        directions=[1, -1, 1, -1, 1, 1],
+        connection=EmulatedSerial(emulator),
+        latency_s=LATENCY_S,
+    )
+    with arm:
+        arm.set_torque(True)
+        q = np.array([0.1, -0.1, 0.12, 0.05, -0.02, 0.0])
+        sent = arm.command(q)
+        state = arm.read()  # the fake is an ideal servo: present = goal
+        assert np.allclose(state.positions, sent, atol=XL330_M288.rad_per_step)
+        assert np.all(np.isfinite(state.loads))
+    assert not any(emulator.torque_states().values())
