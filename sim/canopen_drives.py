@@ -72,6 +72,9 @@ def _is_pdo_or_sync(can_id: int) -> bool:
 class _FaultyNetwork(canopen.Network):
     """A canopen network that loses a fraction of PDO/SYNC frames, both ways."""
 
+    # Longest blocking receive of the notifier thread, s (bounds the time ``stop`` takes).
+    NOTIFIER_CYCLE = 0.1
+
     def __init__(self, bus: Any, drop_rate: float, seed: int) -> None:
         super().__init__(bus)
         self.drop_rate = drop_rate

@@ -58,6 +58,9 @@ PDO_NOT_VALID = 1 << 31  # COB-ID bit 31 of a PDO communication parameter (CiA 3
 TRANS_SYNC = 1
 NMT_START_ALL, NMT_PRE_OPERATIONAL = 0x01, 0x80
 HEARTBEAT_OPERATIONAL = 5  # NMT state byte in a heartbeat (CiA 301)
+# Longest blocking receive of the bus's notifier thread, s: bounds how long disconnect waits
+# for it (canopen's default is 1 s; the thread wakes at once when a frame arrives).
+NOTIFIER_CYCLE_S = 0.1
 
 
 class CanNodeError(BusError):
@@ -154,6 +157,8 @@ class CanArm(Arm):
         self._io_owner: int | None = None
         self._pending_off = False
         self._stop_reason: str | None = None
+        self._trip_lock = threading.Lock()
+        self._tripping = threading.Event()
         self._started = False
         self._wake = threading.Event()
         self._closing = threading.Event()
@@ -169,6 +174,7 @@ class CanArm(Arm):
 
         bus = open_bus(self.bus_spec)
         self.network = canopen.Network(bus)
+        self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE_S
         try:
             with self._io():
                 self.network.connect()
@@ -417,18 +423,29 @@ class CanArm(Arm):
         return None
 
     def _trip(self, reason: str) -> None:
-        if self._stop_reason is not None:
-            return
-        self._stop_reason = reason
-        log.error("%s", reason)
-        self._emergency_torque_off()
+        """Stop: torque off on every node, then record the reason. A thread that calls
+        ``_check`` meanwhile waits for the torque off, so ``SafetyStop`` is only ever raised
+        once the drives were told."""
+        with self._trip_lock:
+            if self._stop_reason is not None or self._tripping.is_set():
+                return
+            self._tripping.set()
+        try:
+            log.error("%s", reason)
+            self._emergency_torque_off()
+        finally:
+            self._stop_reason = reason
+            self._tripping.clear()
 
     def _check(self) -> None:
         """Raise ``SafetyStop`` if the arm was stopped (or should be now)."""
-        if self._stop_reason is None:
+        if self._stop_reason is None and not self._tripping.is_set():
             reason = self._health()
             if reason is not None:
                 self._trip(reason)
+        deadline = time.monotonic() + self.config.state_timeout_s + 1.0
+        while self._tripping.is_set() and time.monotonic() < deadline:
+            time.sleep(0.001)  # another thread is turning torque off
         if self._stop_reason is not None:
             raise SafetyStop(self._stop_reason)
 
@@ -515,49 +532,53 @@ class CanArm(Arm):
             self._drive_to(State.SWITCHED_ON)
 
     def _drive_to(self, target: State) -> None:
-        """Walk every node to ``target`` through the controlword in RPDO1, one transition per
-        cycle. Torque off gives up quietly on nodes that are lost or in fault (their torque is
-        off already) and never raises for them."""
+        """Walk every node to ``target`` (OPERATION_ENABLED or SWITCHED_ON) through the
+        controlword in RPDO1, one transition per cycle, holding the joints where they are.
+
+        Torque off tells every node at once (lost ones too) in the first cycle, then waits
+        for the confirmation of the nodes that can still give one; nodes below SWITCHED_ON or
+        in FAULT already have their torque off and are left there.
+        """
         deadline = time.monotonic() + self.config.state_timeout_s
         with self._io():
             with self._cond:
-                self._target[:] = self._counts  # hold where the joints are
+                self._target[:] = self._counts
+            if target is State.SWITCHED_ON:
+                enabling = (self._cw & 0x8F) == cia402.CW_ENABLE_OPERATION
+                self._cw[enabling] = cia402.CW_DISABLE_OPERATION
+                while True:
+                    self._cycle(send_rpdo=True)
+                    lost = self._lost()
+                    todo = [
+                        i
+                        for i, st in enumerate(self._states())
+                        if st is State.OPERATION_ENABLED and i not in lost
+                    ]
+                    if not todo:
+                        return
+                    if time.monotonic() > deadline:
+                        names = ", ".join(self._who(i) for i in todo)
+                        raise CanNodeError(f"torque off not confirmed by {names}")
             while True:
                 states = self._states()
-                lost = self._lost() if target is State.SWITCHED_ON else set()
                 todo = []
                 for i, st in enumerate(states):
-                    if target is State.SWITCHED_ON and st is not State.OPERATION_ENABLED:
-                        continue  # torque already off (any state below, or fault)
-                    if i in lost:
-                        continue  # cannot be told anything; its own fault reaction applies
                     if st is target:
+                        self._cw[i] = cia402.CW_ENABLE_OPERATION
                         continue
-                    if target is State.OPERATION_ENABLED and st is State.FAULT:
+                    if st is State.FAULT:
                         raise CanNodeError(
                             f"{self._who(i)} is in FAULT: fix the cause, then reset_faults()"
                         )
                     todo.append(i)
-                    cw = (
-                        None
-                        if st is None
-                        else cia402.controlword_towards(st, target, int(self._cw[i]))
-                    )
+                    cw = None if st is None else cia402.controlword_towards(st, target)
                     if cw is not None:
                         self._cw[i] = cw
-                hold = (
-                    cia402.CW_ENABLE_OPERATION
-                    if target is State.OPERATION_ENABLED
-                    else (cia402.CW_DISABLE_OPERATION)
-                )
-                for i, st in enumerate(states):
-                    if i not in todo and st is target:
-                        self._cw[i] = hold
                 if not todo:
                     return
                 if time.monotonic() > deadline:
                     names = ", ".join(
-                        f"{self._who(i)} in {states[i].value if states[i] else 'unknown'}"
+                        f"{self._who(i)} in {states[i].value if states[i] else 'an unknown state'}"
                         for i in todo
                     )
                     raise CanNodeError(f"timeout reaching {target.value!r}: {names}")
