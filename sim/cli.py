@@ -38,6 +38,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     serve.add_argument("--corrupt-rate", type=float, default=0.0, help="fraction corrupted")
     serve.add_argument("--delay-ms", type=float, default=0.0, help="extra reply delay, ms")
     serve.add_argument("--overload-servo", type=int, default=None, help="id that raises alerts")
+    serve.add_argument(
+        "--overload-after", dest="overload_after_s", type=float, default=2.0, metavar="S",
+        help="with --overload-servo: seconds of torque before the alert (default 2)",
+    )  # fmt: skip
     serve.add_argument("--seed", type=int, default=0, help="fault injection seed")
     serve.set_defaults(func=_serve)
 

@@ -401,21 +401,8 @@ class DynamixelEmulator:
 
 
 def set_joint_torques(twin: Twin, mask: np.ndarray) -> None:
-    """Servo power per joint: ``mask`` shape (6,), True = torque on.
-
-    ``Twin.set_torque`` switches all six; for a mixed mask this zeroes the gains of single
-    position actuators the way ``Twin.set_torque`` does for all (uses its private index and
-    gain arrays until the twin offers a per-joint switch).
-    """
-    mask = np.asarray(mask, dtype=bool)
-    with twin.lock:
-        if mask.all() or not mask.any():
-            twin.set_torque(bool(mask.all()))
-            return
-        m = twin.model
-        idx = twin._act_idx
-        m.actuator_gainprm[idx, 0] = np.where(mask, twin._kp, 0.0)
-        m.actuator_biasprm[idx, :3] = np.where(mask[:, None], twin._bias, 0.0)
+    """Servo power per joint: ``mask`` shape (6,), True = torque on."""
+    twin.set_joint_torque(mask)
 
 
 class EmulatedSerial:

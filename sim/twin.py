@@ -107,12 +107,17 @@ class Twin:
             self.data.ctrl[self._act_idx] = q
 
     def set_torque(self, enabled: bool) -> None:
-        """Servo power: off zeroes the position actuators' gains, so the arm is limp (joint
-        damping only), as an XL-320 with torque disabled."""
+        """Servo power of all joints: off zeroes the position actuators' gains, so the arm is
+        limp (joint damping only), as an XL-320 with torque disabled."""
+        self.set_joint_torque(np.full(len(JOINTS), enabled))
+
+    def set_joint_torque(self, mask: np.ndarray) -> None:
+        """Servo power per joint, ``mask`` shape (6,) bool (True = torque on)."""
+        mask = np.asarray(mask, dtype=bool).reshape(len(JOINTS))
         with self.lock:
             m = self.model
-            m.actuator_gainprm[self._act_idx, 0] = self._kp if enabled else 0.0
-            m.actuator_biasprm[self._act_idx, :3] = self._bias if enabled else 0.0
+            m.actuator_gainprm[self._act_idx, 0] = np.where(mask, self._kp, 0.0)
+            m.actuator_biasprm[self._act_idx, :3] = np.where(mask[:, None], self._bias, 0.0)
 
     def torque_enabled(self) -> bool:
         return bool(np.all(self.model.actuator_gainprm[self._act_idx, 0] > 0))
