@@ -71,8 +71,9 @@ class TrackerConfig:
         min_area_px, max_area_px: blob area gates, pixels. None: derived from the expected
             ball radius when an arena model is given (0.35x to 2.5x its disc), else 12 and 1/8
             of the image.
-        min_circularity: area / area of the minimum enclosing circle; a full disc gives about
-            0.9 after rasterisation, a half-hidden ball about 0.5.
+        min_circularity: area / area of the minimum enclosing circle. On twin renders a whole
+            ball scores 0.90-0.95 (lens distortion and noise included), a ball with a sixth
+            hidden under a link about 0.79 (its centroid then 4 mm off), half hidden about 0.4.
         ambiguity_ratio: another ball-coloured blob at least this fraction of the chosen
             blob's area makes the detection ambiguous.
         ball_radius_m: radius of the ball, metres: its centre is this high above the floor.
@@ -84,7 +85,7 @@ class TrackerConfig:
     close_px: int = 5
     min_area_px: float | None = None
     max_area_px: float | None = None
-    min_circularity: float = 0.65
+    min_circularity: float = 0.85
     ambiguity_ratio: float = 0.25
     ball_radius_m: float = BALL_RADIUS_M
     arena_margin_m: float = 0.02
