@@ -138,6 +138,18 @@ def test_heartbeat_loss_stops_the_arm(rig) -> None:
             arm.read()  # stays stopped
 
 
+def test_node_that_stops_answering_sync_stops_the_arm(rig) -> None:
+    _twin, drives, can = rig
+    with make_arm(can) as arm:
+        arm.set_torque(True)
+        drives.drive(5).muted = True  # heartbeat on, but no more TPDOs
+        deadline = time.monotonic() + BOUND_S
+        with pytest.raises(SafetyStop, match=r"node 5 \(m5\) answered no SYNC for"):
+            while time.monotonic() < deadline:
+                arm.command(arm.spec.rest)
+        assert enabled(drives) == []  # the mute node still hears the disable and obeys
+
+
 def test_emcy_following_error_stops_the_arm_and_fault_reset_recovers(rig) -> None:
     _twin, drives, can = rig
     with make_arm(can) as arm:
@@ -219,3 +231,25 @@ def test_scan_lists_the_drives(rig, capsys) -> None:
     assert len(out) == 7  # header + six drives
     assert "0x00020192" in out[3] and "CiA 402 drive" in out[3] and "PRE-OPERATIONAL" in out[3]
     assert out[3].split()[0] == "3" and "0x00000003" in out[3]  # serial number = node id
+
+
+def test_adapter_failure_is_a_clear_bus_error_and_reconnect_works(rig) -> None:
+    from robot.canopen.bus import CanBusError
+
+    _twin, drives, can = rig
+    arm = make_arm(can)
+    arm.connect()
+    arm.network.bus.shutdown()  # the adapter goes away under the arm
+    with pytest.raises(CanBusError, match=f"CAN bus {can} failed") as info:
+        arm.command(arm.spec.rest)
+    assert "\n" not in str(info.value)
+    arm.disconnect()  # never raises, even with the bus gone
+    assert not arm.is_connected
+    with make_arm(can) as again:  # a fresh connection to the same drives
+        again.set_torque(True)
+        assert enabled(drives) == [1, 2, 3, 4, 5, 6]
+
+
+def test_bad_heartbeat_settings() -> None:
+    with pytest.raises(ValueError, match="heartbeat_ms must be >= 1"):
+        CanArm("virtual:x", config=CanArmConfig(heartbeat_ms=0))

@@ -20,7 +20,7 @@ the controlword in RPDO1.
 Safety (on top of the base class's clamping, watchdog and torque off on exit):
 - heartbeat consumer: a node silent for longer than 1.5 x its heartbeat time stops the arm;
 - EMCY messages and drives seen in FAULT stop the arm, with the decoded error;
-- a node that misses ``max_missed`` consecutive TPDOs stops the arm;
+- a node that answers no SYNC for ``max_position_age_s`` stops the arm;
 A stop turns torque off on every node at once (from a monitor thread) and makes the next
 ``read``/``command`` raise ``SafetyStop`` with a one-line reason; ``reset_faults()`` clears it.
 
@@ -41,7 +41,13 @@ import numpy as np
 
 from robot.arm import Arm, JointState
 from robot.canopen import cia402, emcy
-from robot.canopen.bus import DEFAULT_BITRATE, CanBusSpec, open_bus, parse_can_spec
+from robot.canopen.bus import (
+    DEFAULT_BITRATE,
+    CanBusError,
+    CanBusSpec,
+    open_bus,
+    parse_can_spec,
+)
 from robot.canopen.cia402 import State
 from robot.canopen.units import JointScaling
 from robot.errors import BusError, SafetyStop
@@ -81,7 +87,9 @@ class CanArmConfig:
             the brief; CiA 301 leaves the consumer time to the integrator).
         pdo_timeout_s: longest wait for the TPDOs answering a SYNC, s (guess: a 1 Mbit/s bus
             carries the 13 frames of a cycle in about 1.5 ms; an SLCAN pty adds a few ms).
-        max_missed: consecutive cycles without a TPDO from a node before the arm stops (guess).
+        max_position_age_s: the arm stops when a node has answered no SYNC for this long, s
+            (guess: 20 control periods at 40 Hz; the drive itself keeps following its last
+            target meanwhile, and a dead node is caught sooner by its heartbeat).
         state_timeout_s: longest time for the drives to reach a CiA 402 state, s (guess).
         sdo_timeout_s: SDO response timeout, s (canopen's default is 0.3 s).
         following_error_window: if set, written to 0x6065, rad (None: leave the drive's).
@@ -94,7 +102,7 @@ class CanArmConfig:
     heartbeat_ms: int = 100
     heartbeat_factor: float = 1.5
     pdo_timeout_s: float = 0.02
-    max_missed: int = 10
+    max_position_age_s: float = 0.5
     state_timeout_s: float = 1.0
     sdo_timeout_s: float = 0.3
     following_error_window: float | None = None
@@ -132,6 +140,12 @@ class CanArm(Arm):
         self._directions = np.asarray(self.config.directions or (1.0,) * n, dtype=float)
         self._offsets = np.asarray(self.config.offsets or (0.0,) * n, dtype=float)
         JointScaling(np.ones(n), self._directions, self._offsets)  # validate early
+        if self.config.heartbeat_ms < 1 or self.config.heartbeat_factor <= 1.0:
+            raise ValueError(
+                f"heartbeat_ms must be >= 1 and heartbeat_factor > 1 (got "
+                f"{self.config.heartbeat_ms}, {self.config.heartbeat_factor}): a node without "
+                f"a heartbeat cannot be watched"
+            )
         self.scaling: JointScaling | None = None
         self.network: Any = None
         self.nodes: list[Any] = []
@@ -142,7 +156,8 @@ class CanArm(Arm):
         self._rx_seq = np.full(n, -1, dtype=np.int64)
         self._rx_time = np.zeros(n)
         self._velocity = np.zeros(n)
-        self._missed = np.zeros(n, dtype=int)
+        self._missed = np.zeros(n, dtype=int)  # consecutive cycles without a TPDO
+        self._late_since = np.full(n, np.nan)  # first unanswered SYNC, monotonic s
         self._emcy_active: list[tuple[int, int] | None] = [None] * n
         self._heartbeat_at = np.zeros(n)
         self._nmt_state = np.zeros(n, dtype=int)
@@ -169,9 +184,24 @@ class CanArm(Arm):
         return f"node {self.node_ids[i]} ({self.spec.joints[i].name})"
 
     # ---- connect ---------------------------------------------------------------------------
+    def _reset_state(self) -> None:
+        """Forget everything heard on a previous connection."""
+        with self._cond:
+            self._rx_seq[:] = -1
+            self._missed[:] = 0
+            self._late_since[:] = np.nan
+            self._statusword[:] = 0
+            self._velocity[:] = 0.0
+            self._emcy_active = [None] * self.spec.n
+            self._nmt_state[:] = 0
+        self._stop_reason = None
+        self._sync_since_read = False
+        self._pending_off = False
+
     def _connect(self) -> None:
         import canopen
 
+        self._reset_state()
         bus = open_bus(self.bus_spec)
         self.network = canopen.Network(bus)
         self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE_S
@@ -347,6 +377,7 @@ class CanArm(Arm):
             self._rx_seq[i] = self._seq
             self._rx_time[i] = now
             self._missed[i] = 0
+            self._late_since[i] = np.nan
             self._cond.notify_all()
 
     def _on_heartbeat(self, i: int, state: int) -> None:
@@ -415,10 +446,11 @@ class CanArm(Arm):
                         f"safety stop: {self._who(i)} in FAULT (statusword "
                         f"0x{int(self._statusword[i]):04X}); torque off"
                     )
-                if self._missed[i] >= self.config.max_missed:
+                waited = now - self._late_since[i]  # NaN when not waiting
+                if waited > self.config.max_position_age_s:
                     return (
-                        f"safety stop: {self._who(i)} sent no position for "
-                        f"{self._missed[i]} cycles; torque off"
+                        f"safety stop: {self._who(i)} answered no SYNC for {waited:.2f} s "
+                        f"({self._missed[i]} cycles); torque off"
                     )
         return None
 
@@ -459,23 +491,35 @@ class CanArm(Arm):
         return _IoGuard(self)
 
     def _cycle(self, send_rpdo: bool = True) -> None:
-        """RPDO1 to every node (controlword + target), then a SYNC, then wait for the TPDOs."""
-        if send_rpdo:
-            for i, node in enumerate(self.nodes):
-                pdo = node.rpdo.map[1]
-                pdo[0x6040].raw = int(self._cw[i])
-                pdo[0x607A].raw = int(self._target[i])
-                pdo.transmit()
+        """RPDO1 to every node (controlword + target), then a SYNC, then wait for the TPDOs.
+
+        Raises:
+            CanBusError: the adapter failed (unplugged, bus off, serial error).
+        """
+        import can
+
         with self._cond:
             self._seq += 1
             seq = self._seq
-        self.network.sync.transmit()
+        sent_at = time.monotonic()
+        try:
+            if send_rpdo:
+                for i, node in enumerate(self.nodes):
+                    pdo = node.rpdo.map[1]
+                    pdo[0x6040].raw = int(self._cw[i])
+                    pdo[0x607A].raw = int(self._target[i])
+                    pdo.transmit()
+            self.network.sync.transmit()
+        except (can.CanError, OSError) as exc:
+            detail = " ".join(str(exc).split()) or type(exc).__name__
+            raise CanBusError(f"CAN bus {self.bus_spec} failed: {detail}") from exc
         with self._cond:
             self._cond.wait_for(
                 lambda: bool(np.all(self._rx_seq >= seq)), self.config.pdo_timeout_s
             )
             late = self._rx_seq < seq
             self._missed[late] += 1
+            self._late_since[late & np.isnan(self._late_since)] = sent_at
         self._sync_since_read = True
 
     def _require_fresh(self, when: str) -> None:
@@ -619,6 +663,7 @@ class CanArm(Arm):
             with self._cond:
                 self._emcy_active = [None] * self.spec.n
                 self._missed[:] = 0
+                self._late_since[:] = np.nan
         self._stop_reason = None
         self._torque = False
         self._check()
