@@ -1,0 +1,147 @@
+"""Soak: N episodes with ~1% faults; a failed episode is retried by resuming the run.
+
+    python bench/soak.py                        # 2000 episodes over the emulated serial bus
+    python bench/soak.py --episodes 300 --fault-rate 0.01 --bus serial
+    python bench/soak.py --bus arm              # twin rig, faults injected at the Arm level
+
+``--bus serial``: the real ``DynamixelArm`` and ``DynamixelBus`` (retries, typed errors)
+talk Protocol 2.0 to ``sim.dynamixel_emulator.DynamixelEmulator`` driving the twin, through
+its in-process ``EmulatedSerial`` (the byte stream of the pty server without the pty and
+without real-time pacing). Status packets are dropped at rate/2 and corrupted at rate/2.
+``--bus arm``: the ``sim`` rig's arm wrapped in ``explore.faults.FaultyArm`` (reads and sends
+raise at the rate).
+
+When an episode fails after the bus's retries, the rig is disconnected (torque off), and
+the run resumes from its folder with a freshly built rig, as ``ergo explore --resume``
+would. Reported: episodes stored, lost completed episodes (history checked 0..N-1 with
+valid checksums: must be 0), failures and their messages, bus counters, time lost to
+recovery (from the last stored episode before a failure to the first episode of the
+resumed run, less one typical episode), wall time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from explore.clock import TwinClock
+from explore.explorer import Explorer
+from explore.rig import Rig, RigConfig
+from explore.store import RunStore
+from explore.strategies import make_strategy
+from robot.errors import RobotError
+from sim.camera import SimCamera
+from sim.twin import Twin
+
+RENDER = (64, 64)  # the recorded image is 64 x 64; larger renders only cost time
+
+
+def build_rig(bus: str, rate: float, seed: int) -> tuple[Rig, dict]:
+    twin = Twin(render_size=RENDER)
+    if bus == "serial":
+        from robot.dynamixel.arm import DynamixelArm
+        from sim.dynamixel_emulator import DynamixelEmulator, EmulatedSerial, FaultConfig
+
+        emulator = DynamixelEmulator(
+            twin, faults=FaultConfig(drop_rate=rate / 2, corrupt_rate=rate / 2, seed=seed)
+        )
+        # latency 2 ms: the in-process fake answers at once, so a lost reply costs only this
+        arm = DynamixelArm("emulated", connection=EmulatedSerial(emulator), latency_s=0.002)
+        probe = {"bus": arm.bus}
+    else:
+        from explore.faults import FaultyArm
+        from sim.arm import SimArm
+
+        arm = FaultyArm(SimArm(twin), rate=rate, seed=seed)
+        probe = {"faulty": arm}
+    rig = Rig(arm=arm, camera=SimCamera(twin), clock=TwinClock(twin),
+              config=RigConfig(name="sim"), twin=twin)  # fmt: skip
+    return rig, probe
+
+
+def soak(episodes: int, rate: float, bus: str, seed: int, out: Path) -> dict:
+    store = RunStore.create(out, {"soak": True, "bus": bus, "rate": rate, "seed": seed})
+    failures: collections.Counter[str] = collections.Counter()
+    counters: collections.Counter[str] = collections.Counter()
+    last_stored = time.perf_counter()
+    lost_s = 0.0
+    pending_failure_at: float | None = None
+    t0 = time.perf_counter()
+
+    def on_episode(_p: object) -> None:
+        nonlocal last_stored, lost_s, pending_failure_at
+        now = time.perf_counter()
+        if pending_failure_at is not None:
+            # from the last good episode to the end of the first one after recovery, minus
+            # one normal episode: the time recovery cost
+            typical = (now - t0) / max(len(store), 1)
+            lost_s += max(0.0, now - pending_failure_at - typical)
+            pending_failure_at = None
+        last_stored = now
+
+    attempts = 0
+    while len(store) < episodes:
+        attempts += 1
+        if attempts > 50 + episodes // 10:
+            raise SystemExit("soak: too many failures, giving up")
+        # a fresh rig per attempt, as a resumed process opens the port again (the fault
+        # draws get a new seed per attempt so a failure does not replay identically)
+        rig, probe = build_rig(bus, rate, seed * 1000 + attempts)
+        strategy = make_strategy("rpe")
+        explorer = Explorer(rig, strategy, store, seed=seed, on_episode=on_episode)
+        try:
+            explorer.run(episodes)
+        except RobotError as exc:
+            failures[type(exc).__name__ + ": " + str(exc).split(" on ")[0][:90]] += 1
+            pending_failure_at = last_stored
+        finally:
+            if "bus" in probe:
+                counters.update(probe["bus"].counters.as_dict())
+            if "faulty" in probe:
+                counters.update(probe["faulty"].counts)
+            rig.twin.close()
+    wall = time.perf_counter() - t0
+    store.close()
+    check = RunStore.open(out)  # verifies every checksum, cuts nothing
+    ids = [r.episode for r in check]
+    check.close()
+    lost = episodes - len(set(ids)) if ids == sorted(set(ids)) else -1
+    result = {
+        "bus": bus,
+        "fault_rate": rate,
+        "episodes": len(ids),
+        "lost_episodes": lost,
+        "history_ok": ids == list(range(episodes)),
+        "failed_attempts": sum(failures.values()),
+        "failures": dict(failures),
+        "time_lost_to_recovery_s": round(lost_s, 2),
+        "wall_s": round(wall, 1),
+        "episodes_per_s": round(len(ids) / wall, 2),
+    }
+    result["bus_counters" if bus == "serial" else "injected"] = dict(counters)
+    return result
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description="soak with injected faults")
+    ap.add_argument("--episodes", type=int, default=2000)
+    ap.add_argument("--fault-rate", type=float, default=0.01)
+    ap.add_argument("--bus", choices=("serial", "arm"), default="serial")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", type=Path, help="run folder (default: a temporary one)")
+    args = ap.parse_args()
+    out = Path(tempfile.mkdtemp(prefix="soak-")) / "run" if args.out is None else args.out
+    result = soak(args.episodes, args.fault_rate, args.bus, args.seed, out)
+    print(json.dumps(result, indent=2))
+    return 0 if result["lost_episodes"] == 0 and result["history_ok"] else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
