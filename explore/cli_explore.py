@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from explore.cli import CliError
+from explore.recording import add_rerun_arguments
 from explore.rig import RIG_FACTORIES
 
 
@@ -63,6 +64,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="with --out: continue the run there if it exists, else start it",
     )  # fmt: skip
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_rerun_arguments(p)
     p.set_defaults(func=run_explore)
 
 
@@ -133,17 +135,29 @@ def run_explore(args: argparse.Namespace) -> int:
         raise CliError(str(exc)) from exc
 
     from explore.episode import EpisodeConfig
+    from explore.recording import make_recorder
 
     total = int(config["episodes"])
     bar = _progress_bar(total, len(store), disabled=args.no_progress)
+    recorder = make_recorder(args, store.path, records=store.records, config=config)
+
+    def on_episode(p: Any) -> None:
+        if bar:
+            bar.update(p)
+        if recorder:
+            recorder.on_progress(p)
+
     explorer = Explorer(
         rig, strategy, store, seed=int(config["seed"]),
         episode_config=EpisodeConfig(**config.get("episode", {})),
-        on_episode=bar.update if bar else None,
+        on_episode=on_episode,
+        on_record=recorder.on_record if recorder else None,
     )  # fmt: skip
     try:
         explorer.run(total)
     finally:
+        if recorder:
+            recorder.close()
         store.close()
         if bar:
             bar.close()
