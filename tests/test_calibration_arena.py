@@ -1,0 +1,195 @@
+"""Arena calibration on the twin: ArUco markers on the twin's floor (rendered by MuJoCo), the
+homography recovered from the overhead render maps the ball's pixel to the twin's true ball
+position within 5 mm; clicked points; the sampled ball colour; the CLI end to end."""
+
+from __future__ import annotations
+
+import math
+import re
+
+import cv2
+import numpy as np
+import pytest
+
+from calibration import store
+from calibration.arena import (
+    MarkerLayout,
+    arena_from_markers,
+    arena_from_points,
+    ball_position_check,
+    find_saturated_blob,
+    parse_markers,
+    sample_ball_hsv,
+)
+from calibration.store import CalibrationError
+from sim.camera import SimCamera, ideal_camera_matrix, write_marker_scene
+from sim.twin import Twin
+from vision.tracker import BallTracker, TrackerConfig
+
+SIZE = (480, 640)
+LAYOUT = MarkerLayout()  # the default layout is the one written into the test scene
+DIST = (-0.25, 0.08, 0.001, -0.0015, 0.0)
+BALL_R = 0.03  # the twin's ball radius (sim/models/make_scene.py)
+POSITIONS = [
+    (0.15, 0.0),
+    (0.0, 0.16),
+    (-0.13, 0.05),
+    (-0.1, -0.12),
+    (0.11, -0.11),
+    (-0.165, -0.02),
+]
+
+
+@pytest.fixture(scope="module")
+def marker_twin(tmp_path_factory):
+    scene = write_marker_scene(tmp_path_factory.mktemp("scene"), LAYOUT.markers, LAYOUT.size_m)
+    t = Twin(scene=scene, render_size=SIZE)
+    yield t
+    t.close()
+
+
+def ideal_intrinsics(twin: Twin) -> tuple[np.ndarray, np.ndarray]:
+    """From the MJCF camera's fovy and the image size only (no access to the twin's truth)."""
+    fovy = float(twin.model.cam("overhead").fovy[0])
+    return ideal_camera_matrix(fovy, SIZE), np.zeros(5)
+
+
+def ball_errors_mm(twin, cam, model, tracker):
+    """Per position: (error of the true ball pixel mapped through the model, tracker error)."""
+    out = []
+    for xy in POSITIONS:
+        twin.reset(ball_xy=xy)
+        truth = twin.ball_position()
+        px = cam.project(truth[None])[0]
+        mapped = ball_position_check(model, px, BALL_R)
+        obs = tracker.track(cam.read().image)
+        assert obs.seen, obs.reason
+        out.append(
+            (
+                1000 * np.linalg.norm(mapped - truth[:2]),
+                1000 * np.linalg.norm(np.asarray(obs.xy) - truth[:2]),
+            )
+        )
+    return np.array(out)
+
+
+def test_markers_ideal_intrinsics(marker_twin):
+    cam = SimCamera(marker_twin, size=SIZE)
+    cam.connect()
+    marker_twin.reset()
+    k, d = ideal_intrinsics(marker_twin)
+    image = cam.read().image
+    fit = arena_from_markers(image, LAYOUT, k, d)
+    assert fit.points_used == 16 and fit.residuals_mm.max() < 1.0
+    assert fit.model.camera_position == pytest.approx([0.0, 0.0, 0.55], abs=0.003)
+    ranges = sample_ball_hsv(image, find_saturated_blob(image, fit.model, BALL_R))
+    tracker = BallTracker(TrackerConfig(ranges=tuple(ranges)), fit.model)
+    err = ball_errors_mm(marker_twin, cam, fit.model, tracker)
+    # Measured: about 0.1 mm through the homography, under 1 mm for the tracker.
+    assert err[:, 0].max() < 5.0 and err[:, 1].max() < 5.0
+
+
+def test_markers_distorted_noisy_camera(marker_twin):
+    cam = SimCamera(marker_twin, size=SIZE, dist_coeffs=DIST, noise_std=3.0, seed=5)
+    cam.connect()
+    marker_twin.reset()
+    k, d = cam.intrinsics()  # as a camera calibration would have recovered them
+    fit = arena_from_markers(cam.read().image, LAYOUT, k, d)
+    tracker = BallTracker(arena=fit.model)
+    err = ball_errors_mm(marker_twin, cam, fit.model, tracker)
+    assert err[:, 0].max() < 5.0 and err[:, 1].max() < 5.0
+
+
+def test_clicked_points(marker_twin):
+    """Four pixels given by hand (here: the marker centres, read off the frame) and their
+    positions on the floor."""
+    cam = SimCamera(marker_twin, size=SIZE)
+    cam.connect()
+    k, d = ideal_intrinsics(marker_twin)
+    xy = np.array([LAYOUT.markers[i] for i in range(4)])
+    # A click is good to about a pixel.
+    px = cam.project(np.column_stack([xy, np.zeros(4)])) + np.array(
+        [[0.4, -0.3], [-0.5, 0.2], [0.3, 0.5], [-0.2, -0.4]]
+    )
+    fit = arena_from_points(px, xy, k, d, (SIZE[1], SIZE[0]))
+    err = ball_errors_mm(marker_twin, cam, fit.model, BallTracker(arena=fit.model))
+    assert err.max() < 5.0
+    with pytest.raises(CalibrationError, match=">= 4 points"):
+        arena_from_points(px[:3], xy[:3], k, d, (SIZE[1], SIZE[0]))
+
+
+def test_missing_markers_refused(marker_twin):
+    cam = SimCamera(marker_twin, size=SIZE)
+    cam.connect()
+    k, d = ideal_intrinsics(marker_twin)
+    layout = MarkerLayout({7: (0.0, 0.0), 8: (0.1, 0.1), 9: (0.2, 0.0), 10: (0.0, 0.2)})
+    with pytest.raises(CalibrationError, match=r"found 0 of the arena markers.*\[7, 8, 9, 10\]"):
+        arena_from_markers(cam.read().image, layout, k, d)
+    # A marker whose stated position is grossly wrong shows up in the residuals. (A homography
+    # absorbs part of a small error: 2 cm on one marker leaves only 1.6 mm of residual.)
+    wrong = MarkerLayout({**LAYOUT.markers, 1: (0.10, 0.19)})
+    with pytest.raises(CalibrationError, match="disagree with the plane fit"):
+        arena_from_markers(cam.read().image, wrong, k, d)
+
+
+def test_parse_markers():
+    assert parse_markers("0:-0.19,0.19; 1:0.19,0.19") == {0: (-0.19, 0.19), 1: (0.19, 0.19)}
+    with pytest.raises(CalibrationError, match="ID:X,Y"):
+        parse_markers("0:1")
+
+
+def test_cli_arena_then_track(marker_twin, tmp_path, capsys):
+    from explore.cli import main
+
+    cam = SimCamera(marker_twin, size=SIZE)
+    cam.connect()
+    marker_twin.reset(ball_xy=(0.15, 0.0))
+    frame = tmp_path / "arena.png"
+    cv2.imwrite(str(frame), cam.read().image)
+    caldir = tmp_path / "cal"
+    rc = main(
+        [
+            "calibrate",
+            "arena",
+            "--rig",
+            "twin",
+            "--dir",
+            str(caldir),
+            "--image",
+            str(frame),
+            "--fovy",
+            "45",
+        ]
+    )
+    out = capsys.readouterr()
+    assert rc == 0, out.err
+    assert "residual max" in out.out and "saved" in out.out
+    data = store.load("arena", "twin", caldir)
+    assert data["ball_hsv_ranges"] and data["camera_position"][2] == pytest.approx(0.55, abs=0.01)
+
+    # Without intrinsics or --fovy: a one-line error.
+    rc = main(["calibrate", "arena", "--rig", "other", "--dir", str(caldir), "--image", str(frame)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "ergo calibrate camera" in err and err.count("\n") == 1
+
+    # Track a replayed folder of frames with that calibration.
+    shots = tmp_path / "shots"
+    shots.mkdir()
+    truths = []
+    for i, xy in enumerate([(0.0, -0.15), (-0.12, 0.09)]):
+        marker_twin.reset(ball_xy=xy)
+        truths.append(marker_twin.ball_position()[:2])
+        cv2.imwrite(str(shots / f"{i}.png"), cam.read().image)
+    rc = main(["track", "--camera", str(shots), "--arena", str(caldir / "twin" / "arena.json")])
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert rc == 0 and len(lines) == 2
+    for line, truth in zip(lines, truths, strict=True):
+        m = re.search(r"arena \(([-+\d.]+), ([-+\d.]+)\) mm", line)
+        assert m, line
+        got = np.array([float(m.group(1)), float(m.group(2))]) / 1000
+        assert np.linalg.norm(got - truth) < 0.005
+
+    rc = main(["calibrate", "show", "--rig", "twin", "--dir", str(caldir)])
+    out = capsys.readouterr().out
+    assert rc == 0 and "arena: centre" in out and "camera: none" in out
+    assert math.isfinite(data["residual_max_mm"])

@@ -1,0 +1,160 @@
+"""Camera intrinsics from synthetic ChArUco views: a known camera (intrinsics + distortion)
+renders the board at known poses; the calibration must recover it. Refusals: too few views,
+views that do not cover the image, views without tilt."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from calibration import charuco, store
+from calibration.charuco import BoardSpec, calibrate, detect_view
+from calibration.store import CalibrationError
+from calibration.synthetic import look_at_pose, random_views, render_plane_view
+from vision.rectify import undistort_points
+
+SIZE = (480, 640)  # (height, width)
+K_TRUE = np.array([[610.0, 0.0, 322.0], [0.0, 605.0, 236.0], [0.0, 0.0, 1.0]])
+D_TRUE = np.array([-0.21, 0.09, 0.0012, -0.0009, 0.0])  # webcam-like (made up), k3 = 0
+PX_PER_M = 4000.0  # board texture resolution (0.25 mm per texel)
+MARGIN = 120  # white paper around the board, texels
+
+
+@pytest.fixture(scope="module")
+def spec():
+    return BoardSpec()
+
+
+@pytest.fixture(scope="module")
+def board_image(spec):
+    return spec.image(PX_PER_M, margin_px=MARGIN)
+
+
+def render(board_image, rvec, tvec, rng, noise=2.0):
+    img = render_plane_view(
+        board_image, PX_PER_M, K_TRUE, D_TRUE, rvec, tvec, SIZE, origin_px=(MARGIN, MARGIN)
+    )
+    return np.clip(img + rng.normal(0.0, noise, img.shape), 0, 255).astype(np.uint8)
+
+
+@pytest.fixture(scope="module")
+def views(spec, board_image):
+    rng = np.random.default_rng(7)
+    out, images = [], []
+    for i, (rvec, tvec) in enumerate(random_views(spec.size_m, 12, seed=2)):
+        img = render(board_image, rvec, tvec, rng)
+        v = detect_view(img, spec, f"view{i}")
+        if v is not None:
+            out.append(v)
+            images.append(img)
+    return out, images
+
+
+def test_board_points_match_the_generated_image(spec):
+    """The board image and matchImagePoints agree on where the corners are (OpenCV 5 layout)."""
+    img = spec.image(PX_PER_M)
+    v = detect_view(img, spec)
+    assert v is not None and v.object_points.shape[1] == 3 and v.image_points.shape[1] == 2
+    assert len(v.object_points) == (spec.squares[0] - 1) * (spec.squares[1] - 1)
+    np.testing.assert_allclose(v.object_points[:, :2] * PX_PER_M - 0.5, v.image_points, atol=0.05)
+
+
+def test_intrinsics_recovered(views):
+    vs, _ = views
+    assert len(vs) >= 10
+    res = calibrate(vs, (SIZE[1], SIZE[0]))
+    assert res.rms_px < 0.5  # measured about 0.07 px
+    k = res.camera_matrix
+    # Stated tolerances: focal lengths within 0.5 %, principal point within 3 px, k1 within
+    # 0.01, and the undistortion of every pixel within 1 px of the true camera's.
+    assert k[0, 0] == pytest.approx(K_TRUE[0, 0], rel=0.005)
+    assert k[1, 1] == pytest.approx(K_TRUE[1, 1], rel=0.005)
+    assert abs(k[0, 2] - K_TRUE[0, 2]) < 3.0 and abs(k[1, 2] - K_TRUE[1, 2]) < 3.0
+    assert res.dist_coeffs[0] == pytest.approx(D_TRUE[0], abs=0.01)
+    grid = np.array([[u, v] for u in np.linspace(0, 639, 17) for v in np.linspace(0, 479, 13)])
+    diff = undistort_points(grid, K_TRUE, D_TRUE) - undistort_points(grid, k, res.dist_coeffs)
+    assert np.max(np.linalg.norm(diff, axis=1)) < 1.0
+
+
+def test_too_few_views_refused(views):
+    vs, _ = views
+    with pytest.raises(CalibrationError, match=r"only 7 usable board views \(need >= 8"):
+        calibrate(vs[:7], (SIZE[1], SIZE[0]))
+
+
+def test_poorly_spread_views_refused(spec, board_image):
+    """Ten views of the board in the middle of the image, square on: refused for coverage."""
+    rng = np.random.default_rng(1)
+    w, h = spec.size_m
+    vs = []
+    for i in range(10):
+        centre = np.array([w / 2, h / 2, 0.0])
+        rvec, tvec = look_at_pose(centre, centre + np.array((0.002 * i, 0.0, -0.45)), roll=0.01 * i)
+        v = detect_view(render(board_image, rvec, tvec, rng), spec, str(i))
+        assert v is not None
+        vs.append(v)
+    with pytest.raises(CalibrationError, match="cover only"):
+        calibrate(vs, (SIZE[1], SIZE[0]))
+    # Spread out but never tilted: refused too (focal length unobservable).
+    orig = charuco.MIN_COVERED_CELLS
+    try:
+        charuco.MIN_COVERED_CELLS = 1
+        with pytest.raises(CalibrationError, match="tilted"):
+            calibrate(vs, (SIZE[1], SIZE[0]))
+    finally:
+        charuco.MIN_COVERED_CELLS = orig
+
+
+def test_cli_from_folder_and_print_board(views, tmp_path, capsys):
+    from explore.cli import main
+
+    _, images = views
+    folder = tmp_path / "shots"
+    folder.mkdir()
+    for i, img in enumerate(images):
+        cv2.imwrite(str(folder / f"{i:02d}.png"), img)
+    board = tmp_path / "board.png"
+    rc = main(
+        [
+            "calibrate",
+            "camera",
+            "--rig",
+            "bench",
+            "--dir",
+            str(tmp_path / "cal"),
+            "--images",
+            str(folder),
+            "--print-board",
+            str(board),
+        ]
+    )
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    assert "RMS reprojection error" in out and "saved" in out
+    data = store.load("camera", "bench", tmp_path / "cal")
+    assert data["rms_px"] < 0.5 and data["n_views"] == len(images)
+    # 300 dpi: the board (210 x 150 mm) plus a one-square margin, within rounding.
+    h, w = cv2.imread(str(board)).shape[:2]
+    assert abs(h - (0.15 + 0.06) * 300 / 0.0254) < 2 and abs(w - (0.21 + 0.06) * 300 / 0.0254) < 2
+    # Too few views: a one-line error, exit code 2, and the good file is kept.
+    few = tmp_path / "few"
+    few.mkdir()
+    for i, img in enumerate(images[:3]):
+        cv2.imwrite(str(few / f"{i}.png"), img)
+    before = (tmp_path / "cal" / "bench" / "camera.json").read_text()
+    rc = main(
+        [
+            "calibrate",
+            "camera",
+            "--rig",
+            "bench",
+            "--dir",
+            str(tmp_path / "cal"),
+            "--images",
+            str(few),
+        ]
+    )
+    err = capsys.readouterr().err
+    assert rc == 2 and "only 3 usable board views" in err and err.count("\n") == 1
+    assert (tmp_path / "cal" / "bench" / "camera.json").read_text() == before
