@@ -37,7 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     common(cam)
     src = cam.add_mutually_exclusive_group()
     src.add_argument("--images", type=Path, help="folder of board images")
-    src.add_argument("--camera", help="live camera: device index or URL")
+    src.add_argument("--camera", help="live camera (device index or URL) or a recorded video")
     cam.add_argument("--views", type=int, default=DEFAULT_VIEWS, help="live views to collect")
     cam.add_argument("--max-frames", type=int, default=3000, help="live frames to look at")
     cam.add_argument("--squares", type=int, nargs=2, default=(7, 5), metavar=("COLS", "ROWS"))
@@ -68,9 +68,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="instead of markers: four clicked pixels (raw frame) ...",
     )
     arena.add_argument(
-        "--corner-xy", nargs=4, metavar="X,Y", help="... and their arena positions, m"
+        "--corner-xy",
+        metavar="X,Y;X,Y;X,Y;X,Y",
+        help="... and their arena positions, m (write --corner-xy=... when it starts with -)",
     )
-    arena.add_argument("--centre", default="0,0", metavar="X,Y", help="arena centre, m")
+    arena.add_argument(
+        "--centre", default="0,0", metavar="X,Y", help="arena centre, m (--centre=-0.1,0)"
+    )
     arena.add_argument("--radius", type=float, default=None, help="arena radius, m")
     arena.add_argument("--ball-pixel", metavar="U,V", help="a pixel on the ball (default: find)")
     arena.add_argument("--no-ball", action="store_true", help="do not sample the ball's colour")
@@ -174,17 +178,23 @@ def _live_views(args: argparse.Namespace, spec) -> tuple[list, tuple[int, int]]:
     import numpy as np
 
     from calibration import charuco
-    from vision.opencv_camera import OpenCVCamera
+    from vision.camera import CameraError
+    from vision.cli import open_source
 
     views: list = []
     size = (0, 0)
     last = None
     print(f"show the board at {args.views} places and tilts; Ctrl-C to stop early")
-    with OpenCVCamera(args.camera) as cam:
+    with open_source(args.camera) as cam:
         for n in range(args.max_frames):
             if len(views) >= args.views:
                 break
-            image = cam.read().image
+            try:
+                image = cam.read().image
+            except CameraError as exc:
+                if "end of replay" in str(exc):  # a recorded video: use what it had
+                    break
+                raise
             size = (image.shape[1], image.shape[0])
             view = charuco.detect_view(image, spec, f"frame{n}")
             if view is None:
@@ -266,7 +276,11 @@ def _arena_impl(args: argparse.Namespace) -> int:
         if not args.corner_xy:
             raise store.CalibrationError("--corners needs --corner-xy (their arena positions)")
         px = np.array([_pair(c, "--corners") for c in args.corners])
-        xy = np.array([_pair(c, "--corner-xy") for c in args.corner_xy])
+        xy = np.array([_pair(c, "--corner-xy") for c in args.corner_xy.replace(";", " ").split()])
+        if len(xy) != len(px):
+            raise store.CalibrationError(
+                f"--corner-xy has {len(xy)} positions for {len(px)} --corners pixels"
+            )
         fit = ar.arena_from_points(px, xy, k, dist, size, centre, radius)
         source = "clicked points"
     else:

@@ -189,6 +189,32 @@ def test_cli_arena_then_track(marker_twin, tmp_path, capsys):
         got = np.array([float(m.group(1)), float(m.group(2))]) / 1000
         assert np.linalg.norm(got - truth) < 0.005
 
+    # Clicked corners on the command line (the marker centres, as read off the saved frame).
+    xy = np.array([LAYOUT.markers[i] for i in range(4)])
+    px = cam.project(np.column_stack([xy, np.zeros(4)]))
+    rc = main(
+        [
+            "calibrate",
+            "arena",
+            "--rig",
+            "clicked",
+            "--dir",
+            str(caldir),
+            "--image",
+            str(frame),
+            "--fovy",
+            "45",
+            "--no-ball",
+            "--corners",
+            *[f"{u:.1f},{v:.1f}" for u, v in px],
+            "--corner-xy=" + ";".join(f"{x},{y}" for x, y in xy),
+        ]
+    )
+    out = capsys.readouterr()
+    assert rc == 0, out.err
+    assert "from clicked points (4 points)" in out.out
+    assert "ball_hsv_ranges" not in store.load("arena", "clicked", caldir)
+
     rc = main(["calibrate", "show", "--rig", "twin", "--dir", str(caldir)])
     out = capsys.readouterr().out
     assert rc == 0 and "arena: centre" in out and "camera: none" in out

@@ -158,3 +158,33 @@ def test_cli_from_folder_and_print_board(views, tmp_path, capsys):
     err = capsys.readouterr().err
     assert rc == 2 and "only 3 usable board views" in err and err.count("\n") == 1
     assert (tmp_path / "cal" / "bench" / "camera.json").read_text() == before
+
+
+def test_cli_from_recorded_video(views, tmp_path, capsys):
+    """``--camera`` with a recorded video replays every frame (lossless FFV1 here)."""
+    from explore.cli import main
+
+    _, images = views
+    path = tmp_path / "board.mkv"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"FFV1"), 10.0, (SIZE[1], SIZE[0]))
+    assert writer.isOpened()
+    for img in images:
+        writer.write(cv2.cvtColor(img, cv2.COLOR_GRAY2BGR) if img.ndim == 2 else img)
+    writer.release()
+    rc = main(
+        [
+            "calibrate",
+            "camera",
+            "--rig",
+            "vid",
+            "--dir",
+            str(tmp_path),
+            "--camera",
+            str(path),
+            "--views",
+            "20",
+        ]
+    )
+    out = capsys.readouterr()
+    assert rc == 0, out.err
+    assert store.load("camera", "vid", tmp_path)["rms_px"] < 0.5
