@@ -108,15 +108,25 @@ class EpisodeRunner:
             clock.advance(self.dt)
 
     def observe(self, render: bool = True) -> Observation:
-        """Locate the ball (twin ground truth for now) and optionally take a frame."""
-        twin = self.rig.twin
-        ball = twin.ball_position()[:2] if twin is not None else np.full(2, np.nan)
+        """Locate the ball and optionally keep the frame.
+
+        With a ball locator (the tracker) a frame is always taken; without one (the twin),
+        the twin's ground truth is used and a frame is rendered only if ``render``.
+        """
+        rig = self.rig
+        if rig.ball_locator is None and not render:
+            return Observation(ball=self._true_ball())
+        frame = rig.camera.read().image
+        ball = self._true_ball() if rig.ball_locator is None else rig.ball_locator(frame)
         if not render:
             return Observation(ball=ball)
-        frame = self.rig.camera.read().image
         return Observation(
             ball=ball, image=square_observation(frame, self.config.obs_size), frame=frame
         )
+
+    def _true_ball(self) -> np.ndarray:
+        twin = self.rig.twin
+        return twin.ball_position()[:2] if twin is not None else np.full(2, np.nan)
 
     def play(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Play the DMP of ``theta`` (48,) at the control rate.
@@ -139,14 +149,27 @@ class EpisodeRunner:
         return sent, measured, ee
 
     def settle(self) -> float:
-        """Wait until the ball is still (twin: true speed; hardware: fixed ``settle_max_s``)."""
+        """Wait until the ball is still; returns the time waited, s.
+
+        Twin: its true ball speed. Real rigs: the tracked position between two frames
+        ``settle_check_s`` apart (a ball not seen in both counts as still moving, up to the
+        ``settle_max_s`` cap, as the original waited and re-observed).
+        """
         cfg, clock, twin = self.config, self.rig.clock, self.rig.twin
+        locator = self.rig.ball_locator if twin is None else None
+        previous = locator(self.rig.camera.read().image) if locator is not None else None
         waited = 0.0
         while waited < cfg.settle_max_s:
             if twin is not None and twin.ball_speed() < cfg.settle_speed:
                 break
             clock.advance(cfg.settle_check_s)
             waited += cfg.settle_check_s
+            if locator is not None:
+                here = locator(self.rig.camera.read().image)
+                step = float(np.linalg.norm(here - previous))  # NaN if either is unseen
+                if step / cfg.settle_check_s < cfg.settle_speed:
+                    break
+                previous = here
         return waited
 
     # ---- the whole episode -----------------------------------------------------------------

@@ -8,8 +8,11 @@ an unconnected ``Rig``.
 from __future__ import annotations
 
 import importlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
+
+import numpy as np
 
 from explore.clock import Clock
 from robot.arm import Arm
@@ -44,13 +47,17 @@ class RigConfig:
 
 @dataclass
 class Rig:
-    """Everything an episode needs. ``twin`` is the MuJoCo twin for simulated rigs, else None."""
+    """Everything an episode needs. ``twin`` is the MuJoCo twin for simulated rigs, else None.
+    ``ball_locator`` finds the ball in camera frames (the tracker); a rig needs one unless it
+    is the twin, whose ground truth is used then."""
 
     arm: Arm
     camera: Camera
     clock: Clock
     config: RigConfig
     twin: Any = None
+    #: frame (H, W, 3) BGR -> ball (x, y) m or NaN; None on the twin = its ground truth
+    ball_locator: Callable[[np.ndarray], np.ndarray] | None = None
 
     def connect(self) -> None:
         self.camera.connect()

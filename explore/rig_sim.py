@@ -2,17 +2,26 @@
 
 from __future__ import annotations
 
+from explore.ball import tracker_locator, twin_arena_model
 from explore.clock import TwinClock
-from explore.rig import Rig, RigConfig
+from explore.rig import Rig, RigConfig, RigError
 from sim.arm import SimArm
 from sim.camera import SimCamera
 from sim.twin import Twin
 
 
 def make_sim_rig(config: RigConfig) -> Rig:
-    """Options: ``render_size`` [h, w] of the overhead frame (default 240 x 240)."""
+    """Options: ``render_size`` [h, w] of the overhead frame (default 240 x 240); ``ball``:
+    ``truth`` (default: the twin's ground truth) or ``tracker`` (the ball tracker on the
+    overhead frames, as on a real rig, with the camera's exact arena model)."""
     size = tuple(config.options.get("render_size", (240, 240)))
+    ball = config.options.get("ball", "truth")
+    if ball not in ("truth", "tracker"):
+        raise RigError(f"rig option ball={ball!r}: expected 'truth' or 'tracker'")
     twin = Twin(render_size=size)  # type: ignore[arg-type]
+    camera = SimCamera(twin)
+    locator = tracker_locator(twin_arena_model(camera)) if ball == "tracker" else None
     return Rig(
-        arm=SimArm(twin), camera=SimCamera(twin), clock=TwinClock(twin), config=config, twin=twin
-    )
+        arm=SimArm(twin), camera=camera, clock=TwinClock(twin), config=config, twin=twin,
+        ball_locator=locator,
+    )  # fmt: skip
