@@ -58,13 +58,41 @@ def calibrated_locator(rig_id: str, directory: str | None = None) -> BallLocator
     missing or invalid.
     """
     from calibration.store import load
+
+    return locator_from_calibration(load("arena", rig_id, directory))
+
+
+def locator_from_calibration(data: dict[str, Any]) -> BallLocator:
+    """The tracker from an ``arena`` calibration's data (its model and ball colour ranges)."""
     from vision.rectify import ArenaModel
     from vision.tracker import HSVRange, TrackerConfig
 
-    data = load("arena", rig_id, directory)
     arena = ArenaModel.from_dict(data)
     config = None
     if data.get("ball_hsv_ranges"):
         ranges = tuple(HSVRange.from_list(r) for r in data["ball_hsv_ranges"])
         config = TrackerConfig(ranges=ranges, ball_radius_m=float(data.get("ball_radius_m", 0.03)))
     return tracker_locator(arena, config)
+
+
+def rig_ball_locator(config: Any) -> BallLocator | None:
+    """The tracker for a physical rig from its arena calibration (found by ``rig_id``, or the
+    file named by the rig option ``arena_calibration``). Without one, warns once and returns
+    None: ball positions are then recorded as unknown (NaN), never guessed."""
+    import logging
+
+    from calibration.store import CalibrationError
+
+    try:
+        path = config.options.get("arena_calibration")
+        if path:
+            from calibration.store import load_file
+
+            return locator_from_calibration(load_file(path, "arena"))
+        return calibrated_locator(config.rig_id)
+    except (CalibrationError, FileNotFoundError) as exc:
+        logging.getLogger(__name__).warning(
+            "no ball tracking for rig %r (%s): run 'ergo calibrate arena --rig-id %s'",
+            config.rig_id, exc, config.rig_id,
+        )  # fmt: skip
+        return None

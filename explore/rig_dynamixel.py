@@ -16,6 +16,7 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
+from explore.ball import rig_ball_locator
 from explore.clock import RealClock
 from explore.rig import Rig, RigConfig, RigError
 
@@ -60,4 +61,7 @@ def make_dynamixel_rig(config: RigConfig) -> Rig:
         )
     except (ValueError, KeyError, TypeError) as exc:
         raise RigError(f"dynamixel rig: {exc}") from exc
-    return Rig(arm=arm, camera=_camera(options), clock=RealClock(), config=config, twin=None)
+    return Rig(
+        arm=arm, camera=_camera(options), clock=RealClock(), config=config, twin=None,
+        ball_locator=rig_ball_locator(config),
+    )  # fmt: skip
