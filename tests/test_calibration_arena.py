@@ -219,3 +219,33 @@ def test_cli_arena_then_track(marker_twin, tmp_path, capsys):
     out = capsys.readouterr().out
     assert rc == 0 and "arena: centre" in out and "camera: none" in out
     assert math.isfinite(data["residual_max_mm"])
+
+
+def test_full_chain_charuco_then_markers_then_tracker(marker_twin):
+    """Intrinsics calibrated from synthetic ChArUco views of the twin's (distorted) camera,
+    then the arena from the twin's render, then the tracker: within 5 mm (measured < 1 mm)."""
+    from calibration.charuco import BoardSpec, calibrate, detect_view
+    from calibration.synthetic import random_views, render_plane_view
+
+    cam = SimCamera(marker_twin, size=SIZE, dist_coeffs=DIST, noise_std=3.0, seed=2)
+    cam.connect()
+    k_true, d_true = cam.intrinsics()
+    spec = BoardSpec()
+    ppm, margin = 4000.0, 120
+    board = spec.image(ppm, margin_px=margin)
+    rng = np.random.default_rng(0)
+    views = []
+    for rvec, tvec in random_views(spec.size_m, 12, seed=3):
+        img = render_plane_view(
+            board, ppm, k_true, d_true, rvec, tvec, SIZE, (96), 2, (margin,) * 2
+        )
+        img = np.clip(img + rng.normal(0.0, 2.0, img.shape), 0, 255).astype(np.uint8)
+        view = detect_view(img, spec)
+        if view is not None:
+            views.append(view)
+    intr = calibrate(views, (SIZE[1], SIZE[0]))
+    assert intr.rms_px < 0.5
+    marker_twin.reset()
+    fit = arena_from_markers(cam.read().image, LAYOUT, intr.camera_matrix, intr.dist_coeffs)
+    err = ball_errors_mm(marker_twin, cam, fit.model, BallTracker(arena=fit.model))
+    assert err.max() < 5.0
