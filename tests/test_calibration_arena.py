@@ -237,7 +237,7 @@ def test_full_chain_charuco_then_markers_then_tracker(marker_twin):
     views = []
     for rvec, tvec in random_views(spec.size_m, 12, seed=3):
         img = render_plane_view(
-            board, ppm, k_true, d_true, rvec, tvec, SIZE, (96), 2, (margin,) * 2
+            board, ppm, k_true, d_true, rvec, tvec, SIZE, origin_px=(margin, margin)
         )
         img = np.clip(img + rng.normal(0.0, 2.0, img.shape), 0, 255).astype(np.uint8)
         view = detect_view(img, spec)
