@@ -1,0 +1,123 @@
+"""The VAE: shapes, learning on a tiny dataset, save/load, resumable training, the CLI."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from vision.vae import Vae, VaeConfig, VaeError, load_vae, to_tensor
+from vision.vae_train import TrainConfig, train_vae
+
+torch.set_num_threads(1)
+
+
+def tiny_images(n: int = 32, seed: int = 0) -> np.ndarray:
+    """Dark images (n, 64, 64, 3) BGR with one bright square at a random place."""
+    rng = np.random.default_rng(seed)
+    images = np.full((n, 64, 64, 3), 20, dtype=np.uint8)
+    for img, (x, y) in zip(images, rng.integers(4, 48, (n, 2)), strict=True):
+        img[y : y + 12, x : x + 12] = (0, 200, 255)  # BGR: orange
+    return images
+
+
+def test_shapes_and_bgr_to_rgb():
+    vae = Vae()
+    images = tiny_images(4)
+    x = to_tensor(images)
+    assert x.shape == (4, 3, 64, 64) and float(x.min()) >= 0 and float(x.max()) <= 1
+    assert float(x[0, 0].max()) == 1.0  # RGB index 0 is red (the square is B=0, G=200, R=255)
+    assert float(x[0, 2].max()) == pytest.approx(20 / 255)  # blue: background only
+    logits, mu, logvar = vae(x)
+    assert logits.shape == (4, 3, 64, 64) and mu.shape == logvar.shape == (4, 10)
+    assert vae.encode_bgr(images).shape == (4, 10)
+    assert vae.decode_bgr(np.zeros((2, 10))).shape == (2, 64, 64, 3)
+    with pytest.raises(VaeError, match="expected"):
+        to_tensor(np.zeros((2, 32, 32, 3), dtype=np.uint8))
+    with pytest.raises(VaeError, match="uint8"):
+        to_tensor(np.zeros((2, 64, 64, 3)))
+
+
+def test_to_tensor_converts_bgr_to_rgb():
+    img = np.zeros((1, 64, 64, 3), dtype=np.uint8)
+    img[..., 0] = 255  # blue in BGR
+    x = to_tensor(img)
+    assert float(x[0, 2].mean()) == 1.0 and float(x[0, 0].mean()) == 0.0
+
+
+def test_loss_decreases_on_a_tiny_dataset(tmp_path):
+    images = tiny_images(32)
+    cfg = TrainConfig(iterations=40, batch=16, checkpoint_every=40, threads=1)
+    vae0 = Vae(VaeConfig())
+    torch.manual_seed(0)
+    with torch.no_grad():
+        before = float(vae0.loss(to_tensor(images))["loss"])
+    vae = train_vae(images, tmp_path / "m", VaeConfig(), cfg, progress=False)
+    vae.train()
+    torch.manual_seed(0)
+    with torch.no_grad():
+        after = float(vae.loss(to_tensor(images))["loss"])
+    assert after < 0.6 * before
+    assert len(vae.config.kl_per_latent) == 10
+
+
+def test_capacity_loss_and_beta():
+    vae = Vae(VaeConfig(beta=4.0, capacity=5.0, capacity_iterations=100))
+    x = to_tensor(tiny_images(4))
+    with torch.no_grad():
+        torch.manual_seed(1)
+        t0 = vae.loss(x, iteration=0)
+        torch.manual_seed(1)
+        t1 = vae.loss(x, iteration=100)
+    total0 = float(t0["recon"]) + 4 * abs(float(t0["kl"]))
+    total1 = float(t1["recon"]) + 4 * abs(float(t1["kl"]) - 5.0)
+    assert float(t0["loss"]) == pytest.approx(total0, rel=1e-6)
+    assert float(t1["loss"]) == pytest.approx(total1, rel=1e-6)
+    assert float(t1["kl"]) == pytest.approx(float(t0["kl"]))  # same noise, same KL
+
+
+def test_save_load_round_trip_gives_identical_encodings(tmp_path):
+    vae = Vae(VaeConfig(beta=2.0))
+    vae.config.kl_per_latent = list(np.arange(10.0))
+    vae.save(tmp_path / "m")
+    back = load_vae(tmp_path / "m" / "vae.pt")
+    images = tiny_images(8)
+    assert np.array_equal(vae.encode_bgr(images), back.encode_bgr(images))
+    assert back.config.beta == 2.0 and back.config.kl_per_latent == list(np.arange(10.0))
+    with pytest.raises(VaeError, match="not found"):
+        load_vae(tmp_path / "nothing")
+
+
+def test_resumed_training_equals_uninterrupted_training(tmp_path):
+    images = tiny_images(24)
+
+    def cfg(iterations: int) -> TrainConfig:
+        return TrainConfig(iterations=iterations, batch=8, threads=1, checkpoint_every=6)
+
+    straight = train_vae(images, tmp_path / "a", VaeConfig(), cfg(12), progress=False)
+    train_vae(images, tmp_path / "b", VaeConfig(), cfg(6), progress=False)
+    resumed = train_vae(images, tmp_path / "b", VaeConfig(), cfg(12), progress=False)
+    for (k, a), (_, b) in zip(
+        straight.state_dict().items(), resumed.state_dict().items(), strict=True
+    ):
+        assert torch.equal(a, b), k
+    log = (tmp_path / "b" / "train_log.csv").read_text().splitlines()
+    assert (
+        log[0] == "iteration,loss,recon,kl" and len(log) == 1 + 4
+    )  # its 0, 5 (end of part 1), 10, 11
+    with pytest.raises(VaeError, match="remove it or use the same"):
+        train_vae(images, tmp_path / "b", VaeConfig(beta=3.0),
+                  TrainConfig(iterations=13, threads=1), progress=False)  # fmt: skip
+
+
+def test_vae_train_command(tmp_path, capsys):
+    from explore.cli import main
+
+    data = tmp_path / "d.npz"
+    np.savez(data, images=tiny_images(16))
+    out = tmp_path / "model"
+    assert main(["vae", "train", "--data", str(data), "--out", str(out), "--iterations", "3",
+                 "--batch", "4", "--no-progress"]) == 0  # fmt: skip
+    assert load_vae(out).config.latent_dim == 10
+    assert main(["vae", "train", "--data", str(tmp_path / "none.npz"), "--out", str(out)]) == 2
+    assert "ergo dataset outcomes" in capsys.readouterr().err

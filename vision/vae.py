@@ -1,0 +1,222 @@
+"""The paper's variational autoencoder (VAE / beta-VAE) over 64x64 colour observations.
+
+Architecture (shared/REFERENCE.md, the paper's method section): encoder of 4 convolutions of 32
+channels, 4x4 kernels, stride 2 (64 -> 32 -> 16 -> 8 -> 4 pixels), 2 dense layers of 256 units,
+then the means and log-variances of 10 Gaussian latents; the decoder mirrors it and outputs
+Bernoulli logits over pixels. Loss per image: BCE-with-logits summed over pixels + beta * KL
+(summed over latents), or beta * |KL - C| with a capacity C rising linearly (the capacity
+variant).
+
+Images enter as BGR uint8 arrays (OpenCV order, as the rig and the run store keep them) of
+shape (n, 64, 64, 3); ``to_tensor`` converts them to RGB float tensors (n, 3, 64, 64) in [0, 1].
+A model is saved as a folder: ``vae.pt`` (the state dict, loaded with ``weights_only=True``) and
+``vae.json`` (its ``VaeConfig``).
+
+This module imports no other package of the project.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+IMAGE_SIZE = 64  # paper
+CHANNELS = 32  # paper: 4 conv layers of 32 channels, 4x4, stride 2
+HIDDEN = 256  # paper: 2 dense layers of 256
+LATENT_DIM = 10  # paper: 10 Gaussian latents
+MAX_THREADS = 2  # the project's CPU budget (2 cores shared)
+MODEL_FILE, CONFIG_FILE = "vae.pt", "vae.json"
+
+
+class VaeError(ValueError):
+    """Bad VAE input, configuration or model files."""
+
+
+def limit_threads(n: int = MAX_THREADS) -> None:
+    """Use at most ``n`` CPU threads for torch (never more than it has)."""
+    torch.set_num_threads(max(1, min(n, torch.get_num_threads())))
+
+
+@dataclass
+class VaeConfig:
+    """Model and loss configuration (saved with the weights).
+
+    Attributes:
+        latent_dim, channels, hidden: architecture (paper: 10, 32, 256).
+        beta: weight of the KL term (1: plain VAE; > 1: beta-VAE).
+        capacity: final KL capacity C, nats (None: plain beta * KL).
+        capacity_iterations: iterations over which C rises linearly from 0 to ``capacity``.
+        kl_per_latent: mean KL of each latent over the training data (filled after training;
+            ranks the latents into MGE modules).
+    """
+
+    latent_dim: int = LATENT_DIM
+    channels: int = CHANNELS
+    hidden: int = HIDDEN
+    beta: float = 1.0
+    capacity: float | None = None
+    capacity_iterations: int = 2000
+    kl_per_latent: list[float] | None = field(default=None)
+
+    def validate(self) -> None:
+        if self.latent_dim < 1 or self.channels < 1 or self.hidden < 1:
+            raise VaeError("latent_dim, channels and hidden must be positive")
+        if self.beta < 0:
+            raise VaeError(f"beta must be >= 0, got {self.beta}")
+        if self.capacity is not None and self.capacity < 0:
+            raise VaeError(f"capacity must be >= 0, got {self.capacity}")
+        if self.capacity_iterations < 1:
+            raise VaeError("capacity_iterations must be at least 1")
+
+
+def to_tensor(images: np.ndarray) -> torch.Tensor:
+    """BGR uint8 images (n, 64, 64, 3) -> RGB float tensor (n, 3, 64, 64) in [0, 1]."""
+    a = np.asarray(images)
+    if a.ndim != 4 or a.shape[1:] != (IMAGE_SIZE, IMAGE_SIZE, 3):
+        raise VaeError(f"images have shape {a.shape}, expected (n, 64, 64, 3) BGR")
+    if a.dtype != np.uint8:
+        raise VaeError(f"images have dtype {a.dtype}, expected uint8")
+    t = torch.from_numpy(np.ascontiguousarray(a[..., ::-1]))  # BGR -> RGB
+    return t.permute(0, 3, 1, 2).float().div_(255.0)
+
+
+class Vae(nn.Module):
+    """Convolutional VAE with a Bernoulli decoder."""
+
+    def __init__(self, config: VaeConfig | None = None) -> None:
+        super().__init__()
+        self.config = config or VaeConfig()
+        self.config.validate()
+        c, h, z = self.config.channels, self.config.hidden, self.config.latent_dim
+        self.flat = c * 4 * 4  # 64 / 2^4 = 4
+        self.encoder = nn.Sequential(
+            nn.Conv2d(3, c, 4, 2, 1), nn.ReLU(),
+            nn.Conv2d(c, c, 4, 2, 1), nn.ReLU(),
+            nn.Conv2d(c, c, 4, 2, 1), nn.ReLU(),
+            nn.Conv2d(c, c, 4, 2, 1), nn.ReLU(),
+            nn.Flatten(),
+            nn.Linear(self.flat, h), nn.ReLU(),
+            nn.Linear(h, h), nn.ReLU(),
+            nn.Linear(h, 2 * z),
+        )  # fmt: skip
+        self.decoder_fc = nn.Sequential(
+            nn.Linear(z, h), nn.ReLU(),
+            nn.Linear(h, h), nn.ReLU(),
+            nn.Linear(h, self.flat), nn.ReLU(),
+        )  # fmt: skip
+        self.decoder_conv = nn.Sequential(
+            nn.ConvTranspose2d(c, c, 4, 2, 1), nn.ReLU(),
+            nn.ConvTranspose2d(c, c, 4, 2, 1), nn.ReLU(),
+            nn.ConvTranspose2d(c, c, 4, 2, 1), nn.ReLU(),
+            nn.ConvTranspose2d(c, 3, 4, 2, 1),
+        )  # fmt: skip
+
+    # ---- the model ---------------------------------------------------------------------------
+    def encode(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """x (n, 3, 64, 64) in [0, 1] -> means and log-variances, each (n, latent_dim)."""
+        mu, logvar = self.encoder(x).chunk(2, dim=1)
+        return mu, logvar
+
+    def decode(self, z: torch.Tensor) -> torch.Tensor:
+        """z (n, latent_dim) -> pixel logits (n, 3, 64, 64)."""
+        c = self.config.channels
+        return self.decoder_conv(self.decoder_fc(z).view(-1, c, 4, 4))
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Returns (logits (n, 3, 64, 64), mu (n, z), logvar (n, z)); samples z in training."""
+        mu, logvar = self.encode(x)
+        z = mu + torch.randn_like(mu) * torch.exp(0.5 * logvar) if self.training else mu
+        return self.decode(z), mu, logvar
+
+    def loss(self, x: torch.Tensor, iteration: int = 0) -> dict[str, torch.Tensor]:
+        """Batch-mean loss terms: ``loss`` (to minimise), ``recon`` (BCE summed over pixels),
+        ``kl`` (summed over latents), nats per image."""
+        logits, mu, logvar = self(x)
+        recon = F.binary_cross_entropy_with_logits(logits, x, reduction="sum") / len(x)
+        kl = kl_per_latent(mu, logvar).sum(dim=1).mean()
+        cfg = self.config
+        if cfg.capacity is None:
+            total = recon + cfg.beta * kl
+        else:
+            c = cfg.capacity * min(1.0, iteration / cfg.capacity_iterations)
+            total = recon + cfg.beta * (kl - c).abs()
+        return {"loss": total, "recon": recon, "kl": kl}
+
+    # ---- numpy API ---------------------------------------------------------------------------
+    @torch.no_grad()
+    def encode_bgr(self, images: np.ndarray, batch: int = 256) -> np.ndarray:
+        """Latent means of BGR uint8 images (n, 64, 64, 3) -> (n, latent_dim) float64."""
+        was = self.training
+        self.eval()
+        out = [
+            self.encode(to_tensor(images[i : i + batch]))[0].double().numpy()
+            for i in range(0, len(images), batch)
+        ]
+        self.train(was)
+        return np.concatenate(out) if out else np.zeros((0, self.config.latent_dim))
+
+    @torch.no_grad()
+    def decode_bgr(self, z: np.ndarray) -> np.ndarray:
+        """Latents (n, latent_dim) -> reconstructed BGR uint8 images (n, 64, 64, 3)."""
+        zt = torch.as_tensor(np.asarray(z, dtype=np.float32)).reshape(-1, self.config.latent_dim)
+        rgb = torch.sigmoid(self.decode(zt)).permute(0, 2, 3, 1).numpy()
+        return np.ascontiguousarray((rgb[..., ::-1] * 255.0 + 0.5).astype(np.uint8))
+
+    @torch.no_grad()
+    def mean_kl_per_latent(self, images: np.ndarray, batch: int = 256) -> list[float]:
+        """Mean KL of each latent to the prior over ``images``, nats, length latent_dim."""
+        was = self.training
+        self.eval()
+        total = torch.zeros(self.config.latent_dim, dtype=torch.float64)
+        for i in range(0, len(images), batch):
+            mu, logvar = self.encode(to_tensor(images[i : i + batch]))
+            total += kl_per_latent(mu, logvar).double().sum(dim=0)
+        self.train(was)
+        return (total / max(len(images), 1)).tolist()
+
+    # ---- files -------------------------------------------------------------------------------
+    def save(self, folder: str | Path) -> Path:
+        """Write ``vae.pt`` and ``vae.json`` into ``folder``; returns the folder."""
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        tmp = folder / (MODEL_FILE + ".tmp")
+        torch.save(self.state_dict(), tmp)
+        tmp.replace(folder / MODEL_FILE)
+        tmp = folder / (CONFIG_FILE + ".tmp")
+        tmp.write_text(json.dumps(asdict(self.config), indent=2))
+        tmp.replace(folder / CONFIG_FILE)
+        return folder
+
+
+def kl_per_latent(mu: torch.Tensor, logvar: torch.Tensor) -> torch.Tensor:
+    """KL(N(mu, exp(logvar)) || N(0, 1)) per latent, shape (n, latent_dim), nats."""
+    return 0.5 * (mu.pow(2) + logvar.exp() - 1.0 - logvar)
+
+
+def load_vae(path: str | Path) -> Vae:
+    """Load a model folder (or its ``vae.pt``) saved by ``Vae.save``, in eval mode."""
+    path = Path(path)
+    folder = path.parent if path.suffix == ".pt" else path
+    model_file, config_file = folder / MODEL_FILE, folder / CONFIG_FILE
+    for f in (model_file, config_file):
+        if not f.is_file():
+            raise VaeError(f"{f} not found: is {folder} a model folder from `ergo vae train`?")
+    try:
+        raw = json.loads(config_file.read_text())
+        config = VaeConfig(**raw)
+    except (json.JSONDecodeError, TypeError) as exc:
+        raise VaeError(f"{config_file} is not a VAE config: {exc}") from exc
+    vae = Vae(config)
+    try:
+        state = torch.load(model_file, map_location="cpu", weights_only=True)
+        vae.load_state_dict(state)
+    except (RuntimeError, KeyError) as exc:
+        raise VaeError(f"{model_file} does not match its config: {exc}") from exc
+    vae.eval()
+    return vae

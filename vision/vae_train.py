@@ -1,0 +1,171 @@
+"""Training a ``vision.vae.Vae`` on an image database: progress, checkpoints, resume.
+
+Deterministic given the data and the seed: the batch of iteration i is drawn by
+``numpy.random.default_rng([seed, i])`` and the reparameterisation noise by
+``torch.manual_seed(seed * 1_000_003 + i)``, so a run resumed from a checkpoint continues exactly
+as the uninterrupted run would have (same thread count, same machine).
+
+The paper trained 300k iterations at lr 1e-5 (batch 64) on a GPU. On 2 CPU cores we train with
+Adam at lr 1e-3, batch 64, for a few thousand iterations (figures: docs/goal_exploration.md).
+
+Files in the output folder: ``checkpoint.pt`` (weights, optimiser, iteration; written every
+``checkpoint_every`` iterations and at the end), ``train_log.csv`` (iteration, loss, recon, kl),
+and the final ``vae.pt`` + ``vae.json`` (``Vae.save``).
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from vision.vae import MAX_THREADS, Vae, VaeConfig, VaeError, limit_threads, to_tensor
+
+CHECKPOINT = "checkpoint.pt"
+LOG = "train_log.csv"
+KL_SAMPLE = 2000  # images used to measure the KL per latent after training (guess: enough)
+
+
+@dataclass
+class TrainConfig:
+    """Optimisation settings.
+
+    Attributes:
+        iterations: total gradient steps (measured: a few thousand give a usable space on CPU).
+        lr: Adam learning rate (paper 1e-5 over 300k iterations; 1e-3 here, measured).
+        batch: images per step (paper 64).
+        seed: seeds batches and sampling noise.
+        checkpoint_every: iterations between checkpoints.
+        threads: torch CPU threads (at most 2 on this project's machines).
+    """
+
+    iterations: int = 3000
+    lr: float = 1e-3
+    batch: int = 64
+    seed: int = 0
+    checkpoint_every: int = 250
+    threads: int = MAX_THREADS
+
+    def validate(self) -> None:
+        if self.iterations < 1 or self.batch < 1 or self.checkpoint_every < 1:
+            raise VaeError("iterations, batch and checkpoint_every must be positive")
+        if not self.lr > 0:
+            raise VaeError(f"lr must be positive, got {self.lr}")
+
+
+def load_images(path: str | Path) -> np.ndarray:
+    """The ``images`` array (n, 64, 64, 3) BGR uint8 of a dataset ``.npz``."""
+    path = Path(path)
+    if not path.is_file():
+        raise VaeError(f"{path}: no such dataset file (make one with `ergo dataset outcomes`)")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            images = z["images"]
+    except (KeyError, ValueError, OSError) as exc:
+        raise VaeError(f"{path}: not a dataset with an 'images' array ({exc})") from exc
+    to_tensor(images[:1])  # checks shape and dtype
+    return images
+
+
+def train_vae(
+    images: np.ndarray,
+    out: str | Path,
+    model_config: VaeConfig | None = None,
+    config: TrainConfig | None = None,
+    progress: bool = True,
+) -> Vae:
+    """Train (or resume training) a VAE on ``images`` (n, 64, 64, 3) BGR uint8 into ``out``.
+
+    An existing checkpoint in ``out`` is resumed (its model config wins; a different one given
+    here is refused). Returns the trained model, also saved as ``out/vae.pt`` + ``vae.json``.
+    """
+    config = config or TrainConfig()
+    config.validate()
+    if len(images) < 1:
+        raise VaeError("no images to train on")
+    to_tensor(images[:1])
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    limit_threads(config.threads)
+    model_config = model_config or VaeConfig()
+    start = 0
+    ckpt_path = out / CHECKPOINT
+    state = None
+    if ckpt_path.exists():
+        state = torch.load(ckpt_path, map_location="cpu", weights_only=True)
+        saved = VaeConfig(**state["model_config"])
+        saved.kl_per_latent = None
+        given = VaeConfig(**{**asdict(model_config), "kl_per_latent": None})
+        if asdict(saved) != asdict(given):
+            raise VaeError(
+                f"{ckpt_path} was trained with {asdict(saved)}; remove it or use the same "
+                "settings to resume"
+            )
+        model_config = saved
+        start = int(state["iteration"])
+    torch.manual_seed(config.seed)  # initial weights
+    vae = Vae(model_config)
+    optim = torch.optim.Adam(vae.parameters(), lr=config.lr)
+    if state is not None:
+        vae.load_state_dict(state["model"])
+        optim.load_state_dict(state["optim"])
+    data = torch.from_numpy(np.ascontiguousarray(images))  # uint8, converted per batch
+    bar = None
+    if progress and start < config.iterations:
+        from tqdm import tqdm
+
+        bar = tqdm(total=config.iterations, initial=start, unit="it", file=sys.stderr,
+                   mininterval=1.0, desc="vae")  # fmt: skip
+    log_rows: list[str] = []
+    vae.train()
+    for it in range(start, config.iterations):
+        idx = np.random.default_rng([config.seed, it]).integers(0, len(images), config.batch)
+        torch.manual_seed(config.seed * 1_000_003 + it)
+        x = to_tensor(data[torch.from_numpy(idx)].numpy())
+        terms = vae.loss(x, it)
+        optim.zero_grad(set_to_none=True)
+        terms["loss"].backward()
+        optim.step()
+        if it % 10 == 0 or it == config.iterations - 1:
+            vals = {k: float(v.detach()) for k, v in terms.items()}
+            log_rows.append(f"{it},{vals['loss']:.3f},{vals['recon']:.3f},{vals['kl']:.3f}")
+            if bar is not None:
+                bar.set_postfix(loss=f"{vals['loss']:.1f}", kl=f"{vals['kl']:.1f}", refresh=False)
+        if bar is not None:
+            bar.update(1)
+        done = it + 1
+        if done % config.checkpoint_every == 0 or done == config.iterations:
+            _checkpoint(ckpt_path, vae, optim, done)
+            _append_log(out / LOG, log_rows)
+            log_rows = []
+    if bar is not None:
+        bar.close()
+    vae.eval()
+    sample = images[np.random.default_rng(config.seed).permutation(len(images))[:KL_SAMPLE]]
+    vae.config.kl_per_latent = vae.mean_kl_per_latent(sample)
+    vae.save(out)
+    return vae
+
+
+def _checkpoint(path: Path, vae: Vae, optim: torch.optim.Optimizer, iteration: int) -> None:
+    cfg = asdict(vae.config)
+    cfg["kl_per_latent"] = None
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(
+        {"model": vae.state_dict(), "optim": optim.state_dict(), "iteration": iteration,
+         "model_config": cfg},
+        tmp,
+    )  # fmt: skip
+    tmp.replace(path)
+
+
+def _append_log(path: Path, rows: list[str]) -> None:
+    new = not path.exists()
+    with open(path, "a") as f:
+        if new:
+            f.write("iteration,loss,recon,kl\n")
+        for r in rows:
+            f.write(r + "\n")
