@@ -24,7 +24,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     cal.required = True
 
     def common(q: argparse.ArgumentParser) -> None:
-        q.add_argument("--rig", default="default", help="rig id (a folder per rig)")
+        q.add_argument(
+            "--rig", "--rig-id", dest="rig", default="default", help="rig id (a folder per rig)"
+        )
         q.add_argument(
             "--dir",
             type=Path,
