@@ -10,7 +10,9 @@ Options (``RigConfig.options``):
     camera_width, camera_height, camera_fps: requested camera mode (optional).
     node_ids: the six node ids of m1..m6 (default 1..6).
     directions, offsets: per joint (+1/-1, rad), see ``robot.canopen.units``.
-    heartbeat_ms: producer heartbeat time written to the drives (default 100).
+    heartbeat_ms: producer heartbeat time written to the drives, ms (default 100 on a real
+        adapter; 500 on a pty, i.e. the emulator, whose heartbeats cross several Python threads
+        on a shared machine: gaps over 150 ms were seen with the camera rendering under load).
 """
 
 from __future__ import annotations
@@ -20,6 +22,8 @@ from typing import Any
 from explore.clock import RealClock
 from explore.rig import Rig, RigConfig, RigError
 
+# Heartbeat time for the emulator on a pty, ms (see the module docstring; a guess with margin).
+PTY_HEARTBEAT_MS = 500
 # Options passed through to ``CanArmConfig`` as tuples (lists in JSON).
 _TUPLE_OPTIONS = ("node_ids", "directions", "offsets")
 _SCALAR_OPTIONS = {"heartbeat_ms": int, "pdo_timeout_s": float, "following_error_window": float}
@@ -67,6 +71,8 @@ def make_canopen_rig(config: RigConfig) -> Rig:
             f"rig 'canopen': camera must be a device index, video path or URL, got {source!r}"
         )
     bitrate = options.get("bitrate")
+    if options.get("heartbeat_ms") is None and "/dev/pts/" in str(can):
+        options["heartbeat_ms"] = PTY_HEARTBEAT_MS
     try:
         spec = parse_can_spec(str(can), int(bitrate) if bitrate is not None else None)
         arm = CanArm(spec, config=CanArmConfig(**_arm_config(options)))

@@ -14,7 +14,10 @@ its EMCY producer reports faults. This module adds what a servo drive does:
 
 Physics: either a ``sim.realtime.RealtimeLoop`` steps the twin in wall time (the server), or
 ``sync_step_s`` advances it by a fixed amount at every SYNC (tests: a fake clock that makes
-the loop deterministic and as fast as the CPU allows).
+the loop deterministic and as fast as the CPU allows). In real-time mode a pump thread
+exchanges targets and positions with the twin (woken by each SYNC, and every 5 ms), so the
+SYNC handler never waits for the twin's lock, which a camera render may hold for tens of ms:
+the TPDOs then carry the pump's latest positions, as a drive reports its last sample.
 
 The twin has one torque switch for the whole arm: it is on only while all six drives are in
 OPERATION ENABLED (a drive out of it, e.g. in FAULT, leaves the whole arm limp). Joints whose
@@ -62,6 +65,9 @@ FAULT_REGISTER = emcy.FOLLOWING_ERROR_REGISTER
 SUPPORTED_MODES = (CSP,)
 NMT_RESET_NODE, NMT_RESET_COMM = 0x81, 0x82
 NMT_PRE_OPERATIONAL = 0x80
+# Real-time mode: longest interval between two exchanges with the twin, s (guess: a fifth of
+# the 40 Hz control period, so positions are at most this old when the twin's lock is free).
+PUMP_PERIOD_S = 0.005
 
 
 def _is_pdo_or_sync(can_id: int) -> bool:
@@ -131,6 +137,8 @@ class EmulatedDrive:
         self.heartbeat_stopped = False
         self.muted = False  # sends no TPDO (on top of a stopped heartbeat: a dead node)
         self._rpdo_pending: list[Any] = []
+        self._cpr: float | None = None
+        self._mode: int | None = None
         self._sync_count = 0
         self.node.add_read_callback(self._on_read)
         self.node.add_write_callback(self._on_write)
@@ -145,13 +153,17 @@ class EmulatedDrive:
 
     @property
     def counts_per_rev(self) -> float:
-        """Increments per revolution from 0x608F (sub 1 / sub 2)."""
-        revs = max(1, self._od_int(0x608F, 2))
-        return self._od_int(0x608F, 1) / revs
+        """Increments per revolution from 0x608F (sub 1 / sub 2), cached."""
+        if self._cpr is None:
+            self._cpr = self._od_int(0x608F, 1) / max(1, self._od_int(0x608F, 2))
+        return self._cpr
 
     @property
     def mode(self) -> int:
-        return self._od_int(0x6060)
+        """Modes of operation 0x6060, cached."""
+        if self._mode is None:
+            self._mode = self._od_int(0x6060)
+        return self._mode
 
     def statusword(self) -> int:
         extra = cia402.SW_REMOTE
@@ -176,12 +188,20 @@ class EmulatedDrive:
         return None
 
     def _on_write(self, index: int, subindex: int, od: Any, data: bytes) -> None:
+        if index == 0x608F and subindex in (1, 2):
+            value = int.from_bytes(data[:4], "little")
+            inc = value if subindex == 1 else self._od_int(0x608F, 1)
+            revs = value if subindex == 2 else self._od_int(0x608F, 2)
+            if inc <= 0 or revs <= 0:
+                raise SdoAbortedError(ABORT_VALUE_RANGE)
+            self._cpr = inc / revs
         if index == 0x6060:
             mode = int.from_bytes(data, "little", signed=True)
             if mode not in SUPPORTED_MODES and mode != 0:
                 raise SdoAbortedError(ABORT_VALUE_RANGE)
             if self.state is State.OPERATION_ENABLED:
                 raise SdoAbortedError(ABORT_DEVICE_STATE)
+            self._mode = mode
         elif index == 0x6040:
             self.apply_controlword(int.from_bytes(data[:2], "little"))
         elif index == 0x607A:
@@ -326,6 +346,10 @@ class EmulatedDrives:
         self._scheduled_faults: dict[int, float] = {}
         self.syncs = 0
         self._started = False
+        self._q = np.zeros(6)  # latest joint positions read from the twin, rad
+        self._pump_wake = threading.Event()
+        self._pump_stop = threading.Event()
+        self._pump_thread: threading.Thread | None = None
 
     # ---- lifecycle -------------------------------------------------------------------------
     def start(self) -> None:
@@ -337,10 +361,18 @@ class EmulatedDrives:
         self.network.subscribe(SYNC_COB_ID, self._on_sync)
         self.network.subscribe(0x000, self._on_nmt)
         self.network.connect()
-        self._read_twin()
+        with self.twin.lock:
+            q = self.twin.joint_positions()
+        with self._lock:
+            self._set_actuals(q)
+            for d in self.drives:
+                d.demand = d.actual
         for d in self.drives:
-            d.demand = d.actual
             self._boot(d)
+        if not self.sync_step_s:
+            self._pump_stop.clear()
+            self._pump_thread = threading.Thread(target=self._pump, name="drives-pump", daemon=True)
+            self._pump_thread.start()
         self._started = True
 
     def stop(self) -> None:
@@ -348,6 +380,11 @@ class EmulatedDrives:
         if not self._started:
             return
         self._started = False
+        self._pump_stop.set()
+        self._pump_wake.set()
+        if self._pump_thread is not None:
+            self._pump_thread.join(timeout=2.0)
+            self._pump_thread = None
         for d in self.drives:
             d.node.nmt.stop_heartbeat()
         if self._owns_bus:
@@ -391,11 +428,48 @@ class EmulatedDrives:
                     d.node.nmt.stop_heartbeat()
 
     # ---- the cycle -------------------------------------------------------------------------
-    def _read_twin(self) -> None:
+    def _plan(self) -> tuple[np.ndarray, np.ndarray]:
+        """Which joints are driven (OPERATION ENABLED in CSP) and their targets, shape (6,)
+        each (bool, rad). Call under ``self._lock``."""
+        enabled = np.zeros(6, dtype=bool)
+        targets = np.zeros(6)
+        for d in self.drives:
+            enabled[d.joint] = d.state is State.OPERATION_ENABLED and d.mode == CSP
+            targets[d.joint] = d.joint_target(d.counts_per_rev)
+        return enabled, targets
+
+    def _twin_io(self, plan: tuple[np.ndarray, np.ndarray], step_s: float | None) -> np.ndarray:
+        """Under the twin's lock: set the targets (joints not driven hold where they are) and
+        the torque, step if asked; returns the joint positions, shape (6,), rad."""
+        enabled, targets = plan
         with self.twin.lock:
             q = self.twin.joint_positions()
+            self.twin.set_targets(np.where(enabled, targets, q))
+            if self.twin.torque_enabled() != bool(enabled.all()):
+                self.twin.set_torque(bool(enabled.all()))
+            if step_s:
+                self.twin.step(step_s)
+                q = self.twin.joint_positions()
+        return q
+
+    def _set_actuals(self, q: np.ndarray) -> None:
+        """Position actual of every drive from joint positions (rad). Under ``self._lock``."""
+        self._q = q
         for d in self.drives:
             d.actual = d.to_counts(float(q[d.joint]), d.counts_per_rev)
+
+    def _pump(self) -> None:
+        """Real-time mode: exchange targets and positions with the twin, woken by each SYNC and
+        at least every ``PUMP_PERIOD_S``. It may wait for the twin's lock (a render holds it),
+        the SYNC handler never does."""
+        while not self._pump_stop.is_set():
+            self._pump_wake.wait(PUMP_PERIOD_S)
+            self._pump_wake.clear()
+            with self._lock:
+                plan = self._plan()
+            q = self._twin_io(plan, None)
+            with self._lock:
+                self._set_actuals(q)
 
     def _on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
         try:
@@ -404,28 +478,19 @@ class EmulatedDrives:
             log.exception("emulated drives: SYNC handling failed")
 
     def cycle(self) -> None:
-        """One SYNC: apply RPDOs, set the twin's targets (and step it if ``sync_step_s``),
-        check following errors, then send the TPDOs."""
+        """One SYNC: apply the RPDOs, exchange with the twin (stepping it by ``sync_step_s``;
+        in real-time mode the pump thread does it and the positions are its latest), check
+        following errors, then send the TPDOs."""
         with self._lock:
             self.syncs += 1
             for d in self.drives:
                 d.apply_pending()
-            self._read_twin()
+            if self.sync_step_s:
+                self._set_actuals(self._twin_io(self._plan(), self.sync_step_s))
+            else:
+                self._set_actuals(self._q)
+                self._pump_wake.set()
             now = time.monotonic()
-            enabled = [d.state is State.OPERATION_ENABLED and d.mode == CSP for d in self.drives]
-            with self.twin.lock:
-                q = self.twin.joint_positions()
-                targets = q.copy()
-                for d, on in zip(self.drives, enabled, strict=True):
-                    if on:
-                        targets[d.joint] = d.joint_target(d.counts_per_rev)
-                self.twin.set_targets(targets)
-                all_on = all(enabled)
-                if self.twin.torque_enabled() != all_on:
-                    self.twin.set_torque(all_on)
-                if self.sync_step_s:
-                    self.twin.step(self.sync_step_s)
-            self._read_twin()
             for d in self.drives:
                 self._check_faults(d, now)
         if self.tpdo_delay_s > 0:

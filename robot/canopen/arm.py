@@ -90,7 +90,9 @@ class CanArmConfig:
         max_position_age_s: the arm stops when a node has answered no SYNC for this long, s
             (guess: 20 control periods at 40 Hz; the drive itself keeps following its last
             target meanwhile, and a dead node is caught sooner by its heartbeat).
-        state_timeout_s: longest time for the drives to reach a CiA 402 state, s (guess).
+        state_timeout_s: longest time for the drives to reach a CiA 402 state, s (guess: real
+            drives take up to a few hundred ms to switch on, e.g. to release a brake; the
+            emulator behind a pty on a loaded machine was measured taking over 1 s).
         sdo_timeout_s: SDO response timeout, s (canopen's default is 0.3 s).
         following_error_window: if set, written to 0x6065, rad (None: leave the drive's).
         eds: the drives' EDS (object dictionary).
@@ -103,7 +105,7 @@ class CanArmConfig:
     heartbeat_factor: float = 1.5
     pdo_timeout_s: float = 0.02
     max_position_age_s: float = 0.5
-    state_timeout_s: float = 1.0
+    state_timeout_s: float = 3.0
     sdo_timeout_s: float = 0.3
     following_error_window: float | None = None
     eds: Path = EDS_PATH
@@ -220,8 +222,7 @@ class CanArm(Arm):
                 self._start_nodes()
             self._start_monitor()
             with self._io():
-                self._cycle(send_rpdo=False)
-                self._require_fresh("after NMT start")
+                self._first_positions()
             self._torque = bool(np.all(self._states_are(State.OPERATION_ENABLED)))
             self._cw[:] = np.where(
                 self._states_are(State.OPERATION_ENABLED), cia402.CW_ENABLE_OPERATION, 0
@@ -522,11 +523,23 @@ class CanArm(Arm):
             self._late_since[late & np.isnan(self._late_since)] = sent_at
         self._sync_since_read = True
 
-    def _require_fresh(self, when: str) -> None:
-        with self._cond:
-            never = [self._who(i) for i in np.flatnonzero(self._rx_seq < 0)]
-        if never:
-            raise CanNodeError(f"no TPDO from {', '.join(never)} {when}")
+    def _first_positions(self) -> None:
+        """SYNC until every node has sent a TPDO (or ``state_timeout_s`` passed)."""
+        deadline = time.monotonic() + self.config.state_timeout_s
+        while True:
+            self._cycle(send_rpdo=False)
+            with self._cond:
+                never = [self._who(i) for i in np.flatnonzero(self._rx_seq < 0)]
+            if not never:
+                with self._cond:
+                    self._missed[:] = 0
+                    self._late_since[:] = np.nan
+                return
+            if time.monotonic() > deadline:
+                raise CanNodeError(
+                    f"no TPDO from {', '.join(never)} after NMT start and "
+                    f"{self.config.state_timeout_s:.1f} s of SYNCs"
+                )
 
     def _lost(self) -> set[int]:
         """Nodes that cannot confirm anything: heartbeat silent too long, or no TPDO for 3
