@@ -67,6 +67,7 @@ STRATEGIES: dict[str, str] = {
     "rge-betavae": "explore.strategies.goal_exploration:BetaLatentGoalExploration",
     "mge-vae": "explore.strategies.goal_exploration:ModularLatentGoalExploration",
     "mge-betavae": "explore.strategies.goal_exploration:ModularBetaLatentGoalExploration",
+    "rge-online": "explore.strategies.online:OnlineLatentGoalExploration",
 }
 
 
