@@ -76,4 +76,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    # Run the imported module's main, not this __main__ copy: the subcommands raise
+    # explore.cli.CliError, which a __main__.CliError handler would not catch.
+    from explore.cli import main as _main
+
+    sys.exit(_main())

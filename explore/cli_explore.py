@@ -93,6 +93,7 @@ def _check_resume_flags(args: argparse.Namespace, config: dict[str, Any]) -> Non
 
 
 def run_explore(args: argparse.Namespace) -> int:
+    from explore.config_check import validate_run_config
     from explore.explorer import Explorer
     from explore.figures import coverage_curve
     from explore.rig import RigConfig, RigError, make_rig
@@ -112,6 +113,7 @@ def run_explore(args: argparse.Namespace) -> int:
         if resume_path is not None:
             store = RunStore.open(resume_path)
             config = store.config
+            validate_run_config(config, where=resume_path / "run.json")
             _check_resume_flags(args, config)
             if args.episodes is not None:
                 config["episodes"] = args.episodes
@@ -123,6 +125,8 @@ def run_explore(args: argparse.Namespace) -> int:
         else:
             config = _new_config(args)
             store = None
+        if resume_path is None:
+            validate_run_config(config, where="command line")
         # build strategy and rig before a new run folder exists: a bad name leaves nothing
         strategy = make_strategy(config["strategy"]["name"], **config["strategy"]["options"])
         rig = make_rig(RigConfig(**config["rig"]))

@@ -93,6 +93,9 @@ class RunStore:
     def create(cls, path: str | Path, config: dict[str, Any]) -> RunStore:
         """Make a new run folder; refuses a non-empty existing folder."""
         path = Path(path)
+        stale = path / "run.json.tmp"
+        if path.is_dir() and [p.name for p in path.iterdir()] == [stale.name]:
+            stale.unlink()  # a kill during a previous create's atomic write: nothing was made
         if path.exists() and any(path.iterdir()):
             raise RunStoreError(
                 f"{path} exists and is not empty: use --resume {path} or a new --out"

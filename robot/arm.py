@@ -70,6 +70,7 @@ class Arm(ABC):
         self._connected = False
         self._torque = False
         self._last_sent: np.ndarray | None = None
+        self._resync_needed = False
 
     # ---- lifecycle -------------------------------------------------------------------------
     @property
@@ -98,6 +99,7 @@ class Arm(ABC):
         state was restored): the next command moves at most ``max_step`` from here."""
         self._require()
         self._last_sent = np.asarray(self._initial_command(), dtype=float).copy()
+        self._resync_needed = False
 
     def _initial_command(self) -> np.ndarray:
         """Where the step bound starts from: the measured positions by default, shape (n,)."""
@@ -115,6 +117,8 @@ class Arm(ABC):
         finally:
             try:
                 self._disconnect()
+            except Exception as exc:
+                log.error("error while closing %s: %s", type(self).__name__, exc)
             finally:
                 self._connected = False
 
@@ -139,8 +143,16 @@ class Arm(ABC):
     def command(self, positions: np.ndarray) -> np.ndarray:
         """Send goal positions after clamping; returns what was sent, shape (n,), rad."""
         self._require()
+        if self._resync_needed:
+            # the previous send failed: it may or may not have reached the servos, so the
+            # step bound restarts from where the arm really is
+            self.resync()
         safe = self.spec.clamp(positions, self._last_sent)
-        self._send(safe)
+        try:
+            self._send(safe)
+        except Exception:
+            self._resync_needed = True
+            raise
         self._last_sent = safe
         return safe.copy()
 

@@ -106,7 +106,7 @@ def test_cell_counter_on_hand_made_points():
     "args, message",
     [
         (["explore", "--episodes", "0"], "--episodes must be at least 1"),
-        (["explore", "--strategy", "nope", "--episodes", "1"], "unknown strategy 'nope'"),
+        (["explore", "--strategy", "nope", "--episodes", "1"], "config.strategy.name"),
         (["explore", "--bogus"], "unrecognized arguments: --bogus"),
         (["explore", "--rig", "sim", "--rig-option", "novalue"], "expected KEY=VALUE"),
     ],

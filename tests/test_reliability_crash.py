@@ -158,11 +158,6 @@ def test_twenty_random_sigkills_resume_to_the_uninterrupted_history(tmp_path):
     assert modes["progress"] + modes["append"] >= MIN_KILLS // 2  # most kills mid-exploration
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="gap: a SIGKILL inside RunStore.create's atomic write of run.json leaves only "
-    "run.json.tmp; --resume-or-new then refuses the folder forever (see docs/reliability.md)",
-)
 def test_a_kill_while_run_json_is_written_does_not_block_the_folder(tmp_path, capsys):
     out = tmp_path / "r"
     out.mkdir()
@@ -174,11 +169,6 @@ def test_a_kill_while_run_json_is_written_does_not_block_the_folder(tmp_path, ca
     assert code == 0, capsys.readouterr().err
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="gap: under `python -m explore.cli` the module runs as __main__, so _user_errors() "
-    "catches __main__.CliError, not explore.cli.CliError: user errors become tracebacks (rc 1)",
-)
 def test_python_dash_m_gives_one_line_errors_too(tmp_path):
     done = subprocess.run(
         [sys.executable, "-m", "explore.cli", "explore", "--episodes", "0"],

@@ -192,12 +192,6 @@ def test_non_finite_commands_never_reach_the_backend(bad):
     assert arm.sent == []
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="gap: a send that reached the servos but raised (lost status reply) leaves "
-    "Arm._last_sent at the older goal, so the next goal may be 2 x max_step from where the "
-    "servos were told to go (fix: resync from a read after a failed send)",
-)
 @settings(max_examples=150, deadline=None)
 @given(
     fracs=st.lists(st.floats(0.2, 0.8), min_size=6, max_size=6),
@@ -229,11 +223,6 @@ def test_an_arm_outside_its_calibrated_limits_returns_at_most_max_step_per_tick(
     assert np.max(np.abs(sent - 1.0)) <= spec.max_step + 1e-9
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="gap: Arm.disconnect documents 'Never raises' but lets an exception of the "
-    "backend's _disconnect out",
-)
 def test_disconnect_never_raises_even_when_closing_the_link_fails():
     arm = ScriptedArm(BASE, np.zeros(6), faults=[])
     arm.connect()
