@@ -10,6 +10,8 @@ Options (``RigConfig.options``):
     camera_width, camera_height, camera_fps: requested camera mode (optional).
     node_ids: the six node ids of m1..m6 (default 1..6).
     directions, offsets: per joint (+1/-1, rad), see ``robot.canopen.units``.
+    eds: the drives' EDS file (default: ``robot/canopen/ergo_drive.eds``, the emulated drive).
+    pdo_timeout_s, following_error_window: see ``robot.canopen.arm.CanArmConfig``.
     heartbeat_ms: producer heartbeat time written to the drives, ms (default 100 on a real
         adapter; 500 on a pty, i.e. the emulator, whose heartbeats cross several Python threads
         on a shared machine: gaps over 150 ms were seen with the camera rendering under load).
@@ -17,6 +19,7 @@ Options (``RigConfig.options``):
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 from explore.clock import RealClock
@@ -26,7 +29,12 @@ from explore.rig import Rig, RigConfig, RigError
 PTY_HEARTBEAT_MS = 500
 # Options passed through to ``CanArmConfig`` as tuples (lists in JSON).
 _TUPLE_OPTIONS = ("node_ids", "directions", "offsets")
-_SCALAR_OPTIONS = {"heartbeat_ms": int, "pdo_timeout_s": float, "following_error_window": float}
+_SCALAR_OPTIONS = {
+    "heartbeat_ms": int,
+    "pdo_timeout_s": float,
+    "following_error_window": float,
+    "eds": Path,
+}
 _CAMERA_OPTIONS = ("camera", "camera_width", "camera_height", "camera_fps")
 KNOWN_OPTIONS = {"can", "bitrate", *_CAMERA_OPTIONS, *_TUPLE_OPTIONS, *_SCALAR_OPTIONS}
 

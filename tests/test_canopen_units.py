@@ -125,6 +125,7 @@ def test_emcy_descriptions() -> None:
         ({"can": "virtual:x", "node_ids": [1, 2]}, "needs 6 values"),
         ({"can": "virtual:x", "port": "/dev/ttyUSB0"}, "unknown option"),
         ({"can": "virtual:x", "camera": 1.5}, "camera must be"),
+        ({"can": "virtual:x", "eds": "/nonexistent/drive.eds"}, "EDS file not found"),
     ],
 )
 def test_rig_options_errors(options, message) -> None:
@@ -140,3 +141,23 @@ def test_rig_builds_unconnected() -> None:
     assert str(rig.arm.bus_spec) == "slcan:/dev/pts/99" and rig.arm.bus_spec.bitrate == 500000
     assert type(rig.camera).__name__ == "OpenCVCamera"
     assert type(rig.clock).__name__ == "RealClock"
+
+
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        ({"overload_servo": 9}, "--overload-servo 9 is not a node id"),
+        ({"drop_rate": 1.5}, "--drop-rate 1.5"),
+        ({"delay_ms": -1.0}, "--delay-ms -1.0 is negative"),
+    ],
+)
+def test_server_flag_errors(flags, message, capsys) -> None:
+    import argparse
+
+    from sim.canopen_server import serve
+
+    args = argparse.Namespace(
+        **{"drop_rate": 0.0, "delay_ms": 0.0, "overload_servo": None, **flags}
+    )
+    assert serve(args) == 2
+    assert message in capsys.readouterr().err

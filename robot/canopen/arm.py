@@ -142,6 +142,8 @@ class CanArm(Arm):
         self._directions = np.asarray(self.config.directions or (1.0,) * n, dtype=float)
         self._offsets = np.asarray(self.config.offsets or (0.0,) * n, dtype=float)
         JointScaling(np.ones(n), self._directions, self._offsets)  # validate early
+        if not Path(self.config.eds).is_file():
+            raise ValueError(f"EDS file not found: {self.config.eds}")
         if self.config.heartbeat_ms < 1 or self.config.heartbeat_factor <= 1.0:
             raise ValueError(
                 f"heartbeat_ms must be >= 1 and heartbeat_factor > 1 (got "
@@ -230,6 +232,7 @@ class CanArm(Arm):
             with self._cond:
                 self._target[:] = self._counts
         except BaseException:
+            self._stop_monitor()
             self._shutdown_network()
             raise
 
@@ -346,12 +349,15 @@ class CanArm(Arm):
 
     # ---- disconnect ------------------------------------------------------------------------
     def _disconnect(self) -> None:
+        self._stop_monitor()
+        self._shutdown_network()
+
+    def _stop_monitor(self) -> None:
         self._closing.set()
         self._wake.set()
-        if self._monitor is not None:
+        if self._monitor is not None and self._monitor is not threading.current_thread():
             self._monitor.join(timeout=2.0)
-            self._monitor = None
-        self._shutdown_network()
+        self._monitor = None
 
     def _shutdown_network(self) -> None:
         self._started = False
