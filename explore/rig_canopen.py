@@ -22,6 +22,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from explore.ball import rig_ball_locator
 from explore.clock import RealClock
 from explore.rig import Rig, RigConfig, RigError
 
@@ -96,4 +97,7 @@ def make_canopen_rig(config: RigConfig) -> Rig:
         height=options.get("camera_height"),
         fps=options.get("camera_fps"),
     )
-    return Rig(arm=arm, camera=camera, clock=RealClock(), config=config)
+    return Rig(
+        arm=arm, camera=camera, clock=RealClock(), config=config,
+        ball_locator=rig_ball_locator(config),
+    )  # fmt: skip
