@@ -11,7 +11,8 @@ Usage:
         [--betavae models/betavae] [--jobs 2]
 
 Defaults fit a ~30 min budget on 2 CPU cores: rpe, rge-efr, mge-efr, 3 seeds x 2000 episodes
-(~0.12 s of CPU per episode, measured: 18 runs x 240 s / 2 processes). With ``--vae`` and/or
+(~0.12 s of CPU per episode, measured: 9 runs x 240 s / 2 processes = 18 min plus
+the shared machine's slowdown). With ``--vae`` and/or
 ``--betavae`` (``ergo vae train``), rge-vae / mge-betavae are added.
 """
 

@@ -6,7 +6,8 @@ Deterministic given the data and the seed: the batch of iteration i is drawn by
 as the uninterrupted run would have (same thread count, same machine).
 
 The paper trained 300k iterations at lr 1e-5 (batch 64) on a GPU. On 2 CPU cores we train with
-Adam at lr 1e-3, batch 64, for a few thousand iterations (figures: docs/goal_exploration.md).
+Adam at lr 1e-3, batch 64, for a few thousand iterations; measured cost and the posterior
+collapse seen after 300 iterations: docs/goal_exploration.md.
 
 Files in the output folder: ``checkpoint.pt`` (weights, optimiser, iteration; written every
 ``checkpoint_every`` iterations and at the end), ``train_log.csv`` (iteration, loss, recon, kl),
@@ -34,8 +35,9 @@ class TrainConfig:
     """Optimisation settings.
 
     Attributes:
-        iterations: total gradient steps (measured: a few thousand give a usable space on CPU).
-        lr: Adam learning rate (paper 1e-5 over 300k iterations; 1e-3 here, measured).
+        iterations: total gradient steps (a guess: 300 measured were not enough, the latents had
+            collapsed; docs/goal_exploration.md; ~0.4-0.8 s of CPU each at batch 64).
+        lr: Adam learning rate (paper 1e-5 over 300k iterations; 1e-3 here, a guess for short runs).
         batch: images per step (paper 64).
         seed: seeds batches and sampling noise.
         checkpoint_every: iterations between checkpoints.
