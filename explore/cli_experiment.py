@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from explore.cli import CliError
+from explore.cli_explore import parse_key_values
 
 # strategies that need a representation trained beforehand, and the flag that gives it
 VAE_FLAGS = {
@@ -88,21 +89,6 @@ def _csv_list(text: str, what: str) -> list[str]:
     if not items:
         raise CliError(f"--{what}: give at least one value")
     return items
-
-
-def _parse_options(items: list[str]) -> dict[str, Any]:
-    import json
-
-    out: dict[str, Any] = {}
-    for item in items:
-        key, sep, raw = item.partition("=")
-        if not sep or not key:
-            raise CliError(f"--option {item!r}: expected KEY=VALUE")
-        try:
-            out[key] = json.loads(raw)
-        except json.JSONDecodeError:
-            out[key] = raw
-    return out
 
 
 def strategy_options(
@@ -287,7 +273,7 @@ def run_experiment(args: argparse.Namespace) -> int:
         raise CliError(f"--seeds must be integers: {exc}") from exc
     rows = run_campaign(
         args.out, strategies, seeds, args.episodes, args.jobs, args.vae, args.betavae,
-        _parse_options(args.option), progress=not args.no_progress,
+        parse_key_values(args.option, "--option"), progress=not args.no_progress,
     )  # fmt: skip
     print(format_table(rows))
     print(f"summary: {args.out / 'summary.csv'}")

@@ -36,15 +36,22 @@ def rig_options(args: argparse.Namespace) -> dict[str, Any]:
         value = getattr(args, key, None)
         if value is not None:
             opts[key] = value
-    for item in args.rig_option:
+    opts.update(parse_key_values(args.rig_option, "--rig-option"))
+    return opts
+
+
+def parse_key_values(items: list[str], flag: str) -> dict[str, Any]:
+    """``KEY=VALUE`` flags into a dict; VALUE is JSON when it parses, else a plain string."""
+    out: dict[str, Any] = {}
+    for item in items:
         key, sep, raw = item.partition("=")
         if not sep or not key:
-            raise CliError(f"--rig-option {item!r}: expected KEY=VALUE")
+            raise CliError(f"{flag} {item!r}: expected KEY=VALUE")
         try:
-            opts[key] = json.loads(raw)
+            out[key] = json.loads(raw)
         except json.JSONDecodeError:
-            opts[key] = raw
-    return opts
+            out[key] = raw
+    return out
 
 
 def register(sub: argparse._SubParsersAction) -> None:
