@@ -226,16 +226,13 @@ def serve(args: argparse.Namespace) -> int:
             SlcanPtyBridge(bridge_bus) as bridge,
         ):
             print(f"canopen bus (slcan) on {bridge.path}", flush=True)
-            if not getattr(args, "no_camera", False):
-                from sim.mjpeg_server import MjpegServer
+            from sim.mjpeg_server import start_twin_camera
 
-                camera = MjpegServer(twin.render, port=int(getattr(args, "camera_port", 0) or 0))
-                try:
-                    camera.start()
-                except OSError as exc:
-                    print(f"ergo: error: {exc}", file=sys.stderr)
-                    return 2
-                print(f"camera on {camera.url}", flush=True)
+            try:
+                camera = start_twin_camera(twin, args)
+            except OSError as exc:
+                print(f"ergo: error: {exc}", file=sys.stderr)
+                return 2
             try:
                 while True:
                     time.sleep(1.0)

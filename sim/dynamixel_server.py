@@ -140,17 +140,13 @@ def serve(args: argparse.Namespace) -> int:
         PtyBusServer(emulator) as server,
     ):
         print(f"dynamixel bus on {server.path}", flush=True)
-        if not getattr(args, "no_camera", False):
-            from sim.mjpeg_server import MjpegServer, TwinFrames
+        from sim.mjpeg_server import start_twin_camera
 
-            port = int(getattr(args, "camera_port", 0) or 0)
-            camera = MjpegServer(TwinFrames(twin), port=port)
-            try:
-                camera.start()
-            except OSError as exc:
-                print(f"ergo: error: {exc}", file=sys.stderr)
-                return 2
-            print(f"camera on {camera.url}", flush=True)
+        try:
+            camera = start_twin_camera(twin, args)
+        except OSError as exc:
+            print(f"ergo: error: {exc}", file=sys.stderr)
+            return 2
         try:
             while True:
                 time.sleep(1.0)

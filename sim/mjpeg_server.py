@@ -15,7 +15,7 @@ import time
 from collections.abc import Callable
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
@@ -240,3 +240,18 @@ class MjpegServer:
                     pass  # the client went away
 
         return Handler
+
+
+def start_twin_camera(twin: Twin, args: Any) -> MjpegServer | None:
+    """Serve the twin's overhead camera for ``ergo twin serve`` (``--camera-port``,
+    ``--no-camera``) with its own renderer (``TwinFrames``) and print its URL.
+
+    Returns the started server, or None with ``--no-camera``. Raises OSError when the port
+    cannot be bound.
+    """
+    if getattr(args, "no_camera", False):
+        return None
+    camera = MjpegServer(TwinFrames(twin), port=int(getattr(args, "camera_port", 0) or 0))
+    camera.start()
+    print(f"camera on {camera.url}", flush=True)
+    return camera
