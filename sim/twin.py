@@ -179,7 +179,8 @@ class Twin:
                 renderer = mujoco.Renderer(self.model, h, w)
                 self._renderers[(h, w)] = renderer
             renderer.update_scene(self.data, camera=camera)
-            rgb = renderer.render()
+        # the scene is a copy: physics may step again while it is drawn
+        rgb = renderer.render()
         return np.ascontiguousarray(rgb[:, :, ::-1])
 
     def close(self) -> None:
