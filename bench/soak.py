@@ -7,16 +7,19 @@
 ``--bus serial``: the real ``DynamixelArm`` and ``DynamixelBus`` (retries, typed errors)
 talk Protocol 2.0 to ``sim.dynamixel_emulator.DynamixelEmulator`` driving the twin, through
 its in-process ``EmulatedSerial`` (the byte stream of the pty server without the pty and
-without real-time pacing). Status packets are dropped at rate/2 and corrupted at rate/2.
+without real-time pacing). Status packets are dropped, corrupted and sent late (past the
+timeout), each at rate/3.
 ``--bus arm``: the ``sim`` rig's arm wrapped in ``explore.faults.FaultyArm`` (reads and sends
 raise at the rate).
 
 When an episode fails after the bus's retries, the rig is disconnected (torque off), and
 the run resumes from its folder with a freshly built rig, as ``ergo explore --resume``
 would. Reported: episodes stored, lost completed episodes (history checked 0..N-1 with
-valid checksums: must be 0), failures and their messages, bus counters, time lost to
-recovery (from the last stored episode before a failure to the first episode of the
-resumed run, less one typical episode), wall time.
+valid checksums: must be 0), failures and their messages, the arm's fault counters
+(``Arm.fault_counts``: bus calls, retries, timeouts, CRC errors, and the total duration of
+the calls that needed a retry), time lost to failed episodes (from the last stored episode
+before a failure to the first episode of the resumed run, less one typical episode), wall
+time.
 """
 
 from __future__ import annotations
@@ -31,45 +34,47 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from explore.clock import TwinClock
-from explore.explorer import Explorer
-from explore.rig import Rig, RigConfig
-from explore.store import RunStore
-from explore.strategies import make_strategy
-from robot.errors import RobotError
-from sim.camera import SimCamera
-from sim.twin import Twin
+from sim.headless import ensure_headless_gl
+
+ensure_headless_gl()  # before MuJoCo is imported
+
+from explore.clock import TwinClock  # noqa: E402
+from explore.explorer import Explorer  # noqa: E402
+from explore.rig import Rig, RigConfig  # noqa: E402
+from explore.store import RunStore  # noqa: E402
+from explore.strategies import make_strategy  # noqa: E402
+from robot.errors import RobotError  # noqa: E402
+from sim.camera import SimCamera  # noqa: E402
+from sim.twin import Twin  # noqa: E402
 
 RENDER = (64, 64)  # the recorded image is 64 x 64; larger renders only cost time
 
 
-def build_rig(bus: str, rate: float, seed: int) -> tuple[Rig, dict]:
+def build_rig(bus: str, rate: float, seed: int) -> Rig:
     twin = Twin(render_size=RENDER)
     if bus == "serial":
         from robot.dynamixel.arm import DynamixelArm
         from sim.dynamixel_emulator import DynamixelEmulator, EmulatedSerial, FaultConfig
 
-        emulator = DynamixelEmulator(
-            twin, faults=FaultConfig(drop_rate=rate / 2, corrupt_rate=rate / 2, seed=seed)
-        )
+        third = rate / 3
+        faults = FaultConfig(drop_rate=third, corrupt_rate=third, late_rate=third, seed=seed)
+        emulator = DynamixelEmulator(twin, faults=faults)
         # latency 2 ms: the in-process fake answers at once, so a lost reply costs only this
+        # (a late one comes 30 ms late: past the timeout, it is retried like a lost one)
         arm = DynamixelArm("emulated", connection=EmulatedSerial(emulator), latency_s=0.002)
-        probe = {"bus": arm.bus}
     else:
         from explore.faults import FaultyArm
         from sim.arm import SimArm
 
         arm = FaultyArm(SimArm(twin), rate=rate, seed=seed)
-        probe = {"faulty": arm}
-    rig = Rig(arm=arm, camera=SimCamera(twin), clock=TwinClock(twin),
-              config=RigConfig(name="sim"), twin=twin)  # fmt: skip
-    return rig, probe
+    return Rig(arm=arm, camera=SimCamera(twin), clock=TwinClock(twin),
+               config=RigConfig(name="sim"), twin=twin)  # fmt: skip
 
 
 def soak(episodes: int, rate: float, bus: str, seed: int, out: Path) -> dict:
     store = RunStore.create(out, {"soak": True, "bus": bus, "rate": rate, "seed": seed})
     failures: collections.Counter[str] = collections.Counter()
-    counters: collections.Counter[str] = collections.Counter()
+    counters: collections.Counter[str] = collections.Counter()  # summed over attempts
     last_stored = time.perf_counter()
     lost_s = 0.0
     pending_failure_at: float | None = None
@@ -93,7 +98,7 @@ def soak(episodes: int, rate: float, bus: str, seed: int, out: Path) -> dict:
             raise SystemExit("soak: too many failures, giving up")
         # a fresh rig per attempt, as a resumed process opens the port again (the fault
         # draws get a new seed per attempt so a failure does not replay identically)
-        rig, probe = build_rig(bus, rate, seed * 1000 + attempts)
+        rig = build_rig(bus, rate, seed * 1000 + attempts)
         strategy = make_strategy("rpe")
         explorer = Explorer(rig, strategy, store, seed=seed, on_episode=on_episode)
         try:
@@ -102,10 +107,9 @@ def soak(episodes: int, rate: float, bus: str, seed: int, out: Path) -> dict:
             failures[type(exc).__name__ + ": " + str(exc).split(" on ")[0][:90]] += 1
             pending_failure_at = last_stored
         finally:
-            if "bus" in probe:
-                counters.update(probe["bus"].counters.as_dict())
-            if "faulty" in probe:
-                counters.update(probe["faulty"].counts)
+            counters.update(rig.arm.fault_counts())
+            if bus == "arm":
+                counters.update(rig.arm.counts)  # type: ignore[attr-defined]
             rig.twin.close()
     wall = time.perf_counter() - t0
     store.close()
@@ -125,7 +129,9 @@ def soak(episodes: int, rate: float, bus: str, seed: int, out: Path) -> dict:
         "wall_s": round(wall, 1),
         "episodes_per_s": round(len(ids) / wall, 2),
     }
-    result["bus_counters" if bus == "serial" else "injected"] = dict(counters)
+    result["counters"] = {
+        k: round(v, 3) if isinstance(v, float) else v for k, v in counters.items()
+    }
     return result
 
 

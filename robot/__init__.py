@@ -2,7 +2,7 @@
 package of the project."""
 
 from robot.arm import Arm, JointState
-from robot.errors import BusError, NotConnectedError, RobotError, SafetyStop
+from robot.errors import BusError, LinkLost, NotConnectedError, RobotError, SafetyStop
 from robot.safety import Watchdog, torque_off_on_signals
 from robot.spec import ArmSpec, JointSpec, ergo_jr_spec
 
@@ -12,6 +12,7 @@ __all__ = [
     "BusError",
     "JointSpec",
     "JointState",
+    "LinkLost",
     "NotConnectedError",
     "RobotError",
     "SafetyStop",

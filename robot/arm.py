@@ -3,7 +3,14 @@
 The base class owns the safety logic so that no backend can skip it:
 - ``command`` clamps to the joint limits and to the maximum step from the last command sent;
 - ``read`` feeds the watchdog (temperature, load) which turns torque off when a limit holds;
-- ``disconnect`` (and leaving the ``with`` block, on exception too) turns torque off.
+- ``disconnect`` (and leaving the ``with`` block, on exception too) turns torque off;
+- a lost link (``LinkLost``: adapter unplugged, port closed) during ``read``/``command`` is
+  recovered in place when the backend can reconnect: at most ``RecoveryPolicy.attempts``
+  reconnections with a growing pause, then the positions are read back, torque is re-enabled
+  holding the measured pose (if it was on) and the call is retried once; otherwise a
+  ``SafetyStop`` (torque off where the servos can still be reached) ends the run, which can be
+  resumed from its folder. ``fault_counts()`` gives the counters (links lost, reconnections,
+  time spent recovering, and the backend's bus counters).
 
 Units: positions rad, velocities rad/s, loads as a signed fraction of the maximum torque,
 temperatures degrees C, timestamps seconds (``time.monotonic`` or the twin's clock).
@@ -12,12 +19,14 @@ temperatures degrees C, timestamps seconds (``time.monotonic`` or the twin's clo
 from __future__ import annotations
 
 import logging
+import threading
+import time
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from robot.errors import NotConnectedError, SafetyStop
+from robot.errors import BusError, LinkLost, NotConnectedError, SafetyStop
 from robot.safety import Watchdog
 from robot.spec import ArmSpec
 
@@ -61,16 +70,83 @@ class JointState:
         )
 
 
-class Arm(ABC):
-    """Abstract arm: a context manager that connects on entry and turns torque off on exit."""
+# Reconnection attempts after a lost link before a safe stop, and the pauses between them:
+# 0.1, 0.2, 0.4, 0.8, 1.0 s (3.5 s in all, plus the attempts). Guesses: a USB-serial adapter
+# that was re-plugged re-enumerates within about a second; five tries ride that out without
+# leaving a run hanging for long.
+DEFAULT_RECONNECT_ATTEMPTS = 5
+DEFAULT_RECONNECT_FIRST_DELAY_S = 0.1
+DEFAULT_RECONNECT_MAX_DELAY_S = 1.0
 
-    def __init__(self, spec: ArmSpec, watchdog: Watchdog | None = None) -> None:
+
+@dataclass(frozen=True)
+class RecoveryPolicy:
+    """How an arm recovers from a lost link.
+
+    Attributes:
+        attempts: reconnections tried before giving up (0: never reconnect, stop at once).
+        first_delay_s: pause before the first attempt, doubled after each failure, s.
+        max_delay_s: longest pause between two attempts, s.
+    """
+
+    attempts: int = DEFAULT_RECONNECT_ATTEMPTS
+    first_delay_s: float = DEFAULT_RECONNECT_FIRST_DELAY_S
+    max_delay_s: float = DEFAULT_RECONNECT_MAX_DELAY_S
+
+    def __post_init__(self) -> None:
+        if self.attempts < 0 or self.first_delay_s < 0 or self.max_delay_s < 0:
+            raise ValueError(f"recovery policy needs non-negative values, got {self}")
+
+    def delays(self) -> list[float]:
+        """The pause before each attempt, s."""
+        return [min(self.first_delay_s * 2**k, self.max_delay_s) for k in range(self.attempts)]
+
+
+@dataclass
+class ArmCounters:
+    """Link faults of one arm since it was created.
+
+    Attributes:
+        links_lost: times a ``LinkLost`` reached the arm during ``read``/``command``.
+        reconnects: recoveries that brought the arm back (the call then went through).
+        reconnect_attempts: reconnections tried, successful or not.
+        recovery_s: wall time spent recovering, successful or not, s.
+        stops_after_link_loss: recoveries that gave up (``SafetyStop`` raised).
+    """
+
+    links_lost: int = 0
+    reconnects: int = 0
+    reconnect_attempts: int = 0
+    recovery_s: float = 0.0
+    stops_after_link_loss: int = 0
+
+
+class Arm(ABC):
+    """Abstract arm: a context manager that connects on entry and turns torque off on exit.
+
+    Args:
+        spec: joints, limits and step bound.
+        watchdog: load/temperature watchdog (default thresholds if None).
+        recovery: what to do when the link is lost (default ``RecoveryPolicy()``; only used
+            when the backend ``can_reconnect``).
+    """
+
+    def __init__(
+        self,
+        spec: ArmSpec,
+        watchdog: Watchdog | None = None,
+        recovery: RecoveryPolicy | None = None,
+    ) -> None:
         self.spec = spec
         self.watchdog = watchdog if watchdog is not None else Watchdog()
+        self.recovery = recovery if recovery is not None else RecoveryPolicy()
+        self.counters = ArmCounters()
         self._connected = False
         self._torque = False
         self._last_sent: np.ndarray | None = None
         self._resync_needed = False
+        # set from a signal (``torque_off_on_signals``): no recovery may turn torque back on
+        self._interrupted = threading.Event()
 
     # ---- lifecycle -------------------------------------------------------------------------
     @property
@@ -90,9 +166,28 @@ class Arm(ABC):
         """Open the link and read the joints once; torque stays as the backend found it."""
         if self._connected:
             return
+        self._interrupted.clear()
         self._connect()
         self._connected = True
         self.resync()
+
+    @property
+    def can_reconnect(self) -> bool:
+        """Whether ``_reconnect`` can reopen the link after a ``LinkLost`` (backends that open
+        their port by name say yes)."""
+        return False
+
+    def fault_counts(self) -> dict[str, float]:
+        """Counters of faults and recoveries: ``ArmCounters`` plus the backend's own (bus
+        retries, timeouts, CRC errors, late cycles...), by name. For a run's metrics."""
+        out: dict[str, float] = dict(asdict(self.counters))
+        out["recovery_s"] = round(out["recovery_s"], 3)
+        out.update(self._backend_counts())
+        return out
+
+    def _backend_counts(self) -> dict[str, float]:
+        """The backend's own counters (none by default)."""
+        return {}
 
     def resync(self) -> None:
         """Re-seed the step bound from the arm itself (after connect, or after the backend's
@@ -131,9 +226,14 @@ class Arm(ABC):
 
     # ---- I/O -------------------------------------------------------------------------------
     def read(self) -> JointState:
-        """Read all joints; the watchdog may stop the arm (``SafetyStop``, torque off)."""
+        """Read all joints; the watchdog may stop the arm (``SafetyStop``, torque off). A lost
+        link is recovered first when the backend can reconnect (see ``RecoveryPolicy``)."""
         self._require()
-        state = self._read()
+        try:
+            state = self._read()
+        except LinkLost as exc:
+            self._recover(exc)
+            state = self._read()
         reason = self.watchdog.check(state)
         if reason is not None:
             self._emergency_torque_off()
@@ -149,22 +249,99 @@ class Arm(ABC):
             self.resync()
         safe = self.spec.clamp(positions, self._last_sent)
         try:
-            self._send(safe)
+            try:
+                self._send(safe)
+            except LinkLost as exc:
+                self._recover(exc)  # re-seeds the step bound from the measured pose
+                safe = self.spec.clamp(positions, self._last_sent)
+                self._send(safe)
         except Exception:
             self._resync_needed = True
             raise
         self._last_sent = safe
         return safe.copy()
 
+    def _recover(self, exc: LinkLost) -> None:
+        """Reconnect after ``exc``, at most ``recovery.attempts`` times; then read the
+        positions back, re-seed the step bound from them and, if torque was on, re-enable it
+        holding the measured pose. Raises ``SafetyStop`` (torque off where still possible)
+        when the link does not come back, the backend cannot reconnect, or a signal asked
+        to stop meanwhile."""
+        t0 = time.monotonic()
+        self.counters.links_lost += 1
+        torque_was_on = self._torque
+        goal_before = self._last_sent
+        where = type(self).__name__
+        last: Exception = exc
+        tried = 0
+        try:
+            if not self.can_reconnect:
+                raise self._give_up(
+                    f"{where}: link lost ({exc}); this arm cannot reconnect by itself"
+                )
+            log.warning(
+                "%s: link lost (%s); reconnecting (%d attempts)", where, exc, self.recovery.attempts
+            )
+            for delay in self.recovery.delays():
+                if self._interrupted.is_set():
+                    break
+                time.sleep(delay)
+                tried += 1
+                self.counters.reconnect_attempts += 1
+                try:
+                    self._reconnect()
+                    measured = self._read().positions
+                    if not np.all(np.isfinite(measured)):
+                        raise BusError(f"positions read back are not finite: {measured}")
+                    if self._interrupted.is_set():
+                        break
+                    self._last_sent = None
+                    self.resync()
+                    if torque_was_on:
+                        self.set_torque(True)
+                except BusError as again:
+                    last = again
+                    log.warning("%s: reconnection %d failed: %s", where, tried, again)
+                    continue
+                ref = measured if goal_before is None else goal_before
+                drift = float(np.max(np.abs(measured - ref)))
+                self.counters.reconnects += 1
+                log.warning(
+                    "%s: reconnected after %.2f s (%d attempt(s)); positions read back, at most "
+                    "%.3f rad from the last goal; torque %s",
+                    where, time.monotonic() - t0, tried, drift,
+                    "re-enabled" if torque_was_on else "left off",
+                )  # fmt: skip
+                return
+            if self._interrupted.is_set():
+                raise self._give_up(f"{where}: link lost ({exc}); stopped by a signal")
+            raise self._give_up(
+                f"{where}: link lost ({exc}) and not back after {tried} reconnection(s) over "
+                f"{time.monotonic() - t0:.1f} s (last: {last})"
+            )
+        finally:
+            self.counters.recovery_s += time.monotonic() - t0
+
+    def _give_up(self, message: str) -> SafetyStop:
+        """Torque off where the servos can still be reached; the ``SafetyStop`` to raise."""
+        self.counters.stops_after_link_loss += 1
+        self._emergency_torque_off()
+        return SafetyStop(
+            f"safety stop: {message}; torque off where the servos can be reached (a servo cut "
+            f"off from the host keeps its last goal); the run can be resumed"
+        )
+
     def set_torque(self, enabled: bool) -> None:
         """Enable or disable torque on every joint.
 
-        Enabling first sets the goal to the measured positions, so a limp arm moved by hand
-        does not jump back to its last command.
+        Enabling first sets the goal to the measured positions (one ``max_step`` towards the
+        limits if the arm is outside them), so a limp arm moved by hand does not jump back to
+        its last command, nor to a limit.
         """
         self._require()
         if enabled:
-            here = self.spec.clamp(self._read().positions, None)
+            measured = self._read().positions
+            here = self.spec.clamp(measured, measured)
             self._send(here)
             self._last_sent = here
         self._set_torque(enabled)
@@ -197,3 +374,13 @@ class Arm(ABC):
 
     @abstractmethod
     def _set_torque(self, enabled: bool) -> None: ...
+
+    def _reconnect(self) -> None:
+        """Close what is left of the link and open it again (only called when
+        ``can_reconnect``); raises a ``BusError`` when the link is not back. Sets
+        ``self._torque`` from what the servos report, as ``_connect`` does."""
+        try:
+            self._disconnect()
+        except Exception as exc:  # the link is gone already: closing may fail
+            log.debug("closing the lost link: %s", exc)
+        self._connect()

@@ -15,3 +15,8 @@ class BusError(RobotError):
 
 class SafetyStop(RobotError):
     """The arm was stopped for safety (overload, overheat, lost node); torque is off."""
+
+
+class LinkLost(BusError):
+    """The link to the servos itself failed (adapter unplugged, serial port or CAN interface
+    gone), as opposed to a packet lost on a working link. ``Arm`` reacts by reconnecting."""

@@ -97,18 +97,29 @@ class ArmSpec:
                 avoid by seeding it with the measured positions).
 
         Returns:
-            positions that are safe to send, shape (n,), rad.
+            positions that are safe to send, shape (n,), rad: within ``max_step`` of
+            ``previous``, and inside the limits unless ``previous`` itself is outside them
+            (then one ``max_step`` closer to them).
         """
         target = np.asarray(target, dtype=float).reshape(-1)
         if target.shape != (self.n,):
             raise ValueError(f"command has shape {target.shape}, expected ({self.n},)")
         if not np.all(np.isfinite(target)):
             raise ValueError(f"command has non-finite values: {target}")
-        out = target
-        if previous is not None:
-            prev = np.asarray(previous, dtype=float).reshape(self.n)
-            out = prev + np.clip(out - prev, -self.max_step, self.max_step)
-        return np.clip(out, self.lower, self.upper)
+        inside = np.clip(target, self.lower, self.upper)
+        if previous is None:
+            return inside
+        prev = np.asarray(previous, dtype=float).reshape(self.n)
+        if not np.all(np.isfinite(prev)):
+            raise ValueError(f"previous command has non-finite values: {prev}")
+        # Towards the target brought inside the limits, at most max_step: from inside the
+        # limits this stays inside; from outside (an arm moved by hand past narrowed limits)
+        # it walks back in at max_step per tick instead of jumping to the limit.
+        delta = inside - prev
+        # the target itself when within reach (exactly: no rounding outside the limits)
+        return np.where(
+            np.abs(delta) <= self.max_step, inside, prev + np.sign(delta) * self.max_step
+        )
 
 
 def _deg(lo: float, hi: float) -> tuple[float, float]:

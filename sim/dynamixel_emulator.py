@@ -14,7 +14,8 @@ this one does too (ROBOTIS e-manual, Protocol 2.0 and XL-320 pages):
 - broadcast: no reply, except to PING, SYNC_READ and BULK_READ;
 - a complete packet for one of our ids whose CRC fails -> CRC error status.
 
-Fault injection (``FaultConfig``): replies dropped or corrupted at a rate, an extra delay, and
+Fault injection (``FaultConfig``): replies dropped, corrupted or late at a rate, an extra
+delay, a servo that stops answering (remove it from ``servos``), and
 an "overload servo" that, after its torque has been on for a while, sets the overload bit of
 its Hardware Error Status, raises the alert bit in every status and shuts its torque off
 (the XL-320's Shutdown behaviour) until REBOOT.
@@ -50,6 +51,9 @@ MOVING_THRESHOLD_RAD_S = 0.02
 # Torque-on time before the injected overload trips when none is given, s (guess: long
 # enough to see the arm move first).
 DEFAULT_OVERLOAD_AFTER_S = 2.0
+# How late a "late" status packet comes, s: past the bus's timeout with its default 20 ms of
+# latency slack (robot.dynamixel.bus.DEFAULT_LATENCY_S), so the host sees a timeout (guess).
+DEFAULT_LATE_S = 0.03
 
 
 @dataclass
@@ -60,6 +64,8 @@ class FaultConfig:
         drop_rate: fraction of status packets never sent, 0..1.
         corrupt_rate: fraction of status packets sent with one byte flipped, 0..1.
         extra_delay_s: added before every reply, s.
+        late_rate: fraction of status packets sent ``late_s`` late, 0..1.
+        late_s: how late those are, s.
         overload_servo: id that raises an overload alert, or None.
         overload_after_s: torque-on time (twin time, or wall time without a twin) before it
             trips, s.
@@ -69,16 +75,18 @@ class FaultConfig:
     drop_rate: float = 0.0
     corrupt_rate: float = 0.0
     extra_delay_s: float = 0.0
+    late_rate: float = 0.0
+    late_s: float = DEFAULT_LATE_S
     overload_servo: int | None = None
     overload_after_s: float = DEFAULT_OVERLOAD_AFTER_S
     seed: int = 0
 
     def __post_init__(self) -> None:
-        for name in ("drop_rate", "corrupt_rate"):
+        for name in ("drop_rate", "corrupt_rate", "late_rate"):
             value = getattr(self, name)
             if not 0.0 <= value <= 1.0:
                 raise ValueError(f"{name} must be in [0, 1], got {value}")
-        if self.extra_delay_s < 0 or self.overload_after_s < 0:
+        if self.extra_delay_s < 0 or self.overload_after_s < 0 or self.late_s < 0:
             raise ValueError("delays must be >= 0")
 
 
@@ -309,7 +317,8 @@ class DynamixelEmulator:
                 flipped = bytearray(wire)
                 flipped[self._rng.randrange(7, len(wire))] ^= 1 << self._rng.randrange(8)
                 wire = bytes(flipped)
-            out.append((delay, wire))
+            late = self.faults.late_rate and self._rng.random() < self.faults.late_rate
+            out.append((delay + self.faults.late_s if late else delay, wire))
         return out
 
     # ---- state changes -----------------------------------------------------------------------

@@ -38,31 +38,81 @@ class PtyBusServer:
     ``path`` is the slave side to open with pyserial (e.g. ``/dev/pts/7``). The server keeps its
     own slave descriptor open, so clients may come and go without the pty closing.
 
+    ``unplug()`` closes the pty as a USB adapter pulled out would (the client's next read or
+    write fails with EIO); ``replug()`` opens a new one, whose path differs. With ``link`` the
+    server keeps a symbolic link at that path pointing to the current pty (a stable name, as
+    ``/dev/serial/by-id/...`` is for a real adapter), so a client can reopen it by name.
+
     Args:
         emulator: who answers.
+        link: path of a symbolic link to the current pty (None: no link).
     """
 
-    def __init__(self, emulator: DynamixelEmulator) -> None:
+    def __init__(self, emulator: DynamixelEmulator, link: str | os.PathLike[str] | None = None):
         self.emulator = emulator
-        self._master, self._slave = os.openpty()
-        tty.setraw(self._slave, termios.TCSANOW)  # no echo, no line discipline: bytes as sent
-        tty.setraw(self._master, termios.TCSANOW)
-        self.path = os.ttyname(self._slave)
+        self.link = None if link is None else os.fspath(link)
+        self._fd_lock = threading.Lock()
+        self._master: int | None = None
+        self._slave: int | None = None
+        self.path = ""
+        self._open_pty()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.bytes_in = 0
         self.bytes_out = 0
+        self.unplugs = 0
+
+    @property
+    def port(self) -> str:
+        """What a client should open: the link when there is one, else the pty itself."""
+        return self.link or self.path
+
+    @property
+    def plugged(self) -> bool:
+        return self._master is not None
+
+    def _open_pty(self) -> None:
+        master, slave = os.openpty()
+        tty.setraw(slave, termios.TCSANOW)  # no echo, no line discipline: bytes as sent
+        tty.setraw(master, termios.TCSANOW)
+        with self._fd_lock:
+            self._master, self._slave = master, slave
+            self.path = os.ttyname(slave)
+        if self.link is not None:
+            tmp = f"{self.link}.{os.getpid()}.tmp"
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(tmp)
+            os.symlink(self.path, tmp)
+            os.replace(tmp, self.link)  # atomic: a client never sees the link missing
+
+    def unplug(self) -> None:
+        """Close the pty, as an adapter pulled out of its USB socket."""
+        with self._fd_lock:
+            fds, self._master, self._slave = (self._master, self._slave), None, None
+        for fd in fds:
+            if fd is not None:
+                with contextlib.suppress(OSError):
+                    os.close(fd)
+        self.unplugs += 1
+
+    def replug(self) -> None:
+        """Open a new pty (a new path; the link, if any, follows it)."""
+        if self._master is None:
+            self._open_pty()
 
     def serve_forever(self) -> None:
         """Answer packets until ``stop()`` (call from any thread) or KeyboardInterrupt."""
-        master = self._master
         while not self._stop.is_set():
-            ready, _, _ = select.select([master], [], [], POLL_S)
-            if not ready:
+            master = self._master
+            if master is None:  # unplugged
+                time.sleep(POLL_S)
                 continue
             try:
+                ready, _, _ = select.select([master], [], [], POLL_S)
+                if not ready:
+                    continue
                 data = os.read(master, 4096)
-            except OSError:  # EIO when no slave is open on some systems: wait for one
+            except (OSError, ValueError):  # EIO without a slave open; EBADF once unplugged
                 time.sleep(POLL_S)
                 continue
             if not data:
@@ -73,12 +123,16 @@ class PtyBusServer:
                 wait = t0 + delay - time.monotonic()
                 if wait > 0:
                     time.sleep(wait)
-                os.write(master, wire)
+                try:
+                    os.write(master, wire)
+                except OSError:  # unplugged meanwhile
+                    break
                 self.bytes_out += len(wire)
 
     def start(self) -> None:
         """Serve in a daemon thread."""
         if self._thread is None:
+            self._stop.clear()
             self._thread = threading.Thread(
                 target=self.serve_forever, name="dynamixel-pty", daemon=True
             )
@@ -92,9 +146,12 @@ class PtyBusServer:
 
     def close(self) -> None:
         self.stop()
-        for fd in (self._master, self._slave):
+        self.unplug()
+        self.unplugs -= 1
+        if self.link is not None:
             with contextlib.suppress(OSError):
-                os.close(fd)
+                if os.path.islink(self.link):
+                    os.unlink(self.link)
 
     def __enter__(self) -> PtyBusServer:
         self.start()

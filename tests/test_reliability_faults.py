@@ -76,7 +76,7 @@ def test_a_short_soak_over_the_serial_bus_loses_no_episode(tmp_path):
     result = soak.soak(episodes=25, rate=0.05, bus="serial", seed=1, out=tmp_path / "run")
     print("\n", result)
     assert result["lost_episodes"] == 0 and result["history_ok"]
-    assert result["bus_counters"]["retries"] > 0
+    assert result["counters"]["bus_retries"] > 0
 
 
 def test_a_short_soak_with_arm_level_faults_loses_no_episode(tmp_path):

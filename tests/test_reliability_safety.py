@@ -210,17 +210,50 @@ def test_a_lost_status_reply_does_not_let_the_next_goal_jump(fracs, targets, fau
     _check_sent(arm, spec, start)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="gap: when the measured pose is outside narrowed (calibrated) limits, the first "
-    "goal is clipped to the limit in one tick, a jump larger than max_step",
-)
 def test_an_arm_outside_its_calibrated_limits_returns_at_most_max_step_per_tick():
     spec = BASE.with_limits(np.full(6, -0.5), np.full(6, 0.5))
     arm = ScriptedArm(spec, np.full(6, 1.0), faults=[])  # moved by hand past the limit
     arm.connect()
-    sent = arm.command(np.zeros(6))
-    assert np.max(np.abs(sent - 1.0)) <= spec.max_step + 1e-9
+    path = [arm.command(np.zeros(6)) for _ in range(12)]
+    steps = np.abs(np.diff(np.vstack([np.full(6, 1.0), *path]), axis=0)).max(axis=1)
+    assert steps.max() <= spec.max_step + 1e-9, steps
+    # 1.0 -> 0.85 -> 0.70 -> 0.55 (outside, closer each tick) -> 0.40: inside from the 4th
+    # tick on, never out again, and at the target in the end
+    np.testing.assert_allclose(path[2], 0.55)
+    assert all(np.all(p <= 0.5) for p in path[3:])
+    np.testing.assert_allclose(path[-1], 0.0)
+
+
+def test_enabling_torque_outside_the_limits_holds_the_pose_within_one_step():
+    spec = BASE.with_limits(np.full(6, -0.5), np.full(6, 0.5))
+    arm = ScriptedArm(spec, np.full(6, -0.9), faults=[])
+    arm.connect()
+    arm.set_torque(True)
+    np.testing.assert_allclose(arm.sent[-1], -0.9 + spec.max_step)  # not -0.5 at once
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    spec=calibrated_specs(),
+    start=st.lists(st.floats(-2.7, 2.7), min_size=6, max_size=6),
+    targets=st.lists(st.lists(st.floats(-4, 4), min_size=6, max_size=6), min_size=1, max_size=30),
+)
+def test_from_anywhere_every_step_is_bounded_and_an_arm_once_inside_stays_inside(
+    spec, start, targets
+):
+    prev = np.asarray(start)
+    inside = (prev >= spec.lower) & (prev <= spec.upper)
+    for t in targets:
+        out = spec.clamp(np.asarray(t), prev)
+        assert np.max(np.abs(out - prev)) <= spec.max_step + 1e-9
+        # a joint inside stays inside; one outside never moves further out
+        ok = (out >= spec.lower) & (out <= spec.upper)
+        assert np.all(ok[inside])
+        dist_prev = np.maximum(spec.lower - prev, 0) + np.maximum(prev - spec.upper, 0)
+        dist_out = np.maximum(spec.lower - out, 0) + np.maximum(out - spec.upper, 0)
+        assert np.all(dist_out <= dist_prev + 1e-12)
+        inside |= ok
+        prev = out
 
 
 def test_disconnect_never_raises_even_when_closing_the_link_fails():

@@ -30,7 +30,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from robot.arm import Arm, JointState
+from robot.arm import Arm, JointState, RecoveryPolicy
 from robot.dynamixel.bus import (
     DEFAULT_LATENCY_S,
     DEFAULT_RETRIES,
@@ -69,7 +69,9 @@ class DynamixelArm(Arm):
         return_delay_us: write this Return Delay Time at connect (torque must be off, it is an
             EEPROM register); None leaves the servos as they are.
         retries, latency_s: passed to the ``DynamixelBus``.
-        connection: an open serial-like object instead of opening ``port`` (tests).
+        connection: an open serial-like object instead of opening ``port`` (tests). Such an
+            arm cannot reconnect after a lost link (nothing to reopen): it stops instead.
+        recovery: reconnection policy after a lost link (see ``robot.arm.RecoveryPolicy``).
     """
 
     def __init__(
@@ -86,8 +88,9 @@ class DynamixelArm(Arm):
         retries: int = DEFAULT_RETRIES,
         latency_s: float = DEFAULT_LATENCY_S,
         connection: SerialLike | None = None,
+        recovery: RecoveryPolicy | None = None,
     ) -> None:
-        super().__init__(spec or ergo_jr_spec(), watchdog)
+        super().__init__(spec or ergo_jr_spec(), watchdog, recovery)
         n = self.spec.n
         self.model: Model = model_by_name(model)
         self.ids = self.spec.ids
@@ -118,6 +121,7 @@ class DynamixelArm(Arm):
         m = self.model
         self._fast = m.block(["position", "velocity"])
         self._slow = m.block(["position", "velocity", "load", "voltage", "temperature"])
+        self._reopenable = connection is None
         self._reads = 0
         self._loads = np.full(n, np.nan)
         self._temperatures = np.full(n, np.nan)
@@ -194,6 +198,15 @@ class DynamixelArm(Arm):
 
     def _disconnect(self) -> None:
         self.bus.close()
+
+    @property
+    def can_reconnect(self) -> bool:
+        """True when the port is opened by name (not given as ``connection=``)."""
+        return self._reopenable
+
+    def _backend_counts(self) -> dict[str, float]:
+        """The bus's counters (calls, retries, timeouts, CRC errors, servo errors, alerts)."""
+        return {f"bus_{k}": v for k, v in self.bus.counters.as_dict().items()}
 
     def _read(self) -> JointState:
         slow = self._reads % self.slow_every == 0

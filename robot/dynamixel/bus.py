@@ -10,6 +10,8 @@ errors.
 - A servo that reports an error raises ``ServoError`` (not retried: it will say the same
   again). A status with the alert bit set raises ``HardwareAlertError`` after reading and
   decoding the servo's Hardware Error Status.
+- A port that fails mid-call (unplugged adapter, closed pty) raises ``PortLostError``, a
+  ``robot.errors.LinkLost``: ``robot.Arm`` then reopens it by name (bounded attempts).
 - The port is opened by path (``/dev/ttyUSB0``, a pty) or by pyserial URL (``loop://``). Port
   missing, busy or refusing the baud rate gives a one-line ``BusError``.
 
@@ -28,7 +30,12 @@ from typing import Any, Protocol
 
 from robot.dynamixel import protocol as proto
 from robot.dynamixel.control_table import XL320, Model
-from robot.errors import BusError
+from robot.errors import BusError, LinkLost
+
+try:  # pyserial's flush and buffer resets call termios, whose errors are not OSErrors
+    from termios import error as _TermiosError
+except ImportError:  # pragma: no cover - not a POSIX system
+    _TermiosError = OSError  # type: ignore[misc,assignment]
 
 log = logging.getLogger(__name__)
 
@@ -54,6 +61,11 @@ STATUS_OVERHEAD = 11
 
 class DynamixelError(BusError):
     """Base of the Dynamixel bus errors."""
+
+
+class PortLostError(DynamixelError, LinkLost):
+    """The serial port failed under the bus (adapter unplugged, pty closed): a ``LinkLost``,
+    which the arm answers by reopening the port by name."""
 
 
 class NoStatusError(DynamixelError):
@@ -124,12 +136,15 @@ class BusCounters:
     crc_errors: int = 0  # corrupt frames received, and CRC errors reported by servos
     servo_errors: int = 0  # status packets with an error number (ServoError raised)
     alerts: int = 0  # status packets with the alert bit (HardwareAlertError raised)
+    # total duration of the calls that needed a retry, s: an upper bound of what the faults
+    # cost (the first attempt's wait for the timeout, then the retries)
+    retried_call_s: float = 0.0
 
     def reset(self) -> None:
         for f in fields(self):
             setattr(self, f.name, 0)
 
-    def as_dict(self) -> dict[str, int]:
+    def as_dict(self) -> dict[str, float]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
@@ -231,6 +246,7 @@ class DynamixelBus:
         self._serial: SerialLike | None = connection
         self._decoder = proto.Decoder()
         self._lock = threading.RLock()
+        self._last_bad = 0
 
     # ---- lifecycle ---------------------------------------------------------------------------
     @property
@@ -242,9 +258,12 @@ class DynamixelBus:
             self._serial = open_serial(self.port, self.baud)
 
     def close(self) -> None:
+        """Close the port; never raises (a port that vanished may fail to close)."""
         if self._serial is not None:
             try:
                 self._serial.close()
+            except (OSError, _TermiosError) as exc:
+                log.debug("closing %s: %s", self.port, exc)
             finally:
                 self._serial = None
 
@@ -309,8 +328,9 @@ class DynamixelBus:
                         got.setdefault(item.id, item)
                     # instruction packets are our own echo; other statuses are strays
             return got, corrupt
-        except OSError as exc:  # includes serial.SerialException (unplugged mid-run)
-            raise BusError(f"Dynamixel bus {self.port} failed: {exc}") from exc
+        except (OSError, _TermiosError) as exc:  # serial.SerialException: unplugged mid-run
+            detail = " ".join(str(exc).split()) or type(exc).__name__
+            raise PortLostError(f"Dynamixel bus {self.port} failed: {detail}") from exc
 
     def _call(
         self,
@@ -340,37 +360,24 @@ class DynamixelBus:
             data: dict[int, bytes] = {}
             alerts: list[tuple[int, proto.StatusError]] = []
             corrupt = 0
-            for attempt in range(retries + 1):
-                if attempt:
-                    self.counters.retries += 1
-                    self.last_call_retries += 1
-                got, corrupt = self._exchange(build(list(pending)), pending)
-                if not pending:
-                    return {}
-                for sid, status in got.items():
-                    err = status.status_error
-                    if err.code == proto.CRC_ERROR:  # the servo got our packet damaged: retry
-                        self.counters.crc_errors += 1
-                        corrupt += 1
-                        continue
-                    if err.code:
-                        self.counters.servo_errors += 1
-                        raise ServoError(
-                            f"servo {sid} reported {err} to {what} on {self.port}", sid, err
-                        )
-                    if len(status.params) != pending[sid]:
-                        self.counters.crc_errors += 1
-                        corrupt += 1
-                        continue
-                    if err.alert and check_alert:
-                        self.counters.alerts += 1
-                        alerts.append((sid, err))
-                    data[sid] = status.params
-                    del pending[sid]
-                if not pending:
-                    break
-                if not corrupt:
-                    self.counters.timeouts += 1
+            started = time.monotonic()
+            try:
+                for attempt in range(retries + 1):
+                    if attempt:
+                        self.counters.retries += 1
+                        self.last_call_retries += 1
+                    got, corrupt = self._exchange(build(list(pending)), pending)
+                    if not pending:
+                        return {}
+                    self._take(got, pending, data, alerts, what, check_alert)
+                    corrupt += self._last_bad
+                    if not pending:
+                        break
+                    if not corrupt:
+                        self.counters.timeouts += 1
+            finally:
+                if self.last_call_retries:
+                    self.counters.retried_call_s += time.monotonic() - started
             if pending:
                 ids = ", ".join(str(i) for i in pending)
                 tries = retries + 1
@@ -388,6 +395,37 @@ class DynamixelBus:
             if alerts:
                 self._raise_alert(alerts[0][0], alerts[0][1], what, data)
             return data
+
+    def _take(
+        self,
+        got: Mapping[int, proto.StatusPacket],
+        pending: dict[int, int],
+        data: dict[int, bytes],
+        alerts: list[tuple[int, proto.StatusError]],
+        what: str,
+        check_alert: bool,
+    ) -> None:
+        """Move the good replies of ``got`` from ``pending`` to ``data``; sets ``_last_bad``
+        to the replies that must be asked again (CRC error reported, wrong length)."""
+        self._last_bad = 0
+        for sid, status in got.items():
+            err = status.status_error
+            if err.code == proto.CRC_ERROR:  # the servo got our packet damaged: retry
+                self.counters.crc_errors += 1
+                self._last_bad += 1
+                continue
+            if err.code:
+                self.counters.servo_errors += 1
+                raise ServoError(f"servo {sid} reported {err} to {what} on {self.port}", sid, err)
+            if len(status.params) != pending[sid]:
+                self.counters.crc_errors += 1
+                self._last_bad += 1
+                continue
+            if err.alert and check_alert:
+                self.counters.alerts += 1
+                alerts.append((sid, err))
+            data[sid] = status.params
+            del pending[sid]
 
     def _raise_alert(
         self, servo_id: int, err: proto.StatusError, what: str, data: Mapping[int, bytes]
