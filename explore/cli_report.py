@@ -88,7 +88,8 @@ def run_replay(args: argparse.Namespace) -> int:
         print(f"{args.run} has no recording: writing one from its history", file=sys.stderr)
         ns = argparse.Namespace(rerun="save", rerun_connect=None, rerun_stride=args.rerun_stride)
         try:
-            recorder = make_recorder(ns, args.run, records=[])
+            # a learned goal space's model is loaded too: goal/reached for those runs as well
+            recorder = make_recorder(ns, args.run, records=[], load_models=True)
         except RunStoreError as exc:
             raise CliError(str(exc)) from exc
         assert recorder is not None

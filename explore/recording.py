@@ -17,10 +17,15 @@ Entity paths (units: metres, radians, seconds; shapes are per log call):
 - ``camera/outcome`` EncodedImage (JPEG) 64x64: the outcome observation (every stride).
 - ``joints/m1`` .. ``joints/m6`` Scalars (T, 2): commanded target and measured position, rad,
   sent as columns on the ``time`` and ``episode`` timelines (every stride).
-- ``goal/target`` Points2D (g/2,): the goal, as consecutive coordinate pairs (a 2-D goal is one
-  point; a 10-latent goal is 5 points, one per pair); only when the strategy has a goal.
-- ``goal/reached`` Points2D (g/2,): the outcome in the goal space, when the record has an
-  ``outcome`` field or the recorder was given ``outcome_of``; ``goal/error`` Scalars: distance.
+- ``goal/target`` Points2D (ceil(g/2),): the goal (g coordinates of the goal space module it
+  was sampled in), as consecutive coordinate pairs: 2-D projections of the goal space (a 2-D
+  goal is one point; a 10-latent goal is 5 points, one per pair, labelled "z0,z1", ...); only
+  when the strategy set a goal.
+- ``goal/reached`` Points2D (ceil(g/2),): the episode's outcome in the same module's coordinates,
+  paired the same way; ``goal/miss`` LineStrips2D: one segment per pair, goal -> reached;
+  ``goal/error`` Scalars: Euclidean distance goal <-> reached (goal-space units). Logged when
+  the recorder has ``outcome_of`` (``goal_outcome_of``: the engineered spaces are computed from
+  the record; learned ones need the running strategy) or the record an ``outcome`` field.
 - ``strategy/module`` Scalars: module index (-1 when none); ``strategy/kind`` TextLog: kind.
 - ``stats/ball_cells``, ``stats/ee_cells`` Scalars: distinct cells reached so far (of 30 x 30);
   ``stats/moved_fraction`` Scalars: fraction of episodes so far that moved the ball;
@@ -83,13 +88,15 @@ STRIDE_ENTITIES = (
     "camera/outcome",
     *(f"joints/{name}" for name in JOINT_NAMES),
 )
-GOAL_ENTITIES = ("goal/target", "goal/reached", "goal/error")
+GOAL_ENTITIES = ("goal/target", "goal/reached", "goal/miss", "goal/error")
 
 MOVED_COLOR = (255, 140, 0)
 STILL_COLOR = (150, 150, 150)
 EE_COLOR = (60, 120, 220)
 GOAL_COLOR = (220, 40, 40)
 REACHED_COLOR = (40, 170, 60)
+MISS_COLOR = (200, 200, 200)
+GOAL_RADIUS_UI = -5.0  # goal-space points: 5 UI points whatever the space's scale
 
 
 # ---- run folder helpers --------------------------------------------------------------------
@@ -153,6 +160,82 @@ def pairs(vector: np.ndarray) -> np.ndarray:
     return v.reshape(-1, 2)
 
 
+def pair_labels(g: int) -> list[str]:
+    """Labels of the coordinate pairs of a g-coordinate vector: "z0,z1", "z2,z3", ... (a
+    trailing odd coordinate is "z4")."""
+    return [f"z{i},z{i + 1}" if i + 1 < g else f"z{i}" for i in range(0, g, 2)]
+
+
+OutcomeOf = Callable[["EpisodeRecord"], "np.ndarray | None"]
+
+
+def strategy_outcome_of(strategy: Any) -> OutcomeOf | None:
+    """The map record -> outcome in ``strategy``'s goal space, restricted to the module the
+    record's goal was sampled in (``record.module``), shape (len(module),) like ``record.goal``.
+
+    The map reads ``strategy.space`` at each call (an online space appears during the run and
+    is refit: the outcome is then in the space as it is after the strategy's ``update``). It
+    returns None for records without a module (random episodes) or an outcome (ball not seen,
+    no space yet). Returns None when the strategy has no goal space (RPE).
+    """
+    if not hasattr(strategy, "space"):
+        return None
+
+    def outcome_of(rec: EpisodeRecord) -> np.ndarray | None:
+        space = strategy.space
+        if space is None or rec.module < 0 or rec.module >= len(space.modules):
+            return None
+        o = space.outcome(rec)
+        if o is None:
+            return None
+        return np.asarray(o, dtype=float)[space.modules[rec.module]]
+
+    return outcome_of
+
+
+def goal_outcome_of(strategy_config: dict[str, Any], load_models: bool = False) -> OutcomeOf | None:
+    """``strategy_outcome_of`` for a run's strategy built from its config (``run.json``'s
+    ``config["strategy"]``: name and options), without the running strategy.
+
+    Engineered goal spaces (rge-efr, mge-efr) are functions of the record: always built (cheap).
+    Learned ones (VAE latents) are built only with ``load_models`` (loads the model, and every
+    call encodes the record's image again); an online space (rge-online) does not exist before
+    its strategy has seen the run, so it gives None, as does RPE or a strategy that cannot be
+    built (unknown name, missing model).
+    """
+    from explore.strategies import StrategyError, make_strategy
+    from explore.strategies.goal_exploration import EngineeredGoalExploration, GoalExploration
+
+    name = str(strategy_config.get("name", ""))
+    options = dict(strategy_config.get("options", {}))
+    target = _strategy_class(name)
+    if target is None or not issubclass(target, GoalExploration):
+        return None
+    if not load_models and not issubclass(target, EngineeredGoalExploration):
+        return None
+    try:
+        strategy = make_strategy(name, **options)
+    except (StrategyError, OSError, ValueError) as exc:
+        log.info("no goal-space outcomes for %s: %s", name, exc)
+        return None
+    if getattr(strategy, "space", None) is None:
+        return None
+    return strategy_outcome_of(strategy)
+
+
+def _strategy_class(name: str) -> type | None:
+    """The class registered for a strategy name, without building it."""
+    import importlib
+
+    from explore.strategies import STRATEGIES
+
+    target = STRATEGIES.get(name)
+    if target is None:
+        return None
+    module_name, cls_name = target.split(":")
+    return getattr(importlib.import_module(module_name), cls_name, None)
+
+
 class Recorder:
     """Streams episodes to rerun (a file, a spawned viewer or a gRPC address on loopback).
 
@@ -165,7 +248,9 @@ class Recorder:
         rate_hz: control rate, Hz (places the trajectory ticks on the ``time`` timeline).
         reset_s: time the rest pose takes before each movement, s.
         recording_id: rerun recording id (use ``run_recording_id`` to merge a run's files).
-        outcome_of: maps a record to its outcome in the goal space, shape (g,), or None.
+        outcome_of: maps a record to its outcome in the coordinates of its goal (the module
+            it was sampled in), shape like ``record.goal``, or None (``strategy_outcome_of``,
+            ``goal_outcome_of``); without it, a record's ``outcome`` attribute if it has one.
         blueprint: send the default layout (``default_blueprint()``).
     """
 
@@ -202,7 +287,7 @@ class Recorder:
         # 200 ms, which would cut one small chunk per entity per episode (bigger files, more CPU).
         batcher = rr.ChunkBatcherConfig(flush_tick=BATCH_FLUSH_S)
         self.rec = rr.RecordingStream(APP_ID, recording_id=recording_id, batcher_config=batcher)
-        bp = default_blueprint() if blueprint else None
+        bp = default_blueprint(goals=outcome_of is not None) if blueprint else None
         if sink == "save":
             if self.path is None:
                 raise ValueError("sink 'save' needs a path")
@@ -293,19 +378,29 @@ class Recorder:
             self._log_heavy(rec, start)
 
     def _log_goal(self, rec: EpisodeRecord) -> None:
+        """The goal, the reached outcome and the miss, as coordinate pairs of the goal space."""
         rr = self._rr
         goal = np.asarray(rec.goal, dtype=float).ravel()
         if goal.size == 0:
             return
-        self.rec.log("goal/target", rr.Points2D(pairs(goal), colors=[GOAL_COLOR], radii=0.02))
+        labels = pair_labels(goal.size)
+        self.rec.log(
+            "goal/target",
+            rr.Points2D(pairs(goal), colors=[GOAL_COLOR], radii=GOAL_RADIUS_UI, labels=labels),
+        )
         reached = self.outcome_of(rec) if self.outcome_of else getattr(rec, "outcome", None)
         if reached is None:
             return
         reached = np.asarray(reached, dtype=float).ravel()
-        if reached.shape != goal.shape:
+        if reached.shape != goal.shape or not np.all(np.isfinite(reached)):
             return
         self.rec.log(
-            "goal/reached", rr.Points2D(pairs(reached), colors=[REACHED_COLOR], radii=0.02)
+            "goal/reached",
+            rr.Points2D(pairs(reached), colors=[REACHED_COLOR], radii=GOAL_RADIUS_UI),
+        )
+        self.rec.log(
+            "goal/miss",
+            rr.LineStrips2D(np.stack([pairs(goal), pairs(reached)], axis=1), colors=[MISS_COLOR]),
         )
         self.rec.log("goal/error", rr.Scalars(float(np.linalg.norm(reached - goal))))
 
@@ -380,9 +475,16 @@ class Recorder:
 
 
 # ---- the default layout ----------------------------------------------------------------------
-def default_blueprint() -> Any:
-    """Viewer layout: arena history and camera on the left, this episode's motion in the
-    middle, cells and joints on the right; the ``time`` timeline selected."""
+def default_blueprint(goals: bool = False) -> Any:
+    """Viewer layout: arena history and camera on the left, this episode's motion and the goal
+    space in the middle, cells and joints on the right; the ``time`` timeline selected and
+    following the latest data; the blueprint and selection panels collapsed (the views get the
+    room; the buttons at the top right open them).
+
+    Args:
+        goals: show the goal-space tab first (the strategy sets goals and their outcomes are
+            logged) instead of the 3-D tool tip.
+    """
     import rerun.blueprint as rrb
 
     h = ARENA_HALF_WIDTH * 1.1
@@ -398,6 +500,29 @@ def default_blueprint() -> Any:
         start=rrb.TimeRangeBoundary.cursor_relative(seconds=-20.0),
         end=rrb.TimeRangeBoundary.cursor_relative(),
     )
+    # the whole run on the x axis (the viewer's default follows the cursor over about a minute)
+    whole_run = rrb.TimeAxis(
+        view_range=rrb.TimeRange(
+            start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()
+        )
+    )
+    goal_tabs = [
+        rrb.Spatial2DView(
+            name="Goal vs reached (goal space, this episode)",
+            origin="/goal",
+            contents=["+ /goal/target", "+ /goal/reached", "+ /goal/miss"],
+        ),
+        rrb.Spatial2DView(
+            name="Reached in goal space (all so far)",
+            origin="/goal",
+            contents=["+ /goal/reached"],
+            time_ranges=history,
+        ),
+    ]
+    motion_tabs = [
+        rrb.Spatial3DView(name="Tool tip (3-D)", origin="/arm"),
+        rrb.TextLogView(name="Kinds", origin="/strategy"),
+    ]
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
@@ -416,17 +541,14 @@ def default_blueprint() -> Any:
                     origin="/arena",
                     visual_bounds=bounds,
                 ),
-                rrb.Tabs(
-                    rrb.Spatial3DView(name="Tool tip (3-D)", origin="/arm"),
-                    rrb.Spatial2DView(name="Goal vs reached", origin="/goal"),
-                    rrb.TextLogView(name="Kinds", origin="/strategy"),
-                ),
+                rrb.Tabs(*(goal_tabs + motion_tabs if goals else motion_tabs + goal_tabs)),
             ),
             rrb.Vertical(
                 rrb.TimeSeriesView(
                     name="Cells reached",
                     origin="/stats",
                     contents=["+ /stats/ball_cells", "+ /stats/ee_cells"],
+                    axis_x=whole_run,
                 ),
                 rrb.TimeSeriesView(
                     name="Joints: target vs measured (rad)", origin="/joints", time_ranges=[recent]
@@ -436,17 +558,20 @@ def default_blueprint() -> Any:
                         name="Ball moved (fraction)",
                         origin="/stats",
                         contents=["+ /stats/moved_fraction"],
+                        axis_x=whole_run,
                     ),
-                    rrb.TimeSeriesView(name="Module", origin="/strategy"),
-                    rrb.TimeSeriesView(name="Progress", origin="/progress"),
-                    rrb.TimeSeriesView(name="Series", origin="/series"),
+                    rrb.TimeSeriesView(name="Goal error", origin="/goal", axis_x=whole_run),
+                    rrb.TimeSeriesView(name="Module", origin="/strategy", axis_x=whole_run),
+                    rrb.TimeSeriesView(name="Progress", origin="/progress", axis_x=whole_run),
+                    rrb.TimeSeriesView(name="Series", origin="/series", axis_x=whole_run),
                     rrb.Spatial2DView(name="Frames", origin="/frames"),
                 ),
             ),
             column_shares=[1.0, 1.0, 1.2],
         ),
-        rrb.TimePanel(timeline="time"),
-        collapse_panels=False,
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        rrb.TimePanel(timeline="time", play_state="following"),
     )
 
 
@@ -481,6 +606,8 @@ def make_recorder(
     run_path: Path,
     records: Iterable[EpisodeRecord] | None = None,
     config: dict[str, Any] | None = None,
+    strategy: Any = None,
+    load_models: bool = False,
 ) -> Recorder | None:
     """Build the recorder the flags ask for, or None for ``--rerun off``.
 
@@ -490,6 +617,10 @@ def make_recorder(
         records: episodes already in the run (a resume), to continue the cell counts and the
             clock; read from ``run_path`` when None.
         config: the run's config (``run.json``'s ``config``); read from ``run_path`` when None.
+        strategy: the running strategy: its goal space gives ``goal/reached`` for every
+            strategy with one (learned spaces included). Without it, only the spaces that
+            ``goal_outcome_of(config["strategy"], load_models)`` can build.
+        load_models: without ``strategy``, also load a learned goal space's model.
     """
     mode = getattr(args, "rerun", "save")
     url = getattr(args, "rerun_connect", None)
@@ -511,6 +642,11 @@ def make_recorder(
         "rate_hz": float(episode.get("rate_hz", DEFAULT_RATE_HZ)),
         "reset_s": float(episode.get("reset_s", DEFAULT_RESET_S)),
         "recording_id": run_recording_id(run_path),
+        "outcome_of": (
+            strategy_outcome_of(strategy)
+            if strategy is not None
+            else goal_outcome_of(config.get("strategy", {}), load_models=load_models)
+        ),
     }
     if url is not None:
         recorder = Recorder("connect", url=url, **kw)

@@ -6,8 +6,9 @@ A run report (``report_run``) writes into its output folder:
 - ``coverage.png``: distinct ball and end-effector cells reached (of 30 x 30) against episodes.
 - ``scatter.png``: end-effector positions at the end of each movement and ball positions after
   each episode, seen from above (m), coloured by episode (the paper's appendix style).
-- ``goals.png``: only when the strategy set goals: goals (and reached outcomes, when the records
-  hold them) in the goal space, one panel per coordinate pair.
+- ``goals.png``: only when the strategy set goals: goals and the outcomes reached (in the same
+  goal-space coordinates) in 2-D projections of the goal space: one panel per module and pair
+  of its coordinates (z0,z1), (z2,z3)... (up to ``MAX_GOAL_PANELS``).
 - ``summary.md`` and ``summary.html`` (the HTML embeds the figures, so it stands alone).
 
 A campaign is a folder ``CAMPAIGN/STRATEGY/RUN/`` (e.g. ``CAMPAIGN/rpe/seed-0/``). Its report
@@ -34,13 +35,14 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from explore.metrics import ARENA_HALF_WIDTH, N_BINS, REACH_HALF_WIDTH, MetricsLog
-from explore.recording import iter_history, recording_paths
+from explore.recording import goal_outcome_of, iter_history, recording_paths
 from explore.store import RunStore
 
 FIG_PX = (960, 640)  # width, height of every figure, pixels
 DPI = 100
 FIGSIZE = (FIG_PX[0] / DPI, FIG_PX[1] / DPI)  # inches
 N_CELLS = N_BINS * N_BINS
+MAX_GOAL_PANELS = 6  # goals.png: panels (module, coordinate pair) at most
 
 
 @dataclass
@@ -52,8 +54,12 @@ class RunData:
         ball_moved: (N,) bool. kind: (N,) str. module: (N,) int.
         ball, context_ball: (N, 2) m, ball after / before each episode (NaN when not seen).
         ee_final: (N, 2) m, tool tip (x, y) at the end of each movement.
-        goals: (N, g) goals, g = 0 when the strategy sets none.
-        reached: (N, g) outcomes in the goal space when the records hold them, else None.
+        goals: (N, g) goals, g = 0 when the strategy sets none (NaN-padded: a goal has the
+            size of its module, g is the largest).
+        reached: (N, g) each episode's outcome in its goal's coordinates (NaN where it has no
+            goal or was not seen), or None when the run's goal space cannot be rebuilt
+            (``explore.recording.goal_outcome_of``: engineered spaces, or a learned one whose
+            model is still there).
     """
 
     path: Path
@@ -105,6 +111,7 @@ def load_run(path: Path) -> RunData:
     metrics = MetricsLog(path / "metrics.csv")  # never written here
     cols: dict[str, list[Any]] = {k: [] for k in ("ball", "context_ball", "ee_final", "goals")}
     module, reached = [], []
+    outcome_of = goal_outcome_of(meta["config"].get("strategy", {}), load_models=True)
     for rec in iter_history(path):
         metrics.update(rec)
         cols["ball"].append(np.asarray(rec.ball, dtype=float))
@@ -112,15 +119,18 @@ def load_run(path: Path) -> RunData:
         cols["ee_final"].append(np.asarray(rec.final_end_effector, dtype=float)[:2])
         cols["goals"].append(np.asarray(rec.goal, dtype=float).ravel())
         module.append(rec.module)
-        reached.append(getattr(rec, "outcome", None))
+        reached.append(outcome_of(rec) if outcome_of and rec.goal.size else None)
     rows = metrics.rows
     g = max((len(x) for x in cols["goals"]), default=0)
     goals = np.full((len(rows), g), np.nan)
     for i, x in enumerate(cols["goals"]):
         goals[i, : len(x)] = x
     reached_arr = None
-    if g and rows and all(r is not None and np.size(r) == g for r in reached):
-        reached_arr = np.asarray(reached, dtype=float).reshape(len(rows), g)
+    if g and outcome_of is not None:
+        reached_arr = np.full((len(rows), g), np.nan)
+        for i, (x, r) in enumerate(zip(cols["goals"], reached, strict=True)):
+            if r is not None and np.size(r) == len(x):
+                reached_arr[i, : len(x)] = np.asarray(r, dtype=float).ravel()
 
     def col(name: str, dtype: Any = float) -> np.ndarray:
         return np.array([r[name] for r in rows], dtype=dtype)
@@ -255,18 +265,38 @@ def scatter_figure(run: RunData, out: Path) -> Path:
     return _save(fig, out)
 
 
+def goal_panels(run: RunData) -> list[tuple[int, int, int]]:
+    """The (module, i, j) coordinate pairs that ``goals_figure`` draws: for each module that
+    set goals, (z0, z1), (z2, z3)... of its goal's coordinates (j = i for a trailing odd one),
+    at most ``MAX_GOAL_PANELS`` in all."""
+    panels: list[tuple[int, int, int]] = []
+    if not run.goals.size:
+        return panels
+    has_goal = np.any(np.isfinite(run.goals), axis=1)
+    for m in sorted(set(run.module[has_goal].tolist())):
+        rows = has_goal & (run.module == m)
+        d = int(np.isfinite(run.goals[rows]).sum(axis=1).max())
+        panels += [(m, i, min(i + 1, d - 1)) for i in range(0, d, 2)]
+    return panels[:MAX_GOAL_PANELS]
+
+
 def goals_figure(run: RunData, out: Path) -> Path | None:
-    """Goals (and reached outcomes) in the goal space, one panel per coordinate pair; None when
-    the strategy set no goals."""
-    has_goal = np.any(np.isfinite(run.goals), axis=1) if run.goals.size else np.zeros(run.n, bool)
-    if not run.goals.shape[1] or not has_goal.any():
+    """Goals (red) and the outcomes reached (green, same coordinates), in 2-D projections of
+    the goal space: one panel per module and coordinate pair; None when the strategy set no
+    goals."""
+    panels = goal_panels(run)
+    if not panels:
         return None
-    g = run.goals.shape[1]
-    n_pairs = (g + 1) // 2
-    fig, axes = _new_figure(min(n_pairs, 5), squeeze=False)
-    for p, ax in enumerate(axes[0]):
-        i, j = 2 * p, min(2 * p + 1, g - 1)
-        goals = run.goals[has_goal]
+    n_modules = len({m for m, _, _ in panels})
+    ncols = min(len(panels), 3)
+    nrows = (len(panels) + ncols - 1) // ncols
+    fig, axes = _new_figure(ncols, nrows, squeeze=False)
+    for ax in axes.ravel()[len(panels) :]:
+        ax.set_visible(False)
+    n_goals = int(np.any(np.isfinite(run.goals), axis=1).sum())
+    for ax, (m, i, j) in zip(axes.ravel(), panels, strict=False):
+        rows = (run.module == m) & np.isfinite(run.goals[:, i])
+        goals = run.goals[rows]
         ax.scatter(
             goals[:, i],
             goals[:, j] if j != i else np.zeros(len(goals)),
@@ -276,23 +306,28 @@ def goals_figure(run: RunData, out: Path) -> Path | None:
             label="goals",
         )
         if run.reached is not None:
-            r = run.reached[has_goal]
+            r = run.reached[rows]
+            ok = np.isfinite(r[:, i])
             ax.scatter(
-                r[:, i],
-                r[:, j] if j != i else np.zeros(len(r)),
+                r[ok, i],
+                r[ok, j] if j != i else np.zeros(int(ok.sum())),
                 s=8,
                 color="tab:green",
                 alpha=0.6,
                 label="reached",
             )
-        ax.set_xlabel(f"goal coordinate {i}")
-        ax.set_ylabel(f"goal coordinate {j}" if j != i else "(none)")
-        ax.set_title(f"pair {p}")
+        ax.set_xlabel(f"z{i}")
+        ax.set_ylabel(f"z{j}" if j != i else "(none)")
+        where = f"module {m}: " if n_modules > 1 else ""
+        ax.set_title(f"{where}z{i}, z{j}" if j != i else f"{where}z{i}", fontsize=10)
         ax.grid(alpha=0.3)
         ax.set_aspect("equal", adjustable="datalim")
     axes[0][0].legend(loc="upper right", fontsize=8)
-    note = "" if run.reached is not None else " (the records hold no goal-space outcomes)"
-    fig.suptitle(f"Goals in the goal space: {int(has_goal.sum())} episodes{note}")
+    note = "" if run.reached is not None else " (goal space not rebuilt: no reached outcomes)"
+    fig.suptitle(
+        f"Goals and reached outcomes in the goal space ({run.strategy}): "
+        f"{n_goals} goal episodes{note}"
+    )
     return _save(fig, out)
 
 

@@ -22,11 +22,13 @@ from explore.recording import (
     STRIDE_ENTITIES,
     Recorder,
     add_rerun_arguments,
+    goal_outcome_of,
     iter_history,
     make_recorder,
     next_recording_path,
     recording_paths,
     run_recording_id,
+    strategy_outcome_of,
 )
 from explore.rig import RigConfig, make_rig
 from explore.store import RunStore
@@ -57,20 +59,33 @@ def read_rrd(path: Path) -> tuple[dict[str, int], dict[str, set[str]], rrc.RrdRe
     return rows, timelines, reader
 
 
-def explore_with_recorder(out: Path, recorder_path: Path, episodes: int = N) -> Path:
+def explore_with_recorder(
+    out: Path,
+    recorder_path: Path,
+    episodes: int = N,
+    strategy: dict | None = None,
+    live_outcomes: bool = False,
+) -> Path:
+    """Explore the twin with a recorder saving ``recorder_path``; ``live_outcomes``: the
+    recorder reads the running strategy's goal space (else none, or the config's)."""
     config = {
         "rig": {"name": "sim", "rig_id": "twin", "options": {}},
-        "strategy": {"name": "rpe", "options": {}},
+        "strategy": strategy or {"name": "rpe", "options": {}},
         "seed": 1,
         "episodes": episodes,
     }
     store = RunStore.create(out, config)
+    strat = make_strategy(config["strategy"]["name"], **config["strategy"]["options"])
     recorder = Recorder(
-        "save", path=recorder_path, stride=STRIDE, recording_id=run_recording_id(out)
+        "save",
+        path=recorder_path,
+        stride=STRIDE,
+        recording_id=run_recording_id(out),
+        outcome_of=strategy_outcome_of(strat) if live_outcomes else None,
     )
     explorer = Explorer(
         make_rig(RigConfig(**config["rig"])),
-        make_strategy("rpe"),
+        strat,
         store,
         seed=1,
         on_record=recorder.on_record,
@@ -140,11 +155,62 @@ def test_goals_and_hooks(recorded_run, tmp_path):
         rec.log_frame("grey", np.zeros((8, 8), np.uint8))
     rows, timelines, _ = read_rrd(path)
     for entity in GOAL_ENTITIES:
-        assert rows[entity] == 3
+        assert rows[entity] == 3, entity
     assert rows["frames/vae/reconstruction"] == 3
     assert rows["series/interest/module0"] == 3
     assert {"episode", "time"} <= timelines["series/bus/no_status_packets"]
     assert "frames/grey" in rows
+
+
+GOAL_RUN = {"name": "rge-efr", "options": {"bootstrap": 3}}
+N_GOAL = 7
+
+
+@pytest.fixture(scope="module")
+def goal_run(tmp_path_factory) -> Path:
+    """A goal-exploration run on the twin (3 random episodes, then 4 with goals), recorded
+    with the running strategy's goal space."""
+    out = tmp_path_factory.mktemp("goal") / "run"
+    explore_with_recorder(out, out / "recording.rrd", N_GOAL, GOAL_RUN, live_outcomes=True)
+    return out
+
+
+def test_goal_exploration_logs_goal_and_reached_in_goal_space(goal_run):
+    records = list(iter_history(goal_run))
+    with_goal = [r for r in records if r.goal.size]
+    assert len(with_goal) == N_GOAL - 3
+    seen = [r for r in with_goal if np.all(np.isfinite(r.ball))]
+    rows, timelines, _ = read_rrd(goal_run / "recording.rrd")
+    assert rows["goal/target"] == len(with_goal)
+    for entity in ("goal/reached", "goal/miss", "goal/error"):
+        assert rows[entity] == len(seen), entity
+        assert {"episode", "time"} <= timelines[entity]
+    # the reached outcome is the record's ball in the goal's coordinates (wrap-safe polar)
+    from explore.goal_spaces import wrap_safe_features
+
+    outcome_of = goal_outcome_of(GOAL_RUN)  # from the config alone: the same map
+    assert outcome_of is not None
+    for r in seen:
+        reached = outcome_of(r)
+        assert reached is not None and reached.shape == r.goal.shape
+        np.testing.assert_allclose(reached, wrap_safe_features(r.ball[:2]))
+    assert outcome_of(records[0]) is None  # a random episode has no module
+
+
+def test_goal_outcome_of_needs_a_goal_space():
+    assert goal_outcome_of({"name": "rpe", "options": {}}) is None
+    assert goal_outcome_of({"name": "no-such-strategy"}) is None
+    # a learned space is not loaded unless asked (and rge-vae without a model cannot be built)
+    assert goal_outcome_of({"name": "rge-vae", "options": {}}) is None
+    assert goal_outcome_of({"name": "rge-vae", "options": {}}, load_models=True) is None
+
+
+def test_make_recorder_derives_goal_outcomes_from_the_run_config(goal_run, tmp_path):
+    parser = argparse.ArgumentParser()
+    add_rerun_arguments(parser)
+    rec = make_recorder(parser.parse_args([]), goal_run, records=[])
+    assert rec is not None and rec.outcome_of is not None
+    rec.close()
 
 
 def test_make_recorder_numbers_files_on_resume_and_continues_counts(recorded_run, tmp_path):

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from explore.cli import main
-from explore.report import FIG_PX, goals_figure, load_run, markdown_to_html
+from explore.report import FIG_PX, goal_panels, goals_figure, load_run, markdown_to_html
 
 N = 10
 
@@ -85,6 +85,57 @@ def test_goals_figure_when_goals_exist(runs, tmp_path):
     run.reached = run.goals + 0.1
     path = goals_figure(run, tmp_path / "goals.png")
     assert path is not None and png_size(path) == FIG_PX
+
+
+def test_goal_panels_follow_the_modules(runs):
+    """Two modules (3 and 2 coordinates, NaN-padded to 3): pairs of each module's own goal."""
+    run = load_run(runs[0])
+    goals = np.full((run.n, 3), np.nan)
+    module = np.full(run.n, -1)
+    goals[2:6] = 0.5
+    module[2:6] = 0
+    goals[6:, :2] = -0.5
+    module[6:] = 1
+    run = dataclasses.replace(run, goals=goals, module=module)
+    assert goal_panels(run) == [(0, 0, 1), (0, 2, 2), (1, 0, 1)]
+
+
+@pytest.fixture(scope="module")
+def goal_run(tmp_path_factory) -> Path:
+    """A goal-exploration run on the twin: 3 random episodes, then 4 with goals."""
+    from explore.explorer import Explorer
+    from explore.rig import RigConfig, make_rig
+    from explore.store import RunStore
+    from explore.strategies import make_strategy
+
+    out = tmp_path_factory.mktemp("goal") / "rge-efr-s1"
+    config = {
+        "rig": {"name": "sim", "rig_id": "twin", "options": {}},
+        "strategy": {"name": "rge-efr", "options": {"bootstrap": 3}},
+        "seed": 1,
+        "episodes": 7,
+    }
+    store = RunStore.create(out, config)
+    rig = make_rig(RigConfig(**config["rig"]))
+    try:
+        Explorer(rig, make_strategy("rge-efr", bootstrap=3), store, seed=1).run(7)
+    finally:
+        store.close()
+    return out
+
+
+def test_report_of_a_goal_run_has_the_reached_outcomes(goal_run, tmp_path):
+    from explore.goal_spaces import wrap_safe_features
+
+    run = load_run(goal_run)
+    assert run.goals.shape == (7, 3) and run.reached is not None
+    with_goal = np.all(np.isfinite(run.goals), axis=1)
+    assert with_goal.sum() == 4 and not np.isfinite(run.reached[~with_goal]).any()
+    seen = with_goal & np.all(np.isfinite(run.ball), axis=1)
+    np.testing.assert_allclose(run.reached[seen], wrap_safe_features(run.ball[seen]))
+    out = tmp_path / "report"
+    assert main(["report", str(goal_run), "--out", str(out)]) == 0
+    assert png_size(out / "goals.png") == FIG_PX
 
 
 def test_markdown_to_html_escapes_and_embeds(tmp_path):
