@@ -2,7 +2,8 @@
 
 - ``Watchdog`` trips when a joint's temperature or load stays over its limit for a hold time.
 - ``torque_off_on_signals`` turns torque off on SIGINT/SIGTERM before the usual exception
-  unwinds, so a Ctrl-C never leaves a stiff arm behind.
+  unwinds, so a Ctrl-C never leaves a stiff arm behind; a watcher thread does it without
+  waiting for the main thread's C call in progress.
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import signal
+import socket
 import threading
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -76,27 +78,79 @@ class Watchdog:
         return None
 
 
+# Signals that stop a run: Ctrl-C and the polite kill (systemd, docker stop, kill).
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+# How long leaving the block waits for the watcher thread to end, s (it wakes at once; a
+# bound against a hang, not an expectation).
+WATCHER_JOIN_S = 1.0
+
+
 @contextlib.contextmanager
 def torque_off_on_signals(arm: Arm) -> Iterator[None]:
     """Within the block, SIGINT and SIGTERM turn the arm's torque off at once, then raise
-    ``KeyboardInterrupt`` (SIGINT) or ``SystemExit(143)`` (SIGTERM) as usual.
+    ``KeyboardInterrupt`` (SIGINT) or ``SystemExit(143)`` (SIGTERM) in the main thread as usual.
 
-    Only installs handlers in the main thread (Python's rule); elsewhere it is a no-op.
+    Why a thread: Python runs a signal handler in the main thread between two bytecodes, so a
+    handler alone waits for the C call in progress (a MuJoCo render of 0.1-0.2 s, a camera
+    read, a batch of physics steps) before it can act. Here the C-level handler also writes
+    the signal number to a socket (``signal.set_wakeup_fd``) that a watcher thread blocks on;
+    the watcher turns torque off as soon as it holds the GIL and the bus, which the long C
+    calls release. Whichever of the watcher and the main thread's handler comes first turns
+    torque off; the other only raises (main thread) or returns (watcher). The arm is also
+    marked interrupted, so no link recovery in progress turns torque back on.
+
+    Only installs in the main thread (Python's rule); elsewhere it is a no-op. While inside,
+    this replaces any other wakeup fd of the process (e.g. an asyncio loop's), restored after.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
-    def handler(signum: int, _frame: object) -> None:
+    claim = threading.Lock()  # taken by whoever turns torque off first
+    arm._interrupted.clear()  # a new block: an earlier signal no longer holds recoveries back
+
+    def cut(signum: int, who: str) -> None:
+        if not claim.acquire(blocking=False):
+            return
+        arm._interrupted.set()
         arm._emergency_torque_off()
-        log.warning("signal %d: torque off", signum)
+        log.warning("signal %d: torque off (%s)", signum, who)
+
+    def handler(signum: int, _frame: object) -> None:
+        cut(signum, "signal handler")
         if signum == signal.SIGINT:
             raise KeyboardInterrupt
         raise SystemExit(128 + signum)
 
-    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    reader, writer = socket.socketpair()
+    writer.setblocking(False)  # set_wakeup_fd needs a non-blocking fd
+    stop = threading.Event()
+
+    def watch() -> None:
+        while True:
+            try:
+                data = reader.recv(64)
+            except OSError:
+                return
+            if not data or stop.is_set():
+                return
+            for signum in data:
+                if signum in STOP_SIGNALS:
+                    cut(signum, "watcher thread")
+
+    previous = {s: signal.signal(s, handler) for s in STOP_SIGNALS}
+    previous_fd = signal.set_wakeup_fd(writer.fileno(), warn_on_full_buffer=False)
+    watcher = threading.Thread(target=watch, name="torque-off-on-signals", daemon=True)
+    watcher.start()
     try:
         yield
     finally:
+        signal.set_wakeup_fd(previous_fd)
         for s, h in previous.items():
             signal.signal(s, h)
+        stop.set()
+        with contextlib.suppress(OSError):
+            writer.send(b"\0")
+        watcher.join(WATCHER_JOIN_S)
+        reader.close()
+        writer.close()

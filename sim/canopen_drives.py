@@ -134,6 +134,9 @@ class EmulatedDrive:
         self.demand = 0  # position demand, increments (the target the drive follows)
         self.actual = 0  # position actual, increments
         self.enabled_since: float | None = None
+        # wall time (time.monotonic, system-wide) the drive last left OPERATION ENABLED, for
+        # measuring how fast a host cuts torque
+        self.disabled_at: float | None = None
         self.heartbeat_stopped = False
         self.muted = False  # sends no TPDO (on top of a stopped heartbeat: a dead node)
         self._rpdo_pending: list[Any] = []
@@ -226,6 +229,8 @@ class EmulatedDrive:
             self.enabled_since = time.monotonic()
         elif self.state is not State.OPERATION_ENABLED:
             self.enabled_since = None
+            if before is State.OPERATION_ENABLED:
+                self.disabled_at = time.monotonic()
 
     def trip(self, code: int = emcy.FOLLOWING_ERROR, register: int = FAULT_REGISTER) -> None:
         """Fault (transition 13 then 14): FAULT state, error code 0x603F and an EMCY frame."""

@@ -109,6 +109,9 @@ class EmulatedServo:
         self.poke("position", self.peek("goal"))  # at rest on its goal until physics says
         self.hardware_error = 0
         self.torque_on_since: float | None = None
+        # wall time (time.monotonic, system-wide) of the last torque-off write, for measuring
+        # how fast a host cuts torque
+        self.torque_off_at: float | None = None
 
     @property
     def id(self) -> int:
@@ -333,6 +336,8 @@ class DynamixelEmulator:
             servo.poke("torque", 0)  # after a shutdown only REBOOT re-enables torque (e-manual)
         if servo.torque != before:
             servo.torque_on_since = self._time() if servo.torque else None
+            if not servo.torque:
+                servo.torque_off_at = time.monotonic()
         if torque.address >= address and torque.end <= address + len(data):
             self._apply_torque()
         goal = servo.model.reg("goal")

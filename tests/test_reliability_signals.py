@@ -6,11 +6,12 @@ time torque goes off, and ``Explorer.step`` touches a file after each stored epi
 parent signals only once the exploration loop runs. The parent signals at a seeded random
 moment inside the loop and computes the latency.
 
-Why a median and not every try: the deadline is a safety property, but this machine has 2
-cores shared by several agents, and a Python signal handler runs only between bytecodes, so
-the latency is the remainder of the C call in progress (a MuJoCo render or ``mj_step`` batch)
-plus scheduling delay. We assert the median of 6 tries under 100 ms and that every try turns
-torque off before the process exits; the figures are printed (docs/reliability.md).
+Every try must turn torque off within 100 ms (the issue's safety bound) and before the
+process exits. A Python signal handler alone runs only between bytecodes of the main thread,
+after the C call in progress (a 240 x 240 MuJoCo render takes about 0.2 s here), which gave
+a median of 74 ms and a max of 115 ms; ``torque_off_on_signals`` now also cuts torque from a
+watcher thread woken by ``signal.set_wakeup_fd``, which those C calls do not hold up. The
+figures are printed (docs/reliability.md); the bus rigs are in test_reliability_signals_bus.py.
 """
 
 from __future__ import annotations
@@ -89,7 +90,7 @@ def _one(tmp: Path, sig: int, delay: float) -> tuple[float, int, float]:
 @pytest.mark.slow
 def test_sigint_and_sigterm_turn_torque_off_within_100_ms(tmp_path):
     rng = random.Random(7)
-    results = []
+    results: list[tuple[str, float, int]] = []
     for i, sig in enumerate([signal.SIGINT, signal.SIGTERM] * 3):
         lat, code, after = _one(tmp_path / f"t{i}", sig, rng.uniform(0.0, 0.5))
         results.append((signal.Signals(sig).name, lat, code))
@@ -100,4 +101,4 @@ def test_sigint_and_sigterm_turn_torque_off_within_100_ms(tmp_path):
         f"\ntorque-off latency ms: {[f'{n} {v:.1f}' for n, v, _ in results]}; "
         f"median {statistics.median(lats):.1f}, max {max(lats):.1f}"
     )
-    assert statistics.median(lats) < DEADLINE_MS
+    assert max(lats) < DEADLINE_MS, results

@@ -23,6 +23,9 @@ Safety (on top of the base class's clamping, watchdog and torque off on exit):
 - a node that answers no SYNC for ``max_position_age_s`` stops the arm;
 A stop turns torque off on every node at once (from a monitor thread) and makes the next
 ``read``/``command`` raise ``SafetyStop`` with a one-line reason; ``reset_faults()`` clears it.
+A torque off from another thread (the monitor, the signal watcher of
+``robot.safety.torque_off_on_signals``) preempts the cycle in progress, which gives up at once
+instead of waiting out its TPDO timeout.
 
 Units: joint positions in rad; drive positions in increments (see ``units.JointScaling``).
 """
@@ -71,6 +74,10 @@ NOTIFIER_CYCLE_S = 0.1
 
 class CanNodeError(BusError):
     """A CANopen node did not answer, or answered something a CiA 402 drive would not."""
+
+
+class CyclePreemptedError(CanBusError):
+    """A bus cycle gave up because another thread took the bus to cut torque."""
 
 
 @dataclass(frozen=True)
@@ -175,6 +182,9 @@ class CanArm(Arm):
         self._io_lock = threading.RLock()
         self._io_owner: int | None = None
         self._pending_off = False
+        # Set while another thread cuts torque: a cycle in progress gives up at once.
+        self._preempt = threading.Event()
+        self._preempt_by: int | None = None
         self._stop_reason: str | None = None
         self._trip_lock = threading.Lock()
         self._tripping = threading.Event()
@@ -505,6 +515,7 @@ class CanArm(Arm):
         """
         import can
 
+        self._check_preempted()
         with self._cond:
             self._seq += 1
             seq = self._seq
@@ -522,12 +533,23 @@ class CanArm(Arm):
             raise CanBusError(f"CAN bus {self.bus_spec} failed: {detail}") from exc
         with self._cond:
             self._cond.wait_for(
-                lambda: bool(np.all(self._rx_seq >= seq)), self.config.pdo_timeout_s
+                lambda: bool(np.all(self._rx_seq >= seq)) or self._preempted(),
+                self.config.pdo_timeout_s,
             )
+            self._check_preempted()
             late = self._rx_seq < seq
             self._missed[late] += 1
             self._late_since[late & np.isnan(self._late_since)] = sent_at
         self._sync_since_read = True
+
+    def _preempted(self) -> bool:
+        return self._preempt.is_set() and self._preempt_by != threading.get_ident()
+
+    def _check_preempted(self) -> None:
+        if self._preempted():
+            raise CyclePreemptedError(
+                f"bus cycle on {self.bus_spec} given up: another thread is cutting torque"
+            )
 
     def _first_positions(self) -> None:
         """SYNC until every node has sent a TPDO (or ``state_timeout_s`` passed)."""
@@ -566,10 +588,14 @@ class CanArm(Arm):
     # ---- Arm hooks -------------------------------------------------------------------------
     def _read(self) -> JointState:
         self._check()
-        with self._io():
-            if not self._sync_since_read:
-                self._cycle(send_rpdo=False)
-            self._sync_since_read = False
+        try:
+            with self._io():
+                if not self._sync_since_read:
+                    self._cycle(send_rpdo=False)
+                self._sync_since_read = False
+        except CyclePreemptedError:
+            self._check()  # a safety stop preempted us: say so (SafetyStop)
+            raise
         self._check()
         assert self.scaling is not None
         with self._cond:
@@ -582,9 +608,13 @@ class CanArm(Arm):
         self._check()
         assert self.scaling is not None
         counts = self.scaling.to_counts(positions)
-        with self._io():
-            self._target[:] = counts
-            self._cycle(send_rpdo=True)
+        try:
+            with self._io():
+                self._target[:] = counts
+                self._cycle(send_rpdo=True)
+        except CyclePreemptedError:
+            self._check()  # a safety stop preempted us: say so (SafetyStop)
+            raise
         self._check()
 
     def _set_torque(self, enabled: bool) -> None:
@@ -657,7 +687,17 @@ class CanArm(Arm):
         if self.network is None:
             self._torque = False
             return
-        super()._emergency_torque_off()
+        # From another thread (the signal watcher, the monitor): the cycle in progress gives
+        # up at once instead of waiting for its TPDOs, then this thread takes the bus.
+        self._preempt_by = threading.get_ident()
+        self._preempt.set()
+        with self._cond:
+            self._cond.notify_all()
+        try:
+            super()._emergency_torque_off()
+        finally:
+            self._preempt.clear()
+            self._preempt_by = None
 
     def reset_faults(self) -> None:
         """After a safety stop: fault reset on the drives in FAULT, clear the EMCY record and

@@ -269,6 +269,12 @@ class DynamixelArm(Arm):
         word = "on" if enabled else "off"
         raise BusError(f"servo(s) {', '.join(map(str, off))} did not turn torque {word}")
 
+    def _emergency_torque_off(self) -> None:
+        """Torque off now, from any thread: a call in progress elsewhere gives up first
+        (``DynamixelBus.preempt``), so a signal never waits for its timeouts and retries."""
+        with self.bus.preempt():
+            super()._emergency_torque_off()
+
     def _read_torque_ignoring_alerts(self) -> np.ndarray:
         reg = self.model.reg("torque")
         return np.array(

@@ -21,10 +21,11 @@ packet and the bus ignores it.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, fields
 from typing import Any, Protocol
 
@@ -66,6 +67,10 @@ class DynamixelError(BusError):
 class PortLostError(DynamixelError, LinkLost):
     """The serial port failed under the bus (adapter unplugged, pty closed): a ``LinkLost``,
     which the arm answers by reopening the port by name."""
+
+
+class CallPreemptedError(DynamixelError):
+    """A call gave up because another thread took the bus for an emergency torque off."""
 
 
 class NoStatusError(DynamixelError):
@@ -246,6 +251,9 @@ class DynamixelBus:
         self._serial: SerialLike | None = connection
         self._decoder = proto.Decoder()
         self._lock = threading.RLock()
+        self._owner: int | None = None  # thread running a call (under _lock)
+        self._preempt = threading.Event()  # another thread needs the bus for an emergency
+        self._preempt_by: int | None = None
         self._last_bad = 0
 
     # ---- lifecycle ---------------------------------------------------------------------------
@@ -317,6 +325,7 @@ class DynamixelBus:
             got: dict[int, proto.StatusPacket] = {}
             corrupt = 0
             while len(got) < len(expect) and time.monotonic() < deadline:
+                self._check_preempted()
                 chunk = ser.read(max(1, ser.in_waiting))
                 if not chunk:
                     continue
@@ -353,7 +362,8 @@ class DynamixelBus:
             id -> status parameters.
         """
         retries = self.retries if retries is None else retries
-        with self._lock:
+        with self._lock, self._owned():
+            self._check_preempted()
             self.counters.calls += 1
             self.last_call_retries = 0
             pending = dict(expect)
@@ -426,6 +436,41 @@ class DynamixelBus:
                 alerts.append((sid, err))
             data[sid] = status.params
             del pending[sid]
+
+    @contextlib.contextmanager
+    def _owned(self) -> Iterator[None]:
+        """Mark the calling thread as the one using the bus (under ``_lock``; re-entrant)."""
+        outer, self._owner = self._owner, threading.get_ident()
+        try:
+            yield
+        finally:
+            self._owner = outer
+
+    def _check_preempted(self) -> None:
+        if self._preempt.is_set() and self._preempt_by != threading.get_ident():
+            raise CallPreemptedError(
+                f"call on {self.port} given up: another thread is cutting torque"
+            )
+
+    @contextlib.contextmanager
+    def preempt(self) -> Iterator[None]:
+        """Hold the bus for an emergency (torque off) from any thread: a call in progress in
+        another thread gives up at its next poll (within ``POLL_S``, raising
+        ``CallPreemptedError``) instead of running its timeouts and retries out, so the
+        emergency waits for at most one read of the port. In the thread that already holds
+        the bus (a signal handler inside a call), the calls just nest, as before."""
+        me = threading.get_ident()
+        if self._owner == me:
+            yield
+            return
+        self._preempt_by = me
+        self._preempt.set()
+        try:
+            with self._lock:
+                yield
+        finally:
+            self._preempt.clear()
+            self._preempt_by = None
 
     def _raise_alert(
         self, servo_id: int, err: proto.StatusError, what: str, data: Mapping[int, bytes]
