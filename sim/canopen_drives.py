@@ -24,9 +24,12 @@ OPERATION ENABLED (a drive out of it, e.g. in FAULT, leaves the whole arm limp).
 drive is not enabled hold their current position as target.
 
 Fault injection (for tests and ``ergo twin serve``): a rate of lost PDO/SYNC frames (in both
-directions; heartbeats and SDOs are not dropped), a node that stops its heartbeat, a
-following-error fault (EMCY 0x8611) now or after some time in OPERATION ENABLED, an extra
-delay before the TPDOs.
+directions; heartbeats and SDOs are not dropped), a node that stops its heartbeat (and,
+muted, its TPDOs), a following-error fault (EMCY 0x8611) now or after some time in OPERATION
+ENABLED, any other EMCY fault (e.g. 0x2310 over-current, an overload), an extra delay before
+the TPDOs of every SYNC or of a fraction of them (late frames). Corrupted frames are not
+emulated: on CAN the controllers' CRC rejects them and the sender retransmits (ISO 11898-1),
+so a host only ever sees a frame late or, if the bus gives up, not at all (a drop).
 """
 
 from __future__ import annotations
@@ -314,6 +317,7 @@ class EmulatedDrives:
         sync_step_s: advance the twin by this much at each SYNC (None: a RealtimeLoop does).
         drop_rate: fraction of PDO/SYNC frames lost, each way.
         tpdo_delay_s: extra delay before the TPDOs of a SYNC, s.
+        late_rate: fraction of SYNCs whose TPDOs get that delay (1: every SYNC).
         seed: seed of the loss draws.
         eds: the drives' EDS.
     """
@@ -328,6 +332,7 @@ class EmulatedDrives:
         sync_step_s: float | None = None,
         drop_rate: float = 0.0,
         tpdo_delay_s: float = 0.0,
+        late_rate: float = 1.0,
         seed: int = 0,
         eds: Path = EDS_PATH,
     ) -> None:
@@ -338,8 +343,13 @@ class EmulatedDrives:
         directions = [1.0] * 6 if directions is None else list(directions)
         offsets = [0.0] * 6 if offsets is None else list(offsets)
         self.twin = twin
+        if not 0.0 <= late_rate <= 1.0:
+            raise ValueError(f"late rate must be in [0, 1], got {late_rate}")
         self.sync_step_s = sync_step_s
         self.tpdo_delay_s = tpdo_delay_s
+        self.late_rate = late_rate
+        self.late_syncs = 0  # SYNCs whose TPDOs were delayed
+        self._late_rng = random.Random(seed + 1)
         self.drives = [
             EmulatedDrive(nid, j, eds, directions[j], offsets[j]) for j, nid in enumerate(node_ids)
         ]
@@ -498,7 +508,10 @@ class EmulatedDrives:
             now = time.monotonic()
             for d in self.drives:
                 self._check_faults(d, now)
-        if self.tpdo_delay_s > 0:
+        if self.tpdo_delay_s > 0 and (
+            self.late_rate >= 1.0 or self._late_rng.random() < self.late_rate
+        ):
+            self.late_syncs += 1
             time.sleep(self.tpdo_delay_s)
         with self._lock:
             for d in self.drives:
@@ -552,6 +565,13 @@ class EmulatedDrives:
         d = self.drive(node_id)
         d.heartbeat_stopped = d.muted = False
         d.node.nmt.start_heartbeat(d._od_int(0x1017))
+
+    def fault(self, node_id: int, code: int, register: int = FAULT_REGISTER) -> None:
+        """Trip any fault on the node now: FAULT state and an EMCY with ``code``, e.g.
+        0x2310 continuous over-current (an overload) or 0x4310 excess temperature of the
+        drive (CiA 301 / CiA 402 error codes, see ``robot.canopen.emcy``)."""
+        with self._lock:
+            self.drive(node_id).trip(code, register)
 
     def following_error(self, node_id: int) -> None:
         """Trip a following-error fault on the node now (EMCY 0x8611, FAULT)."""

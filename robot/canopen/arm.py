@@ -27,6 +27,12 @@ A torque off from another thread (the monitor, the signal watcher of
 ``robot.safety.torque_off_on_signals``) preempts the cycle in progress, which gives up at once
 instead of waiting out its TPDO timeout.
 
+Link loss (the adapter fails: ``CanLinkLost``): ``robot.Arm`` reconnects (the bus reopened from
+its spec, the drives configured again, positions read, torque re-enabled holding them) at most
+``RecoveryPolicy.attempts`` times, else a ``SafetyStop``. Late TPDOs are counted
+(``fault_counts``: ``can_late_cycles``, ``can_missing_tpdos``); the positions are then one
+cycle old, and a node late for ``max_position_age_s`` stops the arm.
+
 Units: joint positions in rad; drive positions in increments (see ``units.JointScaling``).
 """
 
@@ -42,7 +48,7 @@ from typing import Any
 
 import numpy as np
 
-from robot.arm import Arm, JointState
+from robot.arm import Arm, JointState, RecoveryPolicy
 from robot.canopen import cia402, emcy
 from robot.canopen.bus import (
     DEFAULT_BITRATE,
@@ -53,7 +59,7 @@ from robot.canopen.bus import (
 )
 from robot.canopen.cia402 import State
 from robot.canopen.units import JointScaling
-from robot.errors import BusError, SafetyStop
+from robot.errors import BusError, LinkLost, SafetyStop
 from robot.safety import Watchdog
 from robot.spec import ArmSpec, ergo_jr_spec
 
@@ -74,6 +80,11 @@ NOTIFIER_CYCLE_S = 0.1
 
 class CanNodeError(BusError):
     """A CANopen node did not answer, or answered something a CiA 402 drive would not."""
+
+
+class CanLinkLost(CanBusError, LinkLost):
+    """The CAN adapter failed under the arm (unplugged, interface down): a ``LinkLost``,
+    which ``robot.Arm`` answers by reconnecting (the bus is reopened by its spec)."""
 
 
 class CyclePreemptedError(CanBusError):
@@ -128,6 +139,7 @@ class CanArm(Arm):
         spec: joints and limits (default: the Ergo Jr).
         config: node ids, units, timeouts.
         watchdog: the base class's thermal/load watchdog.
+        recovery: reconnection policy when the adapter fails (``robot.arm.RecoveryPolicy``).
     """
 
     def __init__(
@@ -137,8 +149,9 @@ class CanArm(Arm):
         spec: ArmSpec | None = None,
         config: CanArmConfig | None = None,
         watchdog: Watchdog | None = None,
+        recovery: RecoveryPolicy | None = None,
     ) -> None:
-        super().__init__(spec or ergo_jr_spec(), watchdog)
+        super().__init__(spec or ergo_jr_spec(), watchdog, recovery)
         self.bus_spec = can if isinstance(can, CanBusSpec) else parse_can_spec(can, bitrate)
         self.config = config or CanArmConfig()
         n = self.spec.n
@@ -185,6 +198,8 @@ class CanArm(Arm):
         # Set while another thread cuts torque: a cycle in progress gives up at once.
         self._preempt = threading.Event()
         self._preempt_by: int | None = None
+        # cycles run, cycles where a node's TPDO missed pdo_timeout_s, TPDOs missing in them
+        self.stats = {"cycles": 0, "late_cycles": 0, "missing_tpdos": 0}
         self._stop_reason: str | None = None
         self._trip_lock = threading.Lock()
         self._tripping = threading.Event()
@@ -299,7 +314,8 @@ class CanArm(Arm):
         self.scaling = JointScaling(cpr, self._directions, self._offsets)
         lo, hi = self.scaling.limits_to_counts(self.spec.lower, self.spec.upper)
         for i in range(self.spec.n):
-            self._sdo_write(i, 0x6060, 0, CSP)
+            if self._sdo_read(i, 0x6060) != CSP:  # a drive may refuse it while enabled
+                self._sdo_write(i, 0x6060, 0, CSP)
             self._sdo_write(i, 0x607D, 1, int(lo[i]))
             self._sdo_write(i, 0x607D, 2, int(hi[i]))
             self._sdo_write(i, 0x1017, 0, self.config.heartbeat_ms)
@@ -503,6 +519,16 @@ class CanArm(Arm):
         """Why the arm was stopped (None while running)."""
         return self._stop_reason
 
+    @property
+    def can_reconnect(self) -> bool:
+        """Always: the bus is reopened from its spec, the drives configured again (they may
+        still be enabled, holding their last target: the configuration leaves that alone)."""
+        return True
+
+    def _backend_counts(self) -> dict[str, float]:
+        """Cycles, late cycles (a TPDO missed ``pdo_timeout_s``) and TPDOs missing in them."""
+        return {f"can_{k}": v for k, v in self.stats.items()}
+
     # ---- I/O cycle -------------------------------------------------------------------------
     def _io(self) -> _IoGuard:
         return _IoGuard(self)
@@ -530,7 +556,8 @@ class CanArm(Arm):
             self.network.sync.transmit()
         except (can.CanError, OSError) as exc:
             detail = " ".join(str(exc).split()) or type(exc).__name__
-            raise CanBusError(f"CAN bus {self.bus_spec} failed: {detail}") from exc
+            raise CanLinkLost(f"CAN bus {self.bus_spec} failed: {detail}") from exc
+        self.stats["cycles"] += 1
         with self._cond:
             self._cond.wait_for(
                 lambda: bool(np.all(self._rx_seq >= seq)) or self._preempted(),
@@ -538,6 +565,9 @@ class CanArm(Arm):
             )
             self._check_preempted()
             late = self._rx_seq < seq
+            if late.any():
+                self.stats["late_cycles"] += 1
+                self.stats["missing_tpdos"] += int(late.sum())
             self._missed[late] += 1
             self._late_since[late & np.isnan(self._late_since)] = sent_at
         self._sync_since_read = True
