@@ -9,6 +9,9 @@ Options (``RigConfig.options``):
     camera_width, camera_height, camera_fps: requested camera mode (optional).
     model: servo model (default "XL-320").
     directions, offsets: per joint +1/-1 and rad (default +1 and 0; the calibration sets them).
+    latency_s: slack added to every bus timeout, s (default 0.020, see
+        ``robot.dynamixel.bus.DEFAULT_LATENCY_S``; more for an emulator on a loaded machine).
+    retries: retries per bus call after a lost or corrupt reply (default 2).
 """
 
 from __future__ import annotations
@@ -42,6 +45,7 @@ def _camera(options: dict[str, Any]) -> Any:
 def make_dynamixel_rig(config: RigConfig) -> Rig:
     """Build (not connect) the rig from ``config.options`` (see the module docstring)."""
     from robot.dynamixel.arm import DynamixelArm
+    from robot.errors import BusError
 
     options = dict(config.options)
     port = options.get("port")
@@ -52,14 +56,20 @@ def make_dynamixel_rig(config: RigConfig) -> Rig:
         )
     try:
         baud = int(options.get("baud", 1_000_000))
+        bus: dict[str, Any] = {}
+        if options.get("latency_s") is not None:
+            bus["latency_s"] = float(options["latency_s"])
+        if options.get("retries") is not None:
+            bus["retries"] = int(options["retries"])
         arm = DynamixelArm(
             str(port),
             baud,
             model=options.get("model", "XL-320"),
             directions=options.get("directions"),
             offsets=options.get("offsets"),
+            **bus,
         )
-    except (ValueError, KeyError, TypeError) as exc:
+    except (ValueError, KeyError, TypeError, BusError) as exc:
         raise RigError(f"dynamixel rig: {exc}") from exc
     return Rig(
         arm=arm, camera=_camera(options), clock=RealClock(), config=config, twin=None,

@@ -239,6 +239,8 @@ class DynamixelBus:
             raise BusError(f"baud rate must be positive, got {baud}")
         if retries < 0:
             raise BusError(f"retries must be >= 0, got {retries}")
+        if not latency_s >= 0:
+            raise BusError(f"latency_s must be >= 0 s, got {latency_s}")
         self.port = port
         self.baud = baud
         self.retries = retries
@@ -324,9 +326,14 @@ class DynamixelBus:
             deadline = time.monotonic() + self.timeout_for(len(wire), list(expect.values()))
             got: dict[int, proto.StatusPacket] = {}
             corrupt = 0
-            while len(got) < len(expect) and time.monotonic() < deadline:
+            last_look = False
+            while len(got) < len(expect) and not last_look:
+                # once past the deadline, one last look at what already arrived: a host that
+                # was not scheduled for a while must not time out on a reply sitting in its
+                # buffer (the retry would flush it)
+                last_look = time.monotonic() >= deadline
                 self._check_preempted()
-                chunk = ser.read(max(1, ser.in_waiting))
+                chunk = ser.read(ser.in_waiting) if last_look else ser.read(max(1, ser.in_waiting))
                 if not chunk:
                     continue
                 for item in self._decoder.feed(chunk):
