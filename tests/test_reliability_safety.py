@@ -1,4 +1,5 @@
-"""Safety properties of ``robot.Arm`` under any calibration, any command and any backend fault.
+"""Safety properties of ``robot.Arm`` under any calibration, any command, any motor parameters
+and any backend fault (lost replies, failed sends, lost links with reconnections).
 
 A scripted backend (``ScriptedArm``) stands in for a bus: every ``_read``/``_send``/
 ``_set_torque`` consults a fault script drawn by hypothesis and may raise. The servo model is
@@ -22,8 +23,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from robot.arm import Arm, JointState
-from robot.errors import BusError
+from explore.dmp import Dmp, DmpConfig
+from robot.arm import Arm, JointState, RecoveryPolicy
+from robot.errors import BusError, LinkLost, SafetyStop
 from robot.spec import ArmSpec, ergo_jr_spec
 
 BASE = ergo_jr_spec()
@@ -31,6 +33,10 @@ BASE = ergo_jr_spec()
 
 class InjectedFault(BusError):
     """A fault the script raised inside the backend."""
+
+
+class InjectedLinkLost(LinkLost):
+    """A lost link the script raised inside the backend."""
 
 
 class ScriptedArm(Arm):
@@ -41,11 +47,13 @@ class ScriptedArm(Arm):
         start: where the servos are at connect, shape (n,), rad.
         faults: one entry per backend call: 0 ok, 1 raise before anything happens,
             2 (sends only) the goal reaches the servos, then the call raises (a lost status
-            reply). Exhausted script: no more faults.
+            reply), 3 the link is lost before anything happens (``LinkLost``: the arm
+            reconnects, each reconnection consuming an entry too: 0 back, else still out).
+            Exhausted script: no more faults.
     """
 
     def __init__(self, spec: ArmSpec, start: np.ndarray, faults: list[int]) -> None:
-        super().__init__(spec)
+        super().__init__(spec, recovery=RecoveryPolicy(attempts=2, first_delay_s=0.0))
         self.pos = np.asarray(start, dtype=float).copy()
         self.faults = list(faults)
         self.sent: list[np.ndarray] = []  # goals that reached the servos
@@ -61,13 +69,26 @@ class ScriptedArm(Arm):
     def _disconnect(self) -> None:
         pass
 
-    def _read(self) -> JointState:
+    @property
+    def can_reconnect(self) -> bool:
+        return True
+
+    def _reconnect(self) -> None:
         if self._fault():
+            raise InjectedFault("still unplugged")
+
+    def _read(self) -> JointState:
+        f = self._fault()
+        if f == 3:
+            raise InjectedLinkLost("link lost before a read")
+        if f:
             raise InjectedFault("read failed")
         return JointState.from_positions(self.pos.copy(), 0.0)
 
     def _send(self, positions: np.ndarray) -> None:
         f = self._fault()
+        if f == 3:
+            raise InjectedLinkLost("link lost before a send")
         if f == 1:
             raise InjectedFault("send failed")
         self.sent.append(np.array(positions, dtype=float))
@@ -132,7 +153,7 @@ def _drive(arm: ScriptedArm, ops) -> None:
                 arm.read()
             else:
                 arm.set_torque(arg)
-        except (InjectedFault, ValueError):
+        except (InjectedFault, InjectedLinkLost, SafetyStop, ValueError):
             pass
 
 
@@ -150,7 +171,7 @@ def _check_sent(arm: ScriptedArm, spec: ArmSpec, start: np.ndarray) -> None:
     spec=calibrated_specs(),
     fracs=st.lists(st.floats(0, 1), min_size=6, max_size=6),
     ops=operations,
-    faults=st.lists(st.sampled_from([0, 0, 0, 1]), max_size=60),
+    faults=st.lists(st.sampled_from([0, 0, 0, 0, 1, 2, 3]), max_size=60),
 )
 def test_no_goal_leaves_the_limits_or_jumps_whatever_the_commands_and_faults(
     spec, fracs, ops, faults
@@ -161,8 +182,9 @@ def test_no_goal_leaves_the_limits_or_jumps_whatever_the_commands_and_faults(
     arm.faults = list(faults)  # faults from the first operation on
     _drive(arm, ops)
     _check_sent(arm, spec, start)
-    # the step bound is the last goal that went out, never a goal that failed
-    if arm.sent:
+    # the step bound is the last goal that went out, never a goal that failed (after a send
+    # whose fate is unknown it is re-read from the arm before the next command)
+    if arm.sent and not arm._resync_needed:
         np.testing.assert_array_equal(arm.last_sent, arm.sent[-1])
     arm.faults = []
     arm.disconnect()
@@ -275,3 +297,22 @@ def test_disconnect_closes_the_link_even_when_torque_off_fails():
     arm.faults = [1]  # the torque-off write fails
     arm.disconnect()
     assert not arm.is_connected
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    spec=calibrated_specs(),
+    fracs=st.lists(st.floats(0, 1), min_size=6, max_size=6),
+    theta=st.lists(st.floats(-1, 1), min_size=48, max_size=48),
+    faults=st.lists(st.sampled_from([0, 0, 0, 0, 1, 2, 3]), max_size=80),
+)
+def test_any_motor_parameters_played_through_any_faults_stay_safe(spec, fracs, theta, faults):
+    """An episode's movement (the DMP of any theta, at the twin's joint ranges, which are
+    wider than a calibration's) played command by command, with faults on the way."""
+    start = _start_inside(fracs, spec)
+    arm = ScriptedArm(spec, start, faults=[])
+    arm.connect()
+    arm.faults = list(faults)
+    trajectory = Dmp(DmpConfig()).trajectory(np.asarray(theta))
+    _drive(arm, [("command", q) for q in trajectory])
+    _check_sent(arm, spec, start)
