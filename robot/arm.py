@@ -216,6 +216,17 @@ class Arm(ABC):
                 log.error("error while closing %s: %s", type(self).__name__, exc)
             finally:
                 self._connected = False
+                self._log_counts()
+
+    def _log_counts(self) -> None:
+        """One line of fault counters at disconnect (a warning when the link was lost)."""
+        try:
+            counts = self.fault_counts()
+        except Exception:  # counters must never break a disconnect
+            return
+        level = logging.WARNING if counts.get("links_lost") else logging.INFO
+        text = ", ".join(f"{k} {v}" for k, v in counts.items() if v)
+        log.log(level, "%s fault counters: %s", type(self).__name__, text or "none")
 
     def __enter__(self) -> Arm:
         self.connect()

@@ -141,8 +141,7 @@ def test_a_broken_run_json_gets_one_line_and_nothing_is_written(
     assert _bytes_of(run) == before
 
 
-# These get a traceback until ``validate_run_config`` is called in ``run_explore`` (see
-# docs/reliability.md); then they flip to XPASS and strict xfail fails: remove the marker.
+# Wrong types that got a traceback before ``run_explore`` called ``validate_run_config``.
 UNHANDLED = [
     ("seed not a number", lambda m: m["config"].update(seed="abc"), "config.seed"),
     ("episodes a string", lambda m: m["config"].update(episodes="ten"), "config.episodes"),
