@@ -62,6 +62,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     add_rig_arguments(p)
     p.add_argument("--strategy", default=None, help="exploration strategy (default rpe)")
+    p.add_argument(
+        "--strategy-option", action="append", default=[], metavar="KEY=JSON",
+        help="strategy option, repeatable (JSON or a string): bootstrap=100, vae=models/vae",
+    )  # fmt: skip
     p.add_argument("--episodes", type=int, default=None, help="total episodes (default 300)")
     p.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
     p.add_argument("--out", type=Path, help="new run folder (default runs/STRATEGY-sSEED-TIME)")
@@ -81,7 +85,10 @@ def _new_config(args: argparse.Namespace) -> dict[str, Any]:
     return {
         "rig": {"name": args.rig or "sim", "rig_id": args.rig_id or "twin",
                 "options": rig_options(args)},
-        "strategy": {"name": args.strategy or "rpe", "options": {}},
+        "strategy": {
+            "name": args.strategy or "rpe",
+            "options": parse_key_values(args.strategy_option, "--strategy-option"),
+        },
         "seed": 0 if args.seed is None else args.seed,
         "episodes": 300 if args.episodes is None else args.episodes,
         "episode": dataclasses.asdict(EpisodeConfig()),
@@ -97,6 +104,10 @@ def _check_resume_flags(args: argparse.Namespace, config: dict[str, Any]) -> Non
     ):
         if value is not None and value != key:
             raise CliError(f"{flag} {value} differs from the run's {key!r}: a run keeps its config")
+    if args.strategy_option:
+        raise CliError(
+            "--strategy-option on resume: a run keeps the strategy options it started with"
+        )
 
 
 def run_explore(args: argparse.Namespace) -> int:
@@ -150,7 +161,9 @@ def run_explore(args: argparse.Namespace) -> int:
 
     total = int(config["episodes"])
     bar = _progress_bar(total, len(store), disabled=args.no_progress)
-    recorder = make_recorder(args, store.path, records=store.records, config=config)
+    recorder = make_recorder(
+        args, store.path, records=store.records, config=config, strategy=strategy
+    )
 
     def on_episode(p: Any) -> None:
         if bar:

@@ -1,10 +1,12 @@
 """Outcome database for pre-training representations: twin scenes rendered as the rig sees them.
 
 Each scene: the ball placed uniformly over its ring (uniform in area between radii 0.13 and
-0.17 m, where the ball's centre can lie; uniform angle), the arm driven towards random joint
-targets inside its limits for ``settle_s`` seconds, then an overhead render reduced to 64x64
-exactly as an episode's outcome (``explore.episode.square_observation``). The ball's position
-is read after the arm moved (the arm may have pushed it).
+0.17 m, where the ball's centre can lie; uniform angle), the arm at its rest pose (``arm="rest"``,
+the default: an episode's outcome is observed there, explore/episode.py) or driven towards random
+joint targets inside its limits (``arm="random"``, the paper's database, in which the arm's pose
+varies), ``settle_s`` seconds of physics, then an overhead render reduced to 64x64 exactly as an
+episode's outcome (``explore.episode.square_observation``). The ball's position is read after
+the arm moved (the arm may have pushed it).
 
 The paper pre-trained its VAEs on such a database of the environment's possible outcomes.
 """
@@ -18,9 +20,11 @@ import numpy as np
 
 from explore.episode import EpisodeConfig, square_observation
 from explore.goal_spaces import R_MAX, R_MIN
+from robot.spec import ergo_jr_spec
 
 SETTLE_S = 0.3  # s of physics towards the random pose: a 30-degree step takes ~0.2 s (docs/twin)
-RENDER_SIZE = (240, 240)  # the sim rig's default overhead frame (explore/rig_sim.py)
+RENDER_SIZE = (240, 240)
+ARM_POSES = ("rest", "random")  # the sim rig's default overhead frame (explore/rig_sim.py)
 
 
 def ring_positions(n: int, rng: np.random.Generator) -> np.ndarray:
@@ -36,8 +40,9 @@ def make_outcome_dataset(
     render_size: tuple[int, int] = RENDER_SIZE,
     settle_s: float = SETTLE_S,
     progress: bool = True,
+    arm: str = "rest",
 ) -> dict[str, np.ndarray]:
-    """Render ``n`` scenes.
+    """Render ``n`` scenes with the arm at rest (``arm="rest"``) or in random poses (``"random"``).
 
     Returns:
         images: (n, 64, 64, 3) BGR uint8; ball: (n, 2) m after the arm moved; placed: (n, 2) m
@@ -45,6 +50,8 @@ def make_outcome_dataset(
     """
     from sim.twin import JOINTS, Twin
 
+    if arm not in ARM_POSES:
+        raise ValueError(f"arm={arm!r}: expected one of {', '.join(ARM_POSES)}")
     rng = np.random.default_rng(seed)
     twin = Twin(render_size=render_size)
     lo = np.array([twin.model.joint(j).range[0] for j in JOINTS])
@@ -52,6 +59,8 @@ def make_outcome_dataset(
     size = EpisodeConfig().obs_size
     placed = ring_positions(n, rng)
     targets = rng.uniform(lo, hi, (n, len(JOINTS)))
+    if arm == "rest":
+        targets[:] = ergo_jr_spec().rest
     images = np.empty((n, size, size, 3), dtype=np.uint8)
     ball = np.empty((n, 2))
     joints = np.empty((n, len(JOINTS)))

@@ -1,4 +1,10 @@
-"""One episode on a rig: rest pose, context, DMP at the control rate, settle, outcome.
+"""One episode on a rig: rest pose, context, DMP at the control rate, back to rest, settle, outcome.
+
+The outcome is observed with the arm back at its rest pose (upright, over the arena's centre),
+so that the arm hides no part of the ring and the outcome image varies with the ball alone; the
+next episode's context is the same scene. The original implementation observed the outcome with
+the arm where its movement ended: there the arm's pose dominated the image, and a VAE trained on
+such images encoded the arm, not the ball (measured: docs/goal_exploration.md).
 
 All positions in metres (arena frame: origin at the arm's base, z up), angles in radians,
 durations in seconds.
@@ -96,12 +102,17 @@ class EpisodeRunner:
 
     # ---- phases --------------------------------------------------------------------------
     def go_rest(self) -> None:
-        """Move to the rest pose by linear interpolation over ``reset_s`` at the control rate."""
+        """Move to the rest pose by linear interpolation over ``reset_s`` at the control rate.
+
+        Nothing is sent when the last command already was the rest pose.
+        """
         arm, clock = self.rig.arm, self.rig.clock
         start = arm.last_sent
+        rest = arm.spec.rest
+        if start is not None and np.array_equal(start, rest):
+            return
         if start is None:
             start = arm.read().positions
-        rest = arm.spec.rest
         n = max(1, round(self.config.reset_s / self.dt))
         for i in range(1, n + 1):
             arm.command(start + (rest - start) * (i / n))
@@ -174,8 +185,10 @@ class EpisodeRunner:
 
     # ---- the whole episode -----------------------------------------------------------------
     def run(self, theta: np.ndarray, context: Observation) -> EpisodeResult:
-        """Play ``theta`` from the rest pose (``context`` seen there), then observe the outcome."""
+        """Play ``theta`` from the rest pose (``context`` seen there), go back to rest, wait for the
+        ball to settle, then observe the outcome."""
         targets, measured, ee = self.play(theta)
+        self.go_rest()
         settle_s = self.settle()
         outcome = self.observe(render=True)
         moved = bool(

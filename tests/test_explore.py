@@ -85,6 +85,39 @@ def test_resume_can_extend_a_run_and_refuses_to_change_its_config(tmp_path, caps
     assert "--seed 9 differs" in capsys.readouterr().err
 
 
+def test_strategy_options_are_stored_and_kept_on_resume(tmp_path, capsys):
+    out = tmp_path / "s"
+    args = ["explore", "--strategy", "rge-efr", "--episodes", "4", "--out", str(out)]
+    assert ergo(*args, "--strategy-option", "bootstrap=2", "--rerun", "off") == 0
+    store = RunStore.open(out)
+    assert store.config["strategy"]["options"] == {"bootstrap": 2}
+    kinds = [r.kind for r in store.records]
+    assert kinds[:2] == ["random", "random"] and set(kinds[2:]) - {"random"}, kinds
+    assert ergo("explore", "--resume", str(out), "--strategy-option", "bootstrap=3") == 2
+    assert "keeps the strategy options" in capsys.readouterr().err
+    assert ergo("explore", "--out", str(tmp_path / "t"), "--strategy", "rge-efr",
+                "--strategy-option", "nonsense=1", "--episodes", "1") == 2  # fmt: skip
+    assert "nonsense" in capsys.readouterr().err and not (tmp_path / "t").exists()
+
+
+def test_the_outcome_is_observed_with_the_arm_back_at_rest():
+    from explore.episode import EpisodeRunner
+    from explore.rig import RigConfig, make_rig
+
+    with make_rig(RigConfig()) as rig:
+        runner = EpisodeRunner(rig)
+        runner.go_rest()
+        context = runner.observe(render=False)
+        theta = np.random.default_rng(0).uniform(-1, 1, 48)
+        result = runner.run(theta, context)
+        assert np.array_equal(rig.arm.last_sent, rig.arm.spec.rest)
+        assert np.allclose(rig.twin.joint_positions(), rig.arm.spec.rest, atol=0.05)
+        assert not np.allclose(result.targets[-1], rig.arm.spec.rest, atol=0.05)  # it did move
+        t = rig.twin.time
+        runner.go_rest()  # already there: nothing is sent, no time passes
+        assert rig.twin.time == t
+
+
 def test_cell_counter_on_hand_made_points():
     c = CellCounter(half_width=0.2, n_bins=30)  # cells of 0.4/30 m
     w = 0.4 / 30

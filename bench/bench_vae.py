@@ -1,0 +1,91 @@
+"""Time on this machine's CPU to a VAE whose latent predicts the ball's position linearly.
+
+Issue 6's benchmark: train on an outcome database (``ergo dataset outcomes``), and after every
+``--every`` iterations fit a linear map (least squares with intercept) from the latent means of
+the training images to the ball's (x, y) and score it on held-out images (R^2, averaged over x
+and y). Prints one row per evaluation: iteration, CPU and wall minutes of training so far, the
+loss terms, the held-out R^2; then the first iteration at which R^2 >= ``--target``.
+
+The paper's schedule (Adam lr 1e-5, batch 64, 300k iterations on a GPU) is the baseline: run the
+same script with ``--lr 1e-5`` to compare at equal iterations.
+
+    .venv/bin/python bench/bench_vae.py --data outcomes.npz --out /tmp/vae_bench \
+        --iterations 3000 --every 250 [--beta 1] [--capacity 12 --capacity-iterations 1500]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from vision.vae import VaeConfig
+from vision.vae_train import TrainConfig, train_vae
+
+HELD_OUT = 0.2  # fraction of the images kept out of training and of the linear fit
+
+
+def linear_r2(
+    z_fit: np.ndarray, y_fit: np.ndarray, z_test: np.ndarray, y_test: np.ndarray
+) -> float:
+    """Held-out R^2 of a least-squares affine map z (n, d) -> y (n, k), averaged over k."""
+    a_fit = np.hstack([z_fit, np.ones((len(z_fit), 1))])
+    w, *_ = np.linalg.lstsq(a_fit, y_fit, rcond=None)
+    pred = np.hstack([z_test, np.ones((len(z_test), 1))]) @ w
+    sse = ((y_test - pred) ** 2).sum(axis=0)
+    sst = ((y_test - y_test.mean(axis=0)) ** 2).sum(axis=0)
+    return float(np.mean(1.0 - sse / sst))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", type=Path, required=True, help="dataset .npz (images, ball)")
+    ap.add_argument("--out", type=Path, required=True, help="model folder (resumed if present)")
+    ap.add_argument("--iterations", type=int, default=3000)
+    ap.add_argument("--every", type=int, default=250)
+    ap.add_argument("--lr", type=float, default=1e-3)
+    ap.add_argument("--batch", type=int, default=64)
+    ap.add_argument("--beta", type=float, default=1.0)
+    ap.add_argument("--capacity", type=float, default=None)
+    ap.add_argument("--capacity-iterations", type=int, default=2000)
+    ap.add_argument("--target", type=float, default=0.9)
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args()
+
+    with np.load(args.data, allow_pickle=False) as z:
+        images, ball = z["images"], z["ball"]
+    order = np.random.default_rng(args.seed).permutation(len(images))
+    n_test = int(len(images) * HELD_OUT)
+    test, train = order[:n_test], order[n_test:]
+    model_cfg = VaeConfig(
+        beta=args.beta, capacity=args.capacity, capacity_iterations=args.capacity_iterations
+    )
+    print(
+        f"{len(train)} training and {n_test} held-out images; lr {args.lr}, batch {args.batch}, "
+        f"beta {args.beta}, capacity {args.capacity} over {args.capacity_iterations} iterations"
+    )
+    print("iteration  cpu_min  wall_min  loss  recon  kl  heldout_R2")
+    cpu0, wall0 = time.process_time(), time.perf_counter()
+    reached = None
+    for stop in range(args.every, args.iterations + 1, args.every):
+        cfg = TrainConfig(iterations=stop, lr=args.lr, batch=args.batch, seed=args.seed)
+        vae = train_vae(images[train], args.out, model_cfg, cfg, progress=False)
+        cpu = (time.process_time() - cpu0) / 60
+        wall = (time.perf_counter() - wall0) / 60
+        z_train, z_test = vae.encode_bgr(images[train]), vae.encode_bgr(images[test])
+        r2 = linear_r2(z_train, ball[train], z_test, ball[test])
+        last = (args.out / "train_log.csv").read_text().strip().splitlines()[-1].split(",")
+        print(f"{stop:9d}  {cpu:7.1f}  {wall:8.1f}  {last[1]}  {last[2]}  {last[3]}  {r2:.3f}")
+        if reached is None and r2 >= args.target:
+            reached = (stop, cpu, wall)
+    if reached is None:
+        print(f"R^2 >= {args.target} not reached in {args.iterations} iterations")
+    else:
+        it, cpu, wall = reached
+        print(f"R^2 >= {args.target} at iteration {it}: {cpu:.1f} CPU min, {wall:.1f} wall min")
+
+
+if __name__ == "__main__":
+    main()
