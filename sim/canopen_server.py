@@ -51,24 +51,66 @@ class SlcanPtyBridge:
     slave descriptor open, so clients may come and go; stale bytes left by a client that died
     are flushed when the next one sends ``C`` or ``O``.
 
+    ``unplug()`` closes the pty as a USB adapter pulled out would; ``replug()`` opens a new one
+    (a new path). With ``link`` the bridge keeps a symbolic link at that path pointing to the
+    current pty (a stable name, as ``/dev/serial/by-id/...``), for ``slcan:LINK``.
+
     Args:
         bus: a python-can bus (the emulated drives' side).
+        link: path of a symbolic link to the current pty (None: no link).
     """
 
-    def __init__(self, bus: Any) -> None:
+    def __init__(self, bus: Any, link: str | os.PathLike[str] | None = None) -> None:
         self.bus = bus
+        self.link = None if link is None else os.fspath(link)
         self.adapter = SlcanAdapter()
         self._splitter = LineSplitter()
-        self._master, self._slave = os.openpty()
-        tty.setraw(self._slave, termios.TCSANOW)  # no echo, no CR/NL translation
-        tty.setraw(self._master, termios.TCSANOW)
-        self.path = os.ttyname(self._slave)
+        self._master: int | None = None
+        self._slave: int | None = None
+        self.path = ""
+        self._open_pty()
         self._write_lock = threading.Lock()
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
         self.frames_in = 0  # host -> bus
         self.frames_out = 0  # bus -> host
         self.frames_dropped = 0  # bus -> host, pty full or adapter closed
+        self.unplugs = 0
+
+    @property
+    def port(self) -> str:
+        """What a client should open: the link when there is one, else the pty itself."""
+        return self.link or self.path
+
+    def _open_pty(self) -> None:
+        master, slave = os.openpty()
+        tty.setraw(slave, termios.TCSANOW)  # no echo, no CR/NL translation
+        tty.setraw(master, termios.TCSANOW)
+        self.adapter = SlcanAdapter()  # a freshly plugged adapter starts closed
+        self._splitter = LineSplitter()
+        self._master, self._slave = master, slave
+        self.path = os.ttyname(slave)
+        if self.link is not None:
+            tmp = f"{self.link}.{os.getpid()}.tmp"
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(tmp)
+            os.symlink(self.path, tmp)
+            os.replace(tmp, self.link)  # atomic: a client never sees the link missing
+
+    def unplug(self) -> None:
+        """Close the pty, as an adapter pulled out of its USB socket (the CAN bus and the
+        drives stay; the host's next read or write of the port fails)."""
+        fds, self._master, self._slave = (self._master, self._slave), None, None
+        for fd in fds:
+            if fd is not None:
+                with contextlib.suppress(OSError):
+                    os.close(fd)
+        self.unplugs += 1
+
+    def replug(self) -> None:
+        """A new pty (a new path; the link, if any, follows it), its adapter closed."""
+        if self._master is None:
+            self._open_pty()
 
     # ---- lifecycle -------------------------------------------------------------------------
     def start(self) -> None:
@@ -88,9 +130,11 @@ class SlcanPtyBridge:
 
     def close(self) -> None:
         self.stop()
-        for fd in (self._master, self._slave):
+        self.unplug()
+        self.unplugs -= 1
+        if self.link is not None and os.path.islink(self.link):
             with contextlib.suppress(OSError):
-                os.close(fd)
+                os.unlink(self.link)
 
     def __enter__(self) -> SlcanPtyBridge:
         self.start()
@@ -104,13 +148,16 @@ class SlcanPtyBridge:
         """Write whole lines to the host; with ``drop_if_full`` give up (whole) when the pty is
         full, so a host that stopped reading never blocks the bus."""
         with self._write_lock:
-            if drop_if_full:
-                _, writable, _ = select.select([], [self._master], [], 0)
-                if not writable:
-                    return False
+            master = self._master
+            if master is None:  # unplugged
+                return False
             try:
-                os.write(self._master, data)
-            except OSError:
+                if drop_if_full:
+                    _, writable, _ = select.select([], [master], [], 0)
+                    if not writable:
+                        return False
+                os.write(master, data)
+            except (OSError, ValueError):
                 return False
         return True
 
@@ -118,17 +165,22 @@ class SlcanPtyBridge:
         import can
 
         while not self._stop.is_set():
-            ready, _, _ = select.select([self._master], [], [], POLL_S)
-            if not ready:
+            master, slave = self._master, self._slave
+            if master is None or slave is None:  # unplugged
+                time.sleep(POLL_S)
                 continue
             try:
-                chunk = os.read(self._master, 4096)
-            except OSError:
+                ready, _, _ = select.select([master], [], [], POLL_S)
+                if not ready:
+                    continue
+                chunk = os.read(master, 4096)
+            except (OSError, ValueError):  # EIO without a client; EBADF once unplugged
                 time.sleep(POLL_S)
                 continue
             for line in self._splitter.feed(chunk):
                 if line is not None and line[:1] in (b"C", b"O", b"L"):
-                    termios.tcflush(self._slave, termios.TCIFLUSH)  # stale bytes to the host
+                    with contextlib.suppress(termios.error):  # stale bytes to the host
+                        termios.tcflush(slave, termios.TCIFLUSH)
                 reply, frame = self.adapter.handle(line)
                 if frame is not None:
                     msg = can.Message(

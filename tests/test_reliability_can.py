@@ -2,7 +2,8 @@
 python-can's ``virtual`` bus (the twin steps one control period per SYNC: deterministic and
 fast). Lost frames, a silent heartbeat, a mute node and a following error are in
 test_canopen_arm.py; here: late TPDOs, an overload and an overheat EMCY, the adapter lost
-and back (recovered in place), and lost for good (safe stop).
+and back (recovered in place: on the virtual bus, and an SLCAN adapter's pty closed and
+reopened behind a stable link), and lost for good (safe stop).
 
 Corrupted frames are not emulated: a CAN controller's CRC rejects them and the sender
 retransmits (ISO 11898-1), so the host sees them late or, at worst, lost: the cases below.
@@ -11,6 +12,7 @@ Nothing here asserts on durations; waits are bounded only against hangs.
 
 from __future__ import annotations
 
+import threading
 import time
 import uuid
 from collections.abc import Iterator
@@ -112,6 +114,37 @@ def test_a_lost_adapter_is_reopened_and_the_arm_goes_on(rig) -> None:
     assert counts["links_lost"] == 1 and counts["reconnects"] == 1, counts
     assert np.abs(state.positions - TARGET).max() < 0.05
     assert enabled(drives) == []  # torque off on exit
+
+
+@DEAD_NOTIFIER
+def test_an_slcan_adapter_unplugged_from_its_pty_and_plugged_back_is_reopened(rig, tmp_path):
+    """The SLCAN adapter's pty closed under the arm, a new one 0.3 s later behind the same
+    link: the arm reopens ``slcan:LINK``, configures the drives again (still enabled), and
+    goes on."""
+    import can
+
+    from sim.canopen_server import SlcanPtyBridge
+
+    _twin, drives, can_spec = rig
+    bridge_bus = can.Bus(interface="virtual", channel=can_spec.split(":", 1)[1])
+    try:
+        with SlcanPtyBridge(bridge_bus, link=tmp_path / "ttyCAN") as bridge:
+            cfg = CanArmConfig(heartbeat_ms=500, pdo_timeout_s=0.05)  # the pty rig's defaults
+            with CanArm(f"slcan:{bridge.port}", config=cfg) as arm:
+                arm.set_torque(True)
+                for _ in range(5):
+                    arm.command(TARGET)
+                bridge.unplug()
+                threading.Timer(0.3, bridge.replug).start()
+                for _ in range(20):
+                    arm.command(TARGET)
+                counts = arm.fault_counts()
+                assert arm.torque_enabled and enabled(drives) == [1, 2, 3, 4, 5, 6]
+            assert enabled(drives) == []
+    finally:
+        bridge_bus.shutdown()
+    assert bridge.unplugs == 1
+    assert counts["links_lost"] == 1 and counts["reconnects"] == 1, counts
 
 
 @DEAD_NOTIFIER

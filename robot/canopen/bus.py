@@ -98,9 +98,15 @@ class CanBusSpec:
         kw: dict[str, Any] = {"interface": self.interface, "channel": self.channel}
         if self.bitrate is not None:
             kw["bitrate"] = self.bitrate
-        if self.interface == "slcan" and self.channel.startswith("/dev/pts/"):
+        if self.interface == "slcan" and _is_pty(self.channel):
             kw["sleep_after_open"] = PTY_SLEEP_AFTER_OPEN_S
         return kw
+
+
+def _is_pty(channel: str) -> bool:
+    """A pseudo-terminal, named directly or through a symbolic link (``/dev/pts/N``)."""
+    path = channel.split("@", 1)[0]
+    return path.startswith("/dev/pts/") or os.path.realpath(path).startswith("/dev/pts/")
 
 
 def parse_can_spec(spec: str, bitrate: int | None = DEFAULT_BITRATE) -> CanBusSpec:
