@@ -275,9 +275,11 @@ def serve(args: argparse.Namespace) -> int:
         with (
             RealtimeLoop(twin, speed=float(getattr(args, "speed", 1.0) or 1.0)),
             drives,
-            SlcanPtyBridge(bridge_bus) as bridge,
+            SlcanPtyBridge(bridge_bus, link=getattr(args, "link", None)) as bridge,
         ):
             print(f"canopen bus (slcan) on {bridge.path}", flush=True)
+            if bridge.link:
+                print(f"canopen bus link {bridge.link}", flush=True)
             from sim.mjpeg_server import start_twin_camera
 
             try:
@@ -308,6 +310,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--overload-servo", type=int, default=None)
     p.add_argument("--overload-after-s", type=float, default=DEFAULT_OVERLOAD_AFTER_S)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--link", default=None, help="keep a symbolic link to the pty at this path")
     p.add_argument("--camera-port", type=int, default=0)
     p.add_argument("--no-camera", action="store_true")
     return serve(p.parse_args(argv))

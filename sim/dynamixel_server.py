@@ -162,11 +162,13 @@ class PtyBusServer:
 
 
 def faults_from_args(args: argparse.Namespace) -> FaultConfig:
-    """The ``--drop-rate --corrupt-rate --delay-ms --overload-servo --seed`` flags."""
+    """The ``--drop-rate --corrupt-rate --delay-ms --overload-servo --seed`` flags (and
+    ``--late-rate`` where the command line has it)."""
     return FaultConfig(
         drop_rate=float(getattr(args, "drop_rate", 0.0) or 0.0),
         corrupt_rate=float(getattr(args, "corrupt_rate", 0.0) or 0.0),
         extra_delay_s=float(getattr(args, "delay_ms", 0.0) or 0.0) / 1000.0,
+        late_rate=float(getattr(args, "late_rate", 0.0) or 0.0),
         overload_servo=getattr(args, "overload_servo", None),
         overload_after_s=float(getattr(args, "overload_after_s", DEFAULT_OVERLOAD_AFTER_S)),
         seed=int(getattr(args, "seed", 0) or 0),
@@ -194,9 +196,11 @@ def serve(args: argparse.Namespace) -> int:
     camera = None
     with (
         RealtimeLoop(twin, speed=float(getattr(args, "speed", 1.0))),
-        PtyBusServer(emulator) as server,
+        PtyBusServer(emulator, link=getattr(args, "link", None)) as server,
     ):
         print(f"dynamixel bus on {server.path}", flush=True)
+        if server.link:
+            print(f"dynamixel bus link {server.link}", flush=True)
         from sim.mjpeg_server import start_twin_camera
 
         try:

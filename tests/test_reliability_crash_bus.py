@@ -12,7 +12,8 @@ compared with a reference run (physics timing differs run to run); the integrity
 the same. Together with that file's 20 kills on the twin, the campaign has 26 kills.
 
 Episodes are shortened through the run's config (80 Hz control, so the 40-point movement
-lasts 0.5 s; 0.25 s reset; 0.2 s settle cap) so that a kill cycle takes a few seconds. Figures are printed for docs/reliability.md.
+lasts 0.5 s; 0.25 s reset; 0.2 s settle cap) so that a kill cycle takes a few seconds.
+Figures are printed for docs/reliability.md.
 """
 
 from __future__ import annotations
