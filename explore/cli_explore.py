@@ -117,6 +117,7 @@ def run_explore(args: argparse.Namespace) -> int:
     from explore.rig import RigConfig, RigError, make_rig
     from explore.store import RunStore, RunStoreError
     from explore.strategies import StrategyError, make_strategy
+    from robot.errors import RobotError
 
     if args.episodes is not None and args.episodes < 1:
         raise CliError(f"--episodes must be at least 1, got {args.episodes}")
@@ -179,6 +180,11 @@ def run_explore(args: argparse.Namespace) -> int:
     )  # fmt: skip
     try:
         explorer.run(total)
+    except RobotError as exc:
+        raise CliError(
+            f"{exc}; run paused after {len(store)} episodes: resume with "
+            f"ergo explore --resume {store.path}"
+        ) from exc
     finally:
         if recorder:
             recorder.close()

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import json
 import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -18,6 +20,31 @@ from explore.strategies.base import Strategy
 from robot.safety import torque_off_on_signals
 
 log = logging.getLogger(__name__)
+
+FAULTS_FILE = "faults.json"  # the arm's fault and recovery counters, summed over sessions
+
+
+def add_fault_counts(run_path: Path, counts: dict[str, float]) -> dict[str, float]:
+    """Add one session's ``Arm.fault_counts()`` to ``RUN/faults.json`` (created if missing;
+    an unreadable file is kept aside as ``faults.json.bad``). Returns the totals."""
+    path = Path(run_path) / FAULTS_FILE
+    totals: dict[str, float] = {}
+    if path.exists():
+        try:
+            loaded = json.loads(path.read_text())
+            totals = {str(k): float(v) for k, v in loaded["totals"].items()}
+            sessions = int(loaded["sessions"])
+        except (ValueError, KeyError, TypeError, AttributeError):
+            path.replace(path.with_name(FAULTS_FILE + ".bad"))
+            totals, sessions = {}, 0
+    else:
+        sessions = 0
+    for k, v in counts.items():
+        totals[k] = round(totals.get(k, 0.0) + float(v), 3)
+    tmp = path.with_name(FAULTS_FILE + ".tmp")
+    tmp.write_text(json.dumps({"sessions": sessions + 1, "totals": totals}, indent=1))
+    tmp.replace(path)
+    return totals
 
 
 def episode_rng(seed: int, episode: int) -> np.random.Generator:
@@ -84,6 +111,12 @@ class Explorer:
         if done >= n_episodes:
             log.info("run already has %d episodes (asked for %d)", done, n_episodes)
             return
+        try:
+            self._explore(done, n_episodes)
+        finally:
+            add_fault_counts(self.store.path, self.rig.arm.fault_counts())
+
+    def _explore(self, done: int, n_episodes: int) -> None:
         with self.rig, torque_off_on_signals(self.rig.arm):
             if done and self.rig.twin is not None:
                 state = self.store.records[-1].sim_state

@@ -17,6 +17,7 @@ Nothing here asserts on durations; waits are bounded only against hangs.
 
 from __future__ import annotations
 
+import json
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -120,6 +121,8 @@ def test_an_adapter_that_stays_unplugged_stops_the_run_which_resumes_once_it_is_
         store.close()
         assert _history(tmp_path / "run") == [0, 1, 2, 3, 4]
         assert not any(emulator.torque_states().values())
+        faults = json.loads((tmp_path / "run" / "faults.json").read_text())  # both sessions
+        assert faults["sessions"] == 2 and faults["totals"]["stops_after_link_loss"] == 1
 
 
 class _Unpluggable(EmulatedSerial):
