@@ -157,6 +157,8 @@ class Explorer:
         t0 = time.perf_counter()
         rng = episode_rng(self.seed, k)
         self.runner.go_rest()
+        if self.rig.before_episode is not None:
+            self.rig.before_episode()
         context = self.runner.observe(render=self.strategy.needs_context_image)
         proposal = self.strategy.propose(context, rng)
         result = self.runner.run(proposal.theta, context)

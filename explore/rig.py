@@ -58,6 +58,8 @@ class Rig:
     twin: Any = None
     #: frame (H, W, 3) BGR -> ball (x, y) m or NaN; None on the twin = its ground truth
     ball_locator: Callable[[np.ndarray], np.ndarray] | None = None
+    #: called with the arm at rest before each episode's context is observed (twin: ball reset)
+    before_episode: Callable[[], None] | None = None
 
     def connect(self) -> None:
         self.camera.connect()

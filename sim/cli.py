@@ -37,6 +37,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     serve.add_argument("--drop-rate", type=float, default=0.0, help="fraction of replies lost")
     serve.add_argument("--corrupt-rate", type=float, default=0.0, help="fraction corrupted")
     serve.add_argument("--delay-ms", type=float, default=0.0, help="extra reply delay, ms")
+    serve.add_argument(
+        "--late-rate", type=float, default=0.0,
+        help="dynamixel: fraction of replies sent after the host's timeout",
+    )  # fmt: skip
+    serve.add_argument(
+        "--link", type=Path, default=None, metavar="PATH",
+        help="keep a symbolic link PATH to the current pty (a stable name across unplug/replug)",
+    )  # fmt: skip
     serve.add_argument("--overload-servo", type=int, default=None, help="id that raises alerts")
     serve.add_argument(
         "--overload-after", dest="overload_after_s", type=float, default=2.0, metavar="S",

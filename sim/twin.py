@@ -81,6 +81,18 @@ class Twin:
                 self.data.qpos[self._ball_qpos : self._ball_qpos + 2] = ball_xy
             mujoco.mj_forward(self.model, self.data)
 
+    def place_ball(self, ball_xy: tuple[float, float] | None = None) -> None:
+        """Put the ball at rest at ``ball_xy`` (m; default: its ``home`` keyframe position),
+        leaving the arm as it is."""
+        with self.lock:
+            home = self.model.key("home").qpos
+            q = self._ball_qpos
+            self.data.qpos[q : q + 7] = home[q : q + 7]
+            if ball_xy is not None:
+                self.data.qpos[q : q + 2] = ball_xy
+            self.data.qvel[self._ball_qvel : self._ball_qvel + 6] = 0.0
+            mujoco.mj_forward(self.model, self.data)
+
     def get_state(self) -> np.ndarray:
         """Full integration state (positions, velocities, controls, warm-start), shape (k,)."""
         with self.lock:

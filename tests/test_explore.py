@@ -118,6 +118,19 @@ def test_the_outcome_is_observed_with_the_arm_back_at_rest():
         assert rig.twin.time == t
 
 
+def test_ball_reset_start_puts_the_ball_back_before_every_episode(tmp_path, capsys):
+    out = tmp_path / "reset"
+    args = ["explore", "--episodes", "25", "--seed", "1", "--out", str(out), "--rerun", "off"]
+    assert ergo(*args, "--rig-option", "ball_reset=start") == 0
+    recs = RunStore.open(out).records
+    contexts = np.array([r.context_ball for r in recs])
+    assert np.allclose(contexts, contexts[0], atol=1e-6), contexts  # the same every episode
+    assert any(r.ball_moved for r in recs)  # while the arm did push it away in some
+    bad = ["explore", "--episodes", "1", "--out", str(tmp_path / "b"), "--rig-option"]
+    assert ergo(*bad, "ball_reset=sometimes") == 2
+    assert "ball_reset='sometimes'" in capsys.readouterr().err
+
+
 def test_cell_counter_on_hand_made_points():
     c = CellCounter(half_width=0.2, n_bins=30)  # cells of 0.4/30 m
     w = 0.4 / 30
