@@ -526,14 +526,32 @@ def final_cells(run_dir: Path) -> tuple[int, int]:
     return len(m["episode"]), int(m["ball_cells"][-1])
 
 
+def welch_vs_baseline(cells: Any, baseline: Any) -> tuple[float, float]:
+    """Welch's t-test (unequal variances) of final cells against the baseline's (RPE), two-sided.
+
+    Returns (t, p); NaN when either side has fewer than 2 seeds or both have no spread.
+    """
+    import numpy as np
+    from scipy import stats
+
+    a, b = np.asarray(cells, dtype=float), np.asarray(baseline, dtype=float)
+    if len(a) < 2 or len(b) < 2 or (a.std() == 0 and b.std() == 0):
+        return float("nan"), float("nan")
+    res = stats.ttest_ind(a, b, equal_var=False)
+    return float(res.statistic), float(res.pvalue)
+
+
 def write_summary(out: Path, strategies: list[str], seeds: list[int]) -> list[dict[str, Any]]:
-    """Final ball cells per strategy over seeds -> ``out/summary.csv``; returns the rows."""
+    """Final ball cells per strategy over seeds, and Welch's t-test of each against ``rpe``
+    (when the campaign has it) -> ``out/summary.csv``; returns the rows."""
     import numpy as np
 
     rows = []
+    finals = {}
     for s in strategies:
         per_seed = [final_cells(out / s / f"seed-{seed}") for seed in seeds]
-        cells = np.array([c for _, c in per_seed], dtype=float)
+        finals[s] = np.array([c for _, c in per_seed], dtype=float)
+        cells = finals[s]
         rows.append({
             "strategy": s,
             "seeds": len(seeds),
@@ -542,6 +560,12 @@ def write_summary(out: Path, strategies: list[str], seeds: list[int]) -> list[di
             "cells_std": round(float(cells.std(ddof=1)) if len(cells) > 1 else 0.0, 2),
             "cells_per_seed": " ".join(str(int(c)) for c in cells),
         })  # fmt: skip
+    for r in rows:
+        t, pval = (float("nan"), float("nan"))
+        if "rpe" in finals and r["strategy"] != "rpe":
+            t, pval = welch_vs_baseline(finals[r["strategy"]], finals["rpe"])
+        r["welch_t_vs_rpe"] = round(t, 3)
+        r["welch_p_vs_rpe"] = round(pval, 4)
     with open(out / "summary.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
@@ -550,8 +574,15 @@ def write_summary(out: Path, strategies: list[str], seeds: list[int]) -> list[di
 
 
 def format_table(rows: list[dict[str, Any]]) -> str:
-    lines = [f"{'strategy':<14} {'episodes':>8} {'ball cells (mean ± std)':>24}  per seed"]
+    head = (
+        f"{'strategy':<14} {'episodes':>8} {'ball cells (mean ± std)':>24} {'Welch p vs rpe':>15}"
+    )
+    lines = [head + "  per seed"]
     for r in rows:
         cells = f"{r['cells_mean']:.1f} ± {r['cells_std']:.1f}"
-        lines.append(f"{r['strategy']:<14} {r['episodes']:>8} {cells:>24}  {r['cells_per_seed']}")
+        p = r.get("welch_p_vs_rpe", float("nan"))
+        ptxt = "" if p != p else f"{p:.4f}"  # NaN: no test (rpe itself, or too few seeds)
+        lines.append(
+            f"{r['strategy']:<14} {r['episodes']:>8} {cells:>24} {ptxt:>15}  {r['cells_per_seed']}"
+        )
     return "\n".join(lines)

@@ -20,6 +20,7 @@ def test_tiny_campaign_writes_summary_and_skips_finished_runs(tmp_path, capsys):
     rows = _summary(out)
     assert [r["strategy"] for r in rows] == ["rpe", "rge-efr"]
     assert all(int(r["episodes"]) == 20 and float(r["cells_mean"]) >= 1 for r in rows)
+    assert "welch_p_vs_rpe" in rows[1]  # one seed: no test, written as nan
     assert "rge-efr" in capsys.readouterr().out
     hist = out / "rge-efr" / "seed-0" / "history.bin"
     stamp = hist.stat().st_mtime_ns, hist.stat().st_size
@@ -38,3 +39,19 @@ def test_a_vae_strategy_without_a_model_names_the_command(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "ergo vae train" in err and "ergo dataset outcomes" in err and err[-1] == "\n"
     assert err.count("\n") == 1
+
+
+def test_welch_test_against_rpe_matches_the_formula():
+    import math
+
+    from explore.campaign import welch_vs_baseline
+
+    a, b = [10.0, 12.0, 14.0], [1.0, 2.0, 3.0]  # variances 4 and 1, 3 seeds each
+    t, p = welch_vs_baseline(a, b)
+    assert math.isclose(t, (12.0 - 2.0) / math.sqrt(4 / 3 + 1 / 3), rel_tol=1e-12)
+    assert 0 < p < 0.05
+    t, p = welch_vs_baseline(b, a)
+    assert t < 0 and 0 < p < 0.05  # two-sided: the same p the other way round
+    assert welch_vs_baseline([5.0, 6.0], [5.0, 6.0])[1] == 1.0
+    assert all(math.isnan(x) for x in welch_vs_baseline([5.0], [1.0, 2.0]))
+    assert all(math.isnan(x) for x in welch_vs_baseline([3.0, 3.0], [3.0, 3.0]))
