@@ -340,6 +340,13 @@ def find_campaign_runs(campaign: Path) -> dict[str, list[Path]]:
     return groups
 
 
+def sample_std(a: np.ndarray, axis: int | None = None) -> np.ndarray:
+    """Standard deviation over seeds with Bessel's correction (as summary.csv), 0 for one seed."""
+    a = np.asarray(a, dtype=float)
+    n = a.shape[axis] if axis is not None else a.size
+    return a.std(axis=axis, ddof=1) if n > 1 else np.zeros_like(a.mean(axis=axis))
+
+
 def campaign_coverage_figure(groups: dict[str, list[RunData]], out: Path) -> Path:
     """Ball cells against episodes: mean over seeds, +-1 std shaded, min/max dotted."""
     fig, ax = _new_figure()
@@ -349,7 +356,7 @@ def campaign_coverage_figure(groups: dict[str, list[RunData]], out: Path) -> Pat
             continue
         cells = np.stack([r.ball_cells[:n] for r in runs])
         x = np.arange(1, n + 1)
-        mean, std = cells.mean(axis=0), cells.std(axis=0)
+        mean, std = cells.mean(axis=0), sample_std(cells, axis=0)
         color = f"C{k}"
         ax.plot(
             x,
@@ -448,8 +455,9 @@ def _campaign_markdown(
                 name,
                 str(len(runs)),
                 "/".join(map(str, eps)),
-                f"{cells.mean():.1f} +- {cells.std():.1f} [{cells.min():.0f}-{cells.max():.0f}]",
-                f"{ee.mean():.1f} +- {ee.std():.1f}",
+                f"{cells.mean():.1f} +- {sample_std(cells):.1f} "
+                f"[{cells.min():.0f}-{cells.max():.0f}]",
+                f"{ee.mean():.1f} +- {sample_std(ee):.1f}",
                 f"{100 * moved.mean():.1f} %",
             ]
         )

@@ -162,7 +162,7 @@ def test_goals_and_hooks(recorded_run, tmp_path):
     assert "frames/grey" in rows
 
 
-GOAL_RUN = {"name": "rge-efr", "options": {"bootstrap": 3}}
+GOAL_RUN = {"name": "rge-efr", "options": {"bootstrap": 3, "random_episodes": 0}}
 N_GOAL = 7
 
 

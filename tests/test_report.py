@@ -111,14 +111,16 @@ def goal_run(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("goal") / "rge-efr-s1"
     config = {
         "rig": {"name": "sim", "rig_id": "twin", "options": {}},
-        "strategy": {"name": "rge-efr", "options": {"bootstrap": 3}},
+        "strategy": {"name": "rge-efr", "options": {"bootstrap": 3, "random_episodes": 0}},
         "seed": 1,
         "episodes": 7,
     }
     store = RunStore.create(out, config)
     rig = make_rig(RigConfig(**config["rig"]))
     try:
-        Explorer(rig, make_strategy("rge-efr", bootstrap=3), store, seed=1).run(7)
+        Explorer(rig, make_strategy("rge-efr", bootstrap=3, random_episodes=0), store, seed=1).run(
+            7
+        )
     finally:
         store.close()
     return out
