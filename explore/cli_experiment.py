@@ -80,6 +80,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     t.add_argument("--iterations", type=int, default=None, help="total iterations (default 3000)")
     t.add_argument("--beta", type=float, default=None, help="KL weight (default 1: plain VAE)")
     t.add_argument("--capacity", type=float, default=None, help="final KL capacity C, nats")
+    t.add_argument(
+        "--capacity-iterations", type=int, default=None, metavar="N",
+        help="iterations over which C rises from 0 (default 2000; docs/results.md: 500)",
+    )  # fmt: skip
     t.add_argument("--lr", type=float, default=None, help="Adam learning rate (default 1e-3)")
     t.add_argument("--batch", type=int, default=None, help="batch size (default 64)")
     t.add_argument("--seed", type=int, default=0, help="random seed")
@@ -90,11 +94,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     dsub = d.add_subparsers(dest="dataset_command", metavar="COMMAND")
     dsub.required = True
     o = dsub.add_parser(
-        "outcomes", help="render ball-on-ring scenes with random arm poses (VAE training data)"
+        "outcomes", help="render ball-on-ring scenes as episodes see them (VAE training data)"
     )
     o.add_argument("--n", type=int, default=10000, help="number of scenes (default 10000)")
     o.add_argument("--out", type=Path, required=True, help="output .npz")
     o.add_argument("--seed", type=int, default=0, help="random seed")
+    o.add_argument(
+        "--arm", choices=("rest", "random"), default="rest",
+        help="arm at rest (default: as in an episode's outcome image) or in random poses",
+    )  # fmt: skip
     o.add_argument("--no-progress", action="store_true", help="no progress bar")
     o.set_defaults(func=run_dataset_outcomes)
 
@@ -144,6 +152,7 @@ def run_vae_train(args: argparse.Namespace) -> int:
         model_cfg = VaeConfig(
             beta=1.0 if args.beta is None else args.beta,
             capacity=args.capacity,
+            capacity_iterations=args.capacity_iterations or VaeConfig().capacity_iterations,
         )
         defaults = TrainConfig()
         train_cfg = TrainConfig(
@@ -167,7 +176,7 @@ def run_dataset_outcomes(args: argparse.Namespace) -> int:
         raise CliError(f"--n must be at least 1, got {args.n}")
     if args.out.suffix != ".npz":
         raise CliError(f"--out {args.out}: expected a .npz file name")
-    data = make_outcome_dataset(args.n, seed=args.seed, progress=not args.no_progress)
+    data = make_outcome_dataset(args.n, seed=args.seed, progress=not args.no_progress, arm=args.arm)
     save_dataset(args.out, data)
     print(f"{args.out}: {args.n} images {data['images'].shape[1:]} with ball positions")
     return 0

@@ -121,3 +121,28 @@ def test_vae_train_command(tmp_path, capsys):
     assert load_vae(out).config.latent_dim == 10
     assert main(["vae", "train", "--data", str(tmp_path / "none.npz"), "--out", str(out)]) == 2
     assert "ergo dataset outcomes" in capsys.readouterr().err
+
+
+def test_vae_train_command_takes_the_capacity_schedule(tmp_path):
+    from explore.cli import main
+
+    data = tmp_path / "d.npz"
+    np.savez(data, images=tiny_images(8))
+    out = tmp_path / "cap"
+    assert main(["vae", "train", "--data", str(data), "--out", str(out), "--iterations", "2",
+                 "--batch", "4", "--beta", "10", "--capacity", "10", "--capacity-iterations",
+                 "500", "--no-progress"]) == 0  # fmt: skip
+    cfg = load_vae(out).config
+    assert (cfg.beta, cfg.capacity, cfg.capacity_iterations) == (10.0, 10.0, 500)
+
+
+def test_outcome_dataset_arm_at_rest_or_random():
+    from explore.dataset import make_outcome_dataset
+
+    rest = make_outcome_dataset(3, seed=1, progress=False)
+    assert np.allclose(rest["joints"], 0.0, atol=0.02)  # the rest pose, as in an episode's outcome
+    assert np.allclose(rest["ball"], rest["placed"], atol=1e-3)  # nothing pushed the ball
+    moved = make_outcome_dataset(3, seed=1, progress=False, arm="random")
+    assert np.abs(moved["joints"]).max() > 0.3
+    with pytest.raises(ValueError, match="arm='sideways'"):
+        make_outcome_dataset(1, arm="sideways", progress=False)
