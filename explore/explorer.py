@@ -114,7 +114,14 @@ class Explorer:
         try:
             self._explore(done, n_episodes)
         finally:
+            self._save_fault_counts()
+
+    def _save_fault_counts(self) -> None:
+        """``RUN/faults.json`` += this session's counters; never masks the run's own error."""
+        try:
             add_fault_counts(self.store.path, self.rig.arm.fault_counts())
+        except Exception as exc:  # counters are a report: losing them must not hide a fault
+            log.warning("could not save the fault counters to %s: %s", self.store.path, exc)
 
     def _explore(self, done: int, n_episodes: int) -> None:
         with self.rig, torque_off_on_signals(self.rig.arm):

@@ -176,3 +176,36 @@ def test_every_command_has_help(capsys):
     out = capsys.readouterr().out
     for command in ("explore", "sim", "twin", "bus"):
         assert command in out
+
+
+def test_fault_counters_are_summed_per_session_and_never_mask_the_runs_error(tmp_path):
+    import json
+
+    from explore.explorer import Explorer, add_fault_counts
+    from explore.rig import RigConfig, make_rig
+    from explore.strategies import make_strategy
+
+    assert add_fault_counts(tmp_path, {"bus_retries": 2, "recovery_s": 0.5})["bus_retries"] == 2
+    totals = add_fault_counts(tmp_path, {"bus_retries": 3, "links_lost": 1})
+    assert totals == {"bus_retries": 5.0, "recovery_s": 0.5, "links_lost": 1.0}
+    assert json.loads((tmp_path / "faults.json").read_text())["sessions"] == 2
+    (tmp_path / "faults.json").write_text("{not json")  # a damaged file is kept aside
+    assert add_fault_counts(tmp_path, {"bus_retries": 1}) == {"bus_retries": 1.0}
+    assert (tmp_path / "faults.json.bad").read_text() == "{not json"
+
+    rig = make_rig(RigConfig())
+    strategy = make_strategy("rpe")
+
+    def broken_counts() -> dict[str, float]:
+        raise RuntimeError("counters unreadable")
+
+    def failing_propose(context, rng):
+        raise ValueError("the strategy failed")
+
+    rig.arm.fault_counts = broken_counts  # type: ignore[method-assign]
+    strategy.propose = failing_propose  # type: ignore[method-assign]
+    store = RunStore.create(tmp_path / "run", {"test": "faults"})
+    with pytest.raises(ValueError, match="the strategy failed"):
+        Explorer(rig, strategy, store, seed=0).run(3)
+    store.close()
+    assert not (tmp_path / "run" / "faults.json").exists()
