@@ -531,13 +531,17 @@ def welch_vs_baseline(cells: Any, baseline: Any) -> tuple[float, float]:
 
     Returns (t, p); NaN when either side has fewer than 2 seeds or both have no spread.
     """
+    import warnings
+
     import numpy as np
     from scipy import stats
 
     a, b = np.asarray(cells, dtype=float), np.asarray(baseline, dtype=float)
     if len(a) < 2 or len(b) < 2 or (a.std() == 0 and b.std() == 0):
         return float("nan"), float("nan")
-    res = stats.ttest_ind(a, b, equal_var=False)
+    with warnings.catch_warnings():  # one side without spread (all seeds equal) is fine here
+        warnings.simplefilter("ignore", RuntimeWarning)
+        res = stats.ttest_ind(a, b, equal_var=False)
     return float(res.statistic), float(res.pvalue)
 
 
