@@ -23,8 +23,8 @@ from explore.goal_spaces import R_MAX, R_MIN
 from robot.spec import ergo_jr_spec
 
 SETTLE_S = 0.3  # s of physics towards the random pose: a 30-degree step takes ~0.2 s (docs/twin)
-RENDER_SIZE = (240, 240)
-ARM_POSES = ("rest", "random")  # the sim rig's default overhead frame (explore/rig_sim.py)
+RENDER_SIZE = (240, 240)  # the sim rig's default overhead frame (explore/rig_sim.py)
+ARM_POSES = ("rest", "random")  # arm at its rest pose (as in an episode's outcome) or random
 
 
 def ring_positions(n: int, rng: np.random.Generator) -> np.ndarray:

@@ -4,7 +4,7 @@ The outcome is observed with the arm back at its rest pose (upright, over the ar
 so that the arm hides no part of the ring and the outcome image varies with the ball alone; the
 next episode's context is the same scene. The original implementation observed the outcome with
 the arm where its movement ended: there the arm's pose dominated the image, and a VAE trained on
-such images encoded the arm, not the ball (measured: docs/goal_exploration.md).
+such images encoded the arm, not the ball (measured: docs/results.md, section 4).
 
 All positions in metres (arena frame: origin at the arm's base, z up), angles in radians,
 durations in seconds.
