@@ -104,9 +104,11 @@ def _check_resume_flags(args: argparse.Namespace, config: dict[str, Any]) -> Non
     ):
         if value is not None and value != key:
             raise CliError(f"{flag} {value} differs from the run's {key!r}: a run keeps its config")
-    if args.strategy_option:
+    given = parse_key_values(args.strategy_option, "--strategy-option")
+    if given and given != config["strategy"].get("options", {}):
         raise CliError(
-            "--strategy-option on resume: a run keeps the strategy options it started with"
+            f"--strategy-option {given} differs from the run's {config['strategy']['options']}: "
+            "a run keeps the strategy options it started with"
         )
 
 

@@ -93,6 +93,7 @@ def test_strategy_options_are_stored_and_kept_on_resume(tmp_path, capsys):
     assert store.config["strategy"]["options"] == {"bootstrap": 2}
     kinds = [r.kind for r in store.records]
     assert kinds[:2] == ["random", "random"] and set(kinds[2:]) - {"random"}, kinds
+    assert ergo(*args, "--strategy-option", "bootstrap=2", "--resume-or-new") == 0  # the same
     assert ergo("explore", "--resume", str(out), "--strategy-option", "bootstrap=3") == 2
     assert "keeps the strategy options" in capsys.readouterr().err
     assert ergo("explore", "--out", str(tmp_path / "t"), "--strategy", "rge-efr",
