@@ -270,34 +270,21 @@ def serve(args: argparse.Namespace) -> int:
         after = float(getattr(args, "overload_after_s", DEFAULT_OVERLOAD_AFTER_S))
         drives.schedule_following_error(int(overload), after)
     bridge_bus = can.Bus(interface="virtual", channel=channel)
-    camera = None
     try:
         with (
             RealtimeLoop(twin, speed=float(getattr(args, "speed", 1.0) or 1.0)),
             drives,
             SlcanPtyBridge(bridge_bus, link=getattr(args, "link", None)) as bridge,
         ):
-            print(f"canopen bus (slcan) on {bridge.path}", flush=True)
-            if bridge.link:
-                print(f"canopen bus link {bridge.link}", flush=True)
-            from sim.mjpeg_server import start_twin_camera
+            from sim.mjpeg_server import serve_until_interrupted
 
-            try:
-                camera = start_twin_camera(twin, args)
-            except OSError as exc:
-                print(f"ergo: error: {exc}", file=sys.stderr)
-                return 2
-            try:
-                while True:
-                    time.sleep(1.0)
-            except KeyboardInterrupt:
-                pass
+            announce = [f"canopen bus (slcan) on {bridge.path}"]
+            if bridge.link:
+                announce.append(f"canopen bus link {bridge.link}")
+            return serve_until_interrupted(twin, args, announce)
     finally:
-        if camera is not None:
-            camera.stop()
         bridge_bus.shutdown()
         signal.signal(signal.SIGTERM, previous)
-    return 0
 
 
 def main(argv: list[str] | None = None) -> int:

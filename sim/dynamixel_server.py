@@ -193,27 +193,13 @@ def serve(args: argparse.Namespace) -> int:
         return 2
     twin = Twin()
     emulator = DynamixelEmulator(twin, faults=faults)
-    camera = None
     with (
         RealtimeLoop(twin, speed=float(getattr(args, "speed", 1.0))),
         PtyBusServer(emulator, link=getattr(args, "link", None)) as server,
     ):
-        print(f"dynamixel bus on {server.path}", flush=True)
-        if server.link:
-            print(f"dynamixel bus link {server.link}", flush=True)
-        from sim.mjpeg_server import start_twin_camera
+        from sim.mjpeg_server import serve_until_interrupted
 
-        try:
-            camera = start_twin_camera(twin, args)
-        except OSError as exc:
-            print(f"ergo: error: {exc}", file=sys.stderr)
-            return 2
-        try:
-            while True:
-                time.sleep(1.0)
-        except KeyboardInterrupt:
-            pass
-        finally:
-            if camera is not None:
-                camera.stop()
-    return 0
+        announce = [f"dynamixel bus on {server.path}"]
+        if server.link:
+            announce.append(f"dynamixel bus link {server.link}")
+        return serve_until_interrupted(twin, args, announce)

@@ -255,3 +255,28 @@ def start_twin_camera(twin: Twin, args: Any) -> MjpegServer | None:
     camera.start()
     print(f"camera on {camera.url}", flush=True)
     return camera
+
+
+def serve_until_interrupted(twin: Twin, args: Any, announce: list[str]) -> int:
+    """The tail of ``ergo twin serve`` for every bus: print ``announce`` (the bus's lines, one
+    each, flushed, for a parent process to read), start the twin's camera
+    (``start_twin_camera``), then block until Ctrl-C or SIGTERM. Returns the exit code (2 when
+    the camera's port cannot be bound)."""
+    import sys
+
+    for line in announce:
+        print(line, flush=True)
+    try:
+        camera = start_twin_camera(twin, args)
+    except OSError as exc:
+        print(f"ergo: error: {exc}", file=sys.stderr)
+        return 2
+    try:
+        while True:
+            time.sleep(1.0)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        if camera is not None:
+            camera.stop()
+    return 0
