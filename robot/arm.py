@@ -353,7 +353,11 @@ class Arm(ABC):
         if enabled:
             measured = self._read().positions
             here = self.spec.clamp(measured, measured)
-            self._send(here)
+            try:
+                self._send(here)
+            except Exception:
+                self._resync_needed = True  # as in ``command``: that goal's fate is unknown
+                raise
             self._last_sent = here
         self._set_torque(enabled)
         self._torque = enabled

@@ -316,3 +316,21 @@ def test_any_motor_parameters_played_through_any_faults_stay_safe(spec, fracs, t
     trajectory = Dmp(DmpConfig()).trajectory(np.asarray(theta))
     _drive(arm, [("command", q) for q in trajectory])
     _check_sent(arm, spec, start)
+
+
+def test_a_failed_send_while_enabling_torque_rereads_the_step_bound():
+    """Regression (found by hypothesis): the goal sent by ``set_torque(True)`` reached the
+    servos, then the call failed; the step bound kept the older goal instead of being re-read,
+    as ``command`` does after a failed send."""
+    spec = ergo_jr_spec()
+    start = np.full(6, 0.05)
+    arm = ScriptedArm(spec, start, faults=[])
+    arm.connect()
+    arm.faults = [0, 2]  # the read is fine; the goal goes out, then no status packet
+    with pytest.raises(InjectedFault):
+        arm.set_torque(True)
+    assert arm._resync_needed
+    out = arm.command(start + 1.0)  # re-read from the arm: one max_step from where it is
+    np.testing.assert_allclose(out, start + spec.max_step)
+    np.testing.assert_array_equal(arm.last_sent, arm.sent[-1])
+    arm.disconnect()
