@@ -306,8 +306,7 @@ class Arm(ABC):
                         raise BusError(f"positions read back are not finite: {measured}")
                     if self._interrupted.is_set():
                         break
-                    self._last_sent = None
-                    self.resync()
+                    self.resync()  # sets the step bound only if the arm could be read
                     if torque_was_on:
                         self.set_torque(True)
                 except BusError as again:

@@ -26,7 +26,7 @@ from hypothesis import strategies as st
 from explore.dmp import Dmp, DmpConfig
 from robot.arm import Arm, JointState, RecoveryPolicy
 from robot.errors import BusError, LinkLost, SafetyStop
-from robot.spec import ArmSpec, ergo_jr_spec
+from robot.spec import ArmSpec, JointSpec, ergo_jr_spec
 
 BASE = ergo_jr_spec()
 
@@ -333,4 +333,25 @@ def test_a_failed_send_while_enabling_torque_rereads_the_step_bound():
     out = arm.command(start + 1.0)  # re-read from the arm: one max_step from where it is
     np.testing.assert_allclose(out, start + spec.max_step)
     np.testing.assert_array_equal(arm.last_sent, arm.sent[-1])
+    arm.disconnect()
+
+
+def test_a_reconnection_that_fails_while_reading_back_keeps_the_step_bound():
+    """Regression (found by hypothesis): the link came back but reading the positions back
+    failed; the step bound was left empty, and a later command could jump by more than
+    ``max_step``."""
+    spec = ArmSpec(joints=tuple(JointSpec(f"m{i + 1}", i + 1, -2.0, 1.0, 0.0) for i in range(6)),
+                   max_step=0.5)  # fmt: skip
+    arm = ScriptedArm(spec, np.zeros(6), faults=[])
+    arm.connect()
+    arm.command(np.zeros(6))
+    # a read loses the link; reconnection 1 fails; reconnection 2 connects but its read-back
+    # fails: the arm gives up with a SafetyStop
+    arm.faults = [3, 1, 0, 0, 1]
+    with pytest.raises(SafetyStop):
+        arm.read()
+    np.testing.assert_array_equal(arm.last_sent, arm.sent[-1])
+    out = arm.command(np.full(6, -2.0))
+    np.testing.assert_allclose(out, np.full(6, -0.5))  # one max_step, not the whole way
+    arm.faults = []
     arm.disconnect()
