@@ -48,8 +48,8 @@ class SlcanPtyBridge:
 
     The host writes SLCAN lines to ``path``; frames it transmits go onto ``bus``; frames on
     ``bus`` are written back as SLCAN lines while the adapter is open. The bridge keeps its own
-    slave descriptor open, so clients may come and go; stale bytes left by a client that died
-    are flushed when the next one sends ``C`` or ``O``.
+    slave descriptor open, so clients may come and go; frames left unread by a client that died
+    with the channel open are flushed when the next one sends ``C``.
 
     ``unplug()`` closes the pty as a USB adapter pulled out would; ``replug()`` opens a new one
     (a new path). With ``link`` the bridge keeps a symbolic link at that path pointing to the
@@ -178,10 +178,16 @@ class SlcanPtyBridge:
                 time.sleep(POLL_S)
                 continue
             for line in self._splitter.feed(chunk):
-                if line is not None and line[:1] in (b"C", b"O", b"L"):
-                    with contextlib.suppress(termios.error):  # stale bytes to the host
-                        termios.tcflush(slave, termios.TCIFLUSH)
+                was_open = self.adapter.is_open
                 reply, frame = self.adapter.handle(line)
+                if was_open and line is not None and line[:1] == b"C":
+                    # A client opening the port sends C first (python-can's slcanBus does, before
+                    # it reads anything): frames queued for a client that died with the channel
+                    # open are dropped here. Only then: flushing while a client is between its
+                    # select() and read() makes pyserial raise "device reports readiness to
+                    # read but returned no data" (seen when O also flushed).
+                    with contextlib.suppress(termios.error):
+                        termios.tcflush(slave, termios.TCIFLUSH)
                 if frame is not None:
                     msg = can.Message(
                         arbitration_id=frame.can_id,
