@@ -28,6 +28,7 @@ EPISODE_BOUNDS: dict[str, tuple[float, float]] = {
     "rate_hz": (1.0, 1000.0),
     "reset_s": (0.0, 60.0),
     "settle_speed": (0.0, 10.0),
+    "arm_settle_speed": (0.0, 10.0),
     "settle_max_s": (0.0, 600.0),
     "settle_check_s": (0.001, 60.0),
     "obs_size": (8, 1024),

@@ -29,7 +29,10 @@ class EpisodeConfig:
         rate_hz: control rate (40 Hz: the DMP's 40 points last 1 s, as in the paper's rig).
         reset_s: time to go back to the rest pose (1 s, original implementation).
         settle_speed: the ball counts as still below this speed, m/s (guess: 1 cm/s).
-        settle_max_s: longest wait for the ball to settle (the original waited 3 s).
+        arm_settle_speed: the arm counts as back at rest when no joint moves faster than this,
+            rad/s. 0.05 rad/s over a 0.1 s check is 0.29 degrees, one XL-320 position unit
+            (datasheet): a real arm's readings cannot show less.
+        settle_max_s: longest wait for the ball and the arm to settle (the original waited 3 s).
         settle_check_s: interval between two settle checks.
         obs_size: side of the square observation the representation sees, pixels (64, paper).
     """
@@ -37,6 +40,7 @@ class EpisodeConfig:
     rate_hz: float = 40.0
     reset_s: float = 1.0
     settle_speed: float = 0.01
+    arm_settle_speed: float = 0.05
     settle_max_s: float = 3.0
     settle_check_s: float = 0.1
     obs_size: int = 64
@@ -160,27 +164,39 @@ class EpisodeRunner:
         return sent, measured, ee
 
     def settle(self) -> float:
-        """Wait until the ball is still; returns the time waited, s.
+        """Wait until the ball is still and the arm has stopped at rest; returns the time
+        waited, s (at least one ``settle_check_s``: the arm's speed takes two readings).
 
-        Twin: its true ball speed. Real rigs: the tracked position between two frames
-        ``settle_check_s`` apart (a ball not seen in both counts as still moving, up to the
-        ``settle_max_s`` cap, as the original waited and re-observed).
+        The arm lags its last rest command by 1-2 degrees per joint on the twin, which shifts
+        it by a few pixels in the 64x64 outcome image, more than a ball moved by a centimetre
+        does; it stops within 0.2-0.3 s (measured, docs/results.md). Ball, twin: its true speed.
+        Ball, real rigs: the tracked position between two frames ``settle_check_s`` apart (a
+        ball not seen in both counts as still moving, up to the ``settle_max_s`` cap, as the
+        original waited and re-observed).
         """
-        cfg, clock, twin = self.config, self.rig.clock, self.rig.twin
+        cfg, clock, twin, arm = self.config, self.rig.clock, self.rig.twin, self.rig.arm
         locator = self.rig.ball_locator if twin is None else None
         previous = locator(self.rig.camera.read().image) if locator is not None else None
+        joints = arm.read().positions
+        step_max = cfg.arm_settle_speed * cfg.settle_check_s
         waited = 0.0
         while waited < cfg.settle_max_s:
-            if twin is not None and twin.ball_speed() < cfg.settle_speed:
-                break
             clock.advance(cfg.settle_check_s)
             waited += cfg.settle_check_s
-            if locator is not None:
+            now = arm.read().positions
+            arm_still = float(np.max(np.abs(now - joints))) <= step_max
+            joints = now
+            if twin is not None:
+                ball_still = twin.ball_speed() < cfg.settle_speed
+            elif locator is not None:
                 here = locator(self.rig.camera.read().image)
                 step = float(np.linalg.norm(here - previous))  # NaN if either is unseen
-                if step / cfg.settle_check_s < cfg.settle_speed:
-                    break
+                ball_still = step / cfg.settle_check_s < cfg.settle_speed
                 previous = here
+            else:
+                ball_still = True
+            if ball_still and arm_still:
+                break
         return waited
 
     # ---- the whole episode -----------------------------------------------------------------

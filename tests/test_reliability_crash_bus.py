@@ -76,8 +76,11 @@ def _create_run(out: Path, port: str, camera: str) -> None:
         "strategy": {"name": "rpe", "options": {}},
         "seed": 5,
         "episodes": EPISODES,
+        # Twice the control rate, for speed. The return to rest takes 0.5 s, not 0.25: with
+        # 0.25 s the loads stay at the servos' limit from one episode into the next (the
+        # settle reads the arm), and the load watchdog rightly stops the arm after 2 s.
         "episode": dataclasses.asdict(
-            EpisodeConfig(rate_hz=80.0, reset_s=0.25, settle_max_s=0.2, settle_check_s=0.1)
+            EpisodeConfig(rate_hz=80.0, reset_s=0.5, settle_max_s=0.2, settle_check_s=0.1)
         ),
     }  # fmt: skip
     RunStore.create(out, config).close()
