@@ -30,8 +30,10 @@ class EpisodeConfig:
         reset_s: time to go back to the rest pose (1 s, original implementation).
         settle_speed: the ball counts as still below this speed, m/s (guess: 1 cm/s).
         arm_settle_speed: the arm counts as back at rest when no joint moves faster than this,
-            rad/s. 0.05 rad/s over a 0.1 s check is 0.29 degrees, one XL-320 position unit
-            (datasheet): a real arm's readings cannot show less.
+            rad/s. 0.05 rad/s over a 0.1 s check is 0.286 degrees, just under one XL-320
+            position unit (0.293 degrees, datasheet): on a real arm a reading that flickers by
+            one unit counts as moving and the settle runs to ``settle_max_s`` (untested on
+            hardware; the twin's results were measured with 0.05).
         settle_max_s: longest wait for the ball and the arm to settle (the original waited 3 s).
         settle_check_s: interval between two settle checks.
         obs_size: side of the square observation the representation sees, pixels (64, paper).
