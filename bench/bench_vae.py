@@ -7,7 +7,8 @@ and y). Prints one row per evaluation: iteration, CPU and wall minutes of traini
 loss terms, the held-out R^2; then the first iteration at which R^2 >= ``--target``.
 
 The paper's schedule (Adam lr 1e-5, batch 64, 300k iterations on a GPU) is the baseline: run the
-same script with ``--lr 1e-5`` to compare at equal iterations.
+same script with ``--lr 1e-5`` to compare at equal iterations, and ``--device cuda`` on a GPU
+(the CPU minutes column then counts the Python process's CPU time only).
 
     .venv/bin/python bench/bench_vae.py [--data outcomes.npz] [--out /tmp/vae_bench] \
         [--iterations 3000] --every 250 [--beta 1] [--capacity 12 --capacity-iterations 1500]
@@ -22,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from vision.vae import VaeConfig
-from vision.vae_train import TrainConfig, train_vae
+from vision.vae_train import CHECKPOINT, TrainConfig, train_vae
 
 N_DEFAULT = 3000  # scenes rendered when no dataset is given (about 5 min of CPU; guess: enough)
 HELD_OUT = 0.2  # fraction of the images kept out of training and of the linear fit
@@ -38,6 +39,16 @@ def linear_r2(
     sse = ((y_test - pred) ** 2).sum(axis=0)
     sst = ((y_test - y_test.mean(axis=0)) ** 2).sum(axis=0)
     return float(np.mean(1.0 - sse / sst))
+
+
+def resumed_iteration(folder: Path) -> int:
+    """Iterations already done by a checkpoint in ``folder`` (0 if none)."""
+    ckpt = folder / CHECKPOINT
+    if not ckpt.exists():
+        return 0
+    import torch
+
+    return int(torch.load(ckpt, map_location="cpu", weights_only=True)["iteration"])
 
 
 def main() -> None:
@@ -59,6 +70,7 @@ def main() -> None:
     ap.add_argument("--capacity-iterations", type=int, default=2000)
     ap.add_argument("--target", type=float, default=0.9)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--device", choices=("cpu", "cuda", "auto"), default="cpu")
     args = ap.parse_args()
 
     if args.data is None:
@@ -77,13 +89,21 @@ def main() -> None:
     )
     print(
         f"{len(train)} training and {n_test} held-out images; lr {args.lr}, batch {args.batch}, "
-        f"beta {args.beta}, capacity {args.capacity} over {args.capacity_iterations} iterations"
+        f"beta {args.beta}, capacity {args.capacity} over {args.capacity_iterations} iterations, "
+        f"device {args.device}"
     )
     print("iteration  cpu_min  wall_min  loss  recon  kl  heldout_R2")
+    done = resumed_iteration(args.out)
+    if done:
+        print(f"resuming {args.out} at iteration {done}: times count from here")
     cpu0, wall0 = time.process_time(), time.perf_counter()
     reached = None
     for stop in range(args.every, args.iterations + 1, args.every):
-        cfg = TrainConfig(iterations=stop, lr=args.lr, batch=args.batch, seed=args.seed)
+        if stop <= done:
+            continue  # measured by the run that wrote the checkpoint
+        cfg = TrainConfig(
+            iterations=stop, lr=args.lr, batch=args.batch, seed=args.seed, device=args.device
+        )
         vae = train_vae(images[train], args.out, model_cfg, cfg, progress=False)
         cpu = (time.process_time() - cpu0) / 60
         wall = (time.perf_counter() - wall0) / 60

@@ -87,6 +87,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     t.add_argument("--lr", type=float, default=None, help="Adam learning rate (default 1e-3)")
     t.add_argument("--batch", type=int, default=None, help="batch size (default 64)")
     t.add_argument("--seed", type=int, default=0, help="random seed")
+    t.add_argument(
+        "--device", choices=("auto", "cpu", "cuda"), default="auto",
+        help="where to train: a CUDA GPU where torch sees one (auto, the default), or cpu/cuda",
+    )  # fmt: skip
     t.add_argument("--no-progress", action="store_true", help="no progress bar")
     t.set_defaults(func=run_vae_train)
 
@@ -145,7 +149,7 @@ def run_experiment(args: argparse.Namespace) -> int:
 # ---- representation and dataset -------------------------------------------------------------
 def run_vae_train(args: argparse.Namespace) -> int:
     from vision.vae import VaeConfig, VaeError
-    from vision.vae_train import TrainConfig, load_images, train_vae
+    from vision.vae_train import TrainConfig, load_images, resolve_device, train_vae
 
     try:
         images = load_images(args.data)
@@ -160,12 +164,14 @@ def run_vae_train(args: argparse.Namespace) -> int:
             lr=args.lr or defaults.lr,
             batch=args.batch or defaults.batch,
             seed=args.seed,
+            device=args.device,
         )
         vae = train_vae(images, args.out, model_cfg, train_cfg, progress=not args.no_progress)
     except VaeError as exc:
         raise CliError(str(exc)) from exc
     kl = ", ".join(f"{v:.2f}" for v in vae.config.kl_per_latent or [])
-    print(f"{args.out}: VAE saved; KL per latent (nats): {kl}")
+    print(f"{args.out}: VAE saved (trained on {resolve_device(args.device)}); "
+          f"KL per latent (nats): {kl}")  # fmt: skip
     return 0
 
 

@@ -30,10 +30,11 @@ class EpisodeConfig:
         reset_s: time to go back to the rest pose (1 s, original implementation).
         settle_speed: the ball counts as still below this speed, m/s (guess: 1 cm/s).
         arm_settle_speed: the arm counts as back at rest when no joint moves faster than this,
-            rad/s. 0.05 rad/s over a 0.1 s check is 0.286 degrees, just under one XL-320
-            position unit (0.293 degrees, datasheet): on a real arm a reading that flickers by
-            one unit counts as moving and the settle runs to ``settle_max_s`` (untested on
-            hardware; the twin's results were measured with 0.05).
+            rad/s (guess, checked on the twin: it stops within 0.2-0.3 s). 0.05 rad/s over a
+            0.1 s check is 0.286 degrees, just under one XL-320 position unit (0.293 degrees,
+            datasheet), so a joint that moved by at most one unit of its reading
+            (``Arm.position_resolution``) also counts as still: a reading that flickers by one
+            unit at rest would otherwise hold every settle to ``settle_max_s``.
         settle_max_s: longest wait for the ball and the arm to settle (the original waited 3 s).
         settle_check_s: interval between two settle checks.
         obs_size: side of the square observation the representation sees, pixels (64, paper).
@@ -180,13 +181,17 @@ class EpisodeRunner:
         locator = self.rig.ball_locator if twin is None else None
         previous = locator(self.rig.camera.read().image) if locator is not None else None
         joints = arm.read().positions
-        step_max = cfg.arm_settle_speed * cfg.settle_check_s
+        # a joint is still when it moved less than arm_settle_speed allows, or by at most one
+        # unit of its reading (a real servo's reading can flicker by one unit at rest)
+        step_max = np.maximum(
+            cfg.arm_settle_speed * cfg.settle_check_s, arm.position_resolution * (1 + 1e-6)
+        )
         waited = 0.0
         while waited < cfg.settle_max_s:
             clock.advance(cfg.settle_check_s)
             waited += cfg.settle_check_s
             now = arm.read().positions
-            arm_still = float(np.max(np.abs(now - joints))) <= step_max
+            arm_still = bool(np.all(np.abs(now - joints) <= step_max))
             joints = now
             if twin is not None:
                 ball_still = twin.ball_speed() < cfg.settle_speed

@@ -42,6 +42,10 @@ class FaultyArm(Arm):
             self.counts[kind] += 1
             raise InjectedBusError(f"injected {kind} fault")
 
+    @property
+    def position_resolution(self) -> np.ndarray:
+        return self.inner.position_resolution
+
     def _connect(self) -> None:
         self.inner.connect()
 

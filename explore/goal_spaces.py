@@ -143,6 +143,11 @@ class LatentGoalSpace(GoalSpace):
         latent_dim: size of the latent.
         kl_per_latent: KL of each latent over the training data (ranks the modules).
         modular: one module per pair of latents ranked by KL (MGE), else one module (RGE).
+        zscore: None for the raw latent means (the paper's), or ``(mean, std)``, each of
+            length latent_dim: the latent means' statistics over the outcome database, and the
+            outcome is ``(mu - mean) / std``. Raw means of a beta-VAE can spread over 1e-4 in
+            one latent and 2e-3 in another, so nearest neighbours in them follow a few latents
+            only (docs/results.md, ``bench/bench_goal_space.py``).
     """
 
     def __init__(
@@ -151,10 +156,23 @@ class LatentGoalSpace(GoalSpace):
         latent_dim: int,
         kl_per_latent: Sequence[float] | None = None,
         modular: bool = False,
+        zscore: tuple[Sequence[float], Sequence[float]] | None = None,
     ) -> None:
         self.encode = encode
         self.dim = latent_dim
         self.context_dim = latent_dim
+        self.shift = np.zeros(latent_dim)
+        self.scale = np.ones(latent_dim)
+        if zscore is not None:
+            mean, std = (np.asarray(v, dtype=float) for v in zscore)
+            if mean.shape != (latent_dim,) or std.shape != (latent_dim,):
+                raise ValueError(
+                    f"latent statistics have shapes {mean.shape} and {std.shape}, "
+                    f"expected ({latent_dim},)"
+                )
+            if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(std)) and np.all(std > 0)):
+                raise ValueError("latent statistics must be finite with std > 0")
+            self.shift, self.scale = mean, std
         if modular:
             kl = kl_per_latent if kl_per_latent is not None else np.arange(latent_dim)[::-1]
             self.modules = kl_ranked_modules(kl)
@@ -165,7 +183,8 @@ class LatentGoalSpace(GoalSpace):
         image = np.asarray(record.image)
         if image.ndim != 3:
             return None
-        return np.asarray(self.encode(image[None]), dtype=float)[0]
+        mu = np.asarray(self.encode(image[None]), dtype=float)[0]
+        return (mu - self.shift) / self.scale
 
     def context(self, record: Any) -> np.ndarray:
         raise NotImplementedError("latent contexts are tracked by the strategy (previous outcome)")

@@ -172,6 +172,12 @@ class Arm(ABC):
         self.resync()
 
     @property
+    def position_resolution(self) -> np.ndarray:
+        """Smallest change a position reading can show, per joint, shape (n,), rad: one raw
+        unit of the servo or drive, 0 where readings are continuous (the twin's own arm)."""
+        return np.zeros(self.spec.n)
+
+    @property
     def can_reconnect(self) -> bool:
         """Whether ``_reconnect`` can reopen the link after a ``LinkLost`` (backends that open
         their port by name say yes)."""

@@ -67,6 +67,7 @@ def test_connect_configures_the_drives_by_sdo(rig) -> None:
     with make_arm(can) as arm:
         assert arm.scaling is not None
         assert arm.scaling.counts_per_rev.tolist() == [65536, 65536, 65536, 4096, 65536, 65536]
+        assert np.allclose(arm.position_resolution, 2 * np.pi / arm.scaling.counts_per_rev)
         for d in drives.drives:
             sdo = d.node.sdo
             assert sdo[0x6060].raw == 8  # cyclic synchronous position

@@ -90,6 +90,8 @@ def test_directions_and_offsets_map_joint_to_servo_angles() -> None:
             assert np.allclose(
                 servo, np.array(directions) * sent + offsets, atol=XL320.rad_per_step
             )
+            # one position unit, what the settle lets a joint flicker by at rest
+            assert np.allclose(arm.position_resolution, np.radians(300 / 1023), rtol=1e-3)
 
 
 def test_eeprom_write_with_torque_on_is_an_access_error() -> None:

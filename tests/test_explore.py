@@ -128,6 +128,35 @@ def test_the_outcome_is_observed_with_the_arm_back_at_rest():
         assert rig.twin.time == t
 
 
+def test_a_reading_that_flickers_by_one_servo_unit_does_not_hold_the_settle(monkeypatch):
+    """A real XL-320 at rest can read one unit (0.29 degrees) apart from one check to the
+    next, just over what arm_settle_speed allows in a check: that is not motion."""
+    from explore.episode import EpisodeRunner
+    from explore.rig import RigConfig, make_rig
+    from sim.arm import SimArm
+
+    unit = np.radians(300.0 / 1023.0)  # XL-320 position unit (e-manual)
+    monkeypatch.setattr(SimArm, "position_resolution", property(lambda self: np.full(6, unit)))
+    with make_rig(RigConfig()) as rig:
+        runner = EpisodeRunner(rig)
+        runner.go_rest()
+        rig.clock.advance(1.0)  # the arm has stopped at rest
+        true_read, calls = rig.arm.read, [0]
+
+        def flickering_read():
+            state = true_read()
+            calls[0] += 1
+            q = np.round(state.positions / unit) * unit
+            q[2] += unit * (calls[0] % 2)  # joint 3 reads one unit higher every other time
+            state.positions = q
+            return state
+
+        rig.arm.read = flickering_read
+        assert runner.settle() == pytest.approx(runner.config.settle_check_s)
+        monkeypatch.setattr(SimArm, "position_resolution", property(lambda self: np.zeros(6)))
+        assert runner.settle() == pytest.approx(runner.config.settle_max_s)  # the old rule
+
+
 def test_ball_reset_start_puts_the_ball_back_before_every_episode(tmp_path, capsys):
     out = tmp_path / "reset"
     args = ["explore", "--episodes", "25", "--seed", "1", "--out", str(out), "--rerun", "off"]

@@ -41,3 +41,29 @@ def test_online_variant_trains_after_bootstrap_and_resumes_identically(tmp_path)
     assert [r.kind for r in ra[12:]] == ["explore"] * 8
     assert all(r.goal.shape == (10,) for r in ra[12:])
     assert all(x.equals(y) for x, y in zip(ra, rb, strict=True))
+
+
+def test_zscored_latents_use_the_statistics_saved_with_the_vae(vae_dir, tmp_path):
+    from explore.strategies import make_strategy
+    from explore.strategies.base import StrategyError
+    from vision.vae import load_vae
+
+    with pytest.raises(StrategyError, match="no latent statistics"):
+        make_strategy("rge-vae", vae=str(vae_dir), latents="zscore")
+    with pytest.raises(StrategyError, match="latents must be one of"):
+        make_strategy("rge-vae", vae=str(vae_dir), latents="whitened")
+    vae = load_vae(vae_dir)
+    images = np.random.default_rng(0).integers(0, 256, (6, 64, 64, 3), dtype=np.uint8)
+    vae.config.latent_mean, vae.config.latent_std = vae.latent_stats(images)
+    folder = vae.save(tmp_path / "with-stats")
+    raw = make_strategy("rge-vae", vae=str(folder)).space
+    z = make_strategy("rge-vae", vae=str(folder), latents="zscore").space
+
+    class Rec:
+        image = images[2]
+
+    mean, std = np.array(vae.config.latent_mean), np.array(vae.config.latent_std)
+    assert np.allclose(z.outcome(Rec), (raw.outcome(Rec) - mean) / std)
+    zs = np.stack([z.outcome(type("R", (), {"image": im})) for im in images])
+    assert np.allclose(zs.mean(axis=0), 0.0, atol=1e-4)  # float32 encodings
+    assert np.allclose(zs.std(axis=0), 1.0, atol=1e-4)

@@ -54,6 +54,8 @@ class VaeConfig:
         capacity_iterations: iterations over which C rises linearly from 0 to ``capacity``.
         kl_per_latent: mean KL of each latent over the training data (filled after training;
             ranks the latents into MGE modules).
+        latent_mean, latent_std: mean and standard deviation of each latent mean over the
+            training data (filled after training; a goal space can z-score latents with them).
     """
 
     latent_dim: int = LATENT_DIM
@@ -63,6 +65,8 @@ class VaeConfig:
     capacity: float | None = None
     capacity_iterations: int = 2000
     kl_per_latent: list[float] | None = field(default=None)
+    latent_mean: list[float] | None = field(default=None)
+    latent_std: list[float] | None = field(default=None)
 
     def validate(self) -> None:
         if self.latent_dim < 1 or self.channels < 1 or self.hidden < 1:
@@ -179,6 +183,14 @@ class Vae(nn.Module):
             total += kl_per_latent(mu, logvar).double().sum(dim=0)
         self.train(was)
         return (total / max(len(images), 1)).tolist()
+
+    def latent_stats(self, images: np.ndarray) -> tuple[list[float], list[float]]:
+        """Mean and standard deviation of each latent mean over ``images`` (n, 64, 64, 3) BGR
+        uint8: two lists of length latent_dim."""
+        mu = self.encode_bgr(images)
+        if len(mu) == 0:
+            raise VaeError("no images to measure latent statistics on")
+        return mu.mean(axis=0).tolist(), mu.std(axis=0).tolist()
 
     # ---- files -------------------------------------------------------------------------------
     def save(self, folder: str | Path) -> Path:

@@ -226,12 +226,14 @@ class ModularEngineeredGoalExploration(EngineeredGoalExploration):
 
 class LatentGoalExploration(GoalExploration):
     """Goal exploration in the latent space of a VAE trained beforehand (option ``vae``: the
-    model folder or its ``.pt`` file, from ``ergo vae train``)."""
+    model folder or its ``.pt`` file, from ``ergo vae train``; option ``latents``: "raw" latent
+    means, the paper's and the default, or "zscore": z-scored with the means' statistics over
+    the VAE's training data, the outcome database)."""
 
     name = "rge-vae"
 
     def extra_options(self) -> tuple[str, ...]:
-        return ("vae",)
+        return ("vae", "latents")
 
     def make_space(self) -> GoalSpace | None:
         path = self.options.get("vae")
@@ -247,14 +249,35 @@ class LatentGoalExploration(GoalExploration):
             vae = load_vae(path)
         except (VaeError, FileNotFoundError) as exc:
             raise StrategyError(f"{self.name}: {exc}") from exc
-        return latent_space(vae, self.modular)
+        return latent_space(vae, self.modular, self.options.get("latents", "raw"), path)
 
 
-def latent_space(vae: Any, modular: bool) -> LatentGoalSpace:
-    """A ``LatentGoalSpace`` over a loaded ``vision.vae.Vae``."""
-    return LatentGoalSpace(
-        vae.encode_bgr, vae.config.latent_dim, vae.config.kl_per_latent, modular=modular
-    )
+LATENT_FORMS = ("raw", "zscore")
+
+
+def latent_space(
+    vae: Any, modular: bool, latents: str = "raw", where: Any = "the VAE"
+) -> LatentGoalSpace:
+    """A ``LatentGoalSpace`` over a loaded ``vision.vae.Vae``: its raw latent means, or
+    (``latents="zscore"``) the means z-scored with the statistics saved with the VAE."""
+    if latents not in LATENT_FORMS:
+        raise StrategyError(f"latents must be one of {', '.join(LATENT_FORMS)}, got {latents!r}")
+    stats = None
+    if latents == "zscore":
+        cfg = vae.config
+        if cfg.latent_mean is None or cfg.latent_std is None:
+            raise StrategyError(
+                f"{where} has no latent statistics (trained before 2026-11-23): run the same "
+                "`ergo vae train` command again on its folder to add them"
+            )
+        stats = (cfg.latent_mean, cfg.latent_std)
+    try:
+        return LatentGoalSpace(
+            vae.encode_bgr, vae.config.latent_dim, vae.config.kl_per_latent, modular=modular,
+            zscore=stats,
+        )  # fmt: skip
+    except ValueError as exc:
+        raise StrategyError(f"{where}: {exc}") from exc
 
 
 class BetaLatentGoalExploration(LatentGoalExploration):

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from explore.strategies.base import StrategyError
-from explore.strategies.goal_exploration import GoalExploration, latent_space
+from explore.strategies.goal_exploration import LATENT_FORMS, GoalExploration, latent_space
 
 ONLINE_BOOTSTRAP = 2000  # paper: 2000 random episodes before the online VAE (rig)
 # CPU schedule (docs/goal_exploration.md): Adam lr 1e-3, batch 64; the paper used 200k
@@ -25,19 +25,25 @@ ONLINE_ITERATIONS = 1500
 
 class OnlineLatentGoalExploration(GoalExploration):
     """Options (besides the goal-exploration ones): ``bootstrap`` (default 2000),
-    ``vae_iterations`` (1500), ``vae_beta`` (1.0), ``vae_seed`` (0)."""
+    ``vae_iterations`` (1500), ``vae_beta`` (1.0), ``vae_seed`` (0), ``latents`` ("raw" or
+    "zscore" over the bootstrap's own outcome images)."""
 
     name = "rge-online"
 
     def __init__(self, **options: Any) -> None:
         options.setdefault("bootstrap", ONLINE_BOOTSTRAP)
         super().__init__(**options)
+        if self.options.get("latents", "raw") not in LATENT_FORMS:
+            raise StrategyError(
+                f"{self.name}: latents must be one of {', '.join(LATENT_FORMS)}, "
+                f"got {self.options['latents']!r}"
+            )
         if self.bootstrap < 1:
             raise StrategyError(f"{self.name}: bootstrap must be at least 1 (the VAE's data)")
         self.vae = None
 
     def extra_options(self) -> tuple[str, ...]:
-        return ("vae_iterations", "vae_beta", "vae_seed")
+        return ("vae_iterations", "vae_beta", "vae_seed", "latents")
 
     def make_space(self) -> None:
         return None  # trained after the bootstrap
@@ -58,7 +64,9 @@ class OnlineLatentGoalExploration(GoalExploration):
                 images, tmp, VaeConfig(beta=float(self.options.get("vae_beta", 1.0))), cfg,
                 progress=False,
             )  # fmt: skip
-        self._init_space(latent_space(self.vae, self.modular))
+        self._init_space(
+            latent_space(self.vae, self.modular, self.options.get("latents", "raw"), self.name)
+        )
         pending, self._pending = self._pending, []
         for rec in pending:
             self._learn(rec)

@@ -39,6 +39,7 @@ Units: joint positions in rad; drive positions in increments (see ``units.JointS
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections.abc import Sequence
@@ -518,6 +519,14 @@ class CanArm(Arm):
     def stop_reason(self) -> str | None:
         """Why the arm was stopped (None while running)."""
         return self._stop_reason
+
+    @property
+    def position_resolution(self) -> np.ndarray:
+        """One position increment per joint, shape (n,), rad (2 pi / the drive's increments per
+        revolution, read from 0x608F at connect; 0 before)."""
+        if self.scaling is None:
+            return np.zeros(self.spec.n)
+        return math.tau / self.scaling.counts_per_rev
 
     @property
     def can_reconnect(self) -> bool:

@@ -136,6 +136,11 @@ class DynamixelArm(Arm):
         """Raw positions, shape (n,) -> joint angles, shape (n,), rad."""
         return self.directions * (self.model.steps_to_rad(steps) - self.offsets)
 
+    @property
+    def position_resolution(self) -> np.ndarray:
+        """One position unit per joint, shape (n,), rad (XL-320: 300 deg / 1023, e-manual)."""
+        return np.full(self.spec.n, self.model.rad_per_step)
+
     # ---- hooks -------------------------------------------------------------------------------
     def _connect(self) -> None:
         self.bus.open()
