@@ -357,6 +357,38 @@ def _one_line(exc: BaseException) -> str:
     return text.splitlines()[0]
 
 
+PR_SET_PDEATHSIG = 1  # linux/prctl.h
+
+
+def die_with_parent(parent: int) -> None:
+    """Worker initialiser: end this process with SIGTERM when the campaign process that
+    started it dies (Linux ``prctl(PR_SET_PDEATHSIG)``), so a campaign killed with SIGKILL
+    leaves no worker running its trial on: its run folders are resumed by the next run of the
+    command. SIGTERM turns a hardware arm's torque off (``robot.arm``); a twin run just stops
+    (its history is crash-safe). Elsewhere than Linux it does nothing."""
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+    import signal
+
+    libc = ctypes.CDLL(None, use_errno=True)
+    if libc.prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0) != 0:
+        return  # not allowed here: the worker runs on as before
+    if os.getppid() != parent:  # the parent died before the signal was armed
+        os._exit(1)
+
+
+def run_trial_in_worker(trial: Trial, progress: bool, parent: int) -> TrialResult:
+    """``run_trial`` in a pool worker. A SIGTERM inside the trial (the campaign died, see
+    ``die_with_parent``) ends it as an exception once torque is off; the pool would then
+    report it to nobody and wait for more work forever, so the worker exits instead."""
+    try:
+        return run_trial(trial, progress)
+    finally:
+        if os.getppid() != parent:
+            os._exit(1)
+
+
 def run_local(trials: list[Trial], settings: BackendSettings) -> list[TrialResult]:
     """Run trials in this process (jobs 1) or in ``jobs`` spawned processes; a failed trial
     does not stop the others. Raises ``CampaignError`` at the end if any failed."""
@@ -382,8 +414,12 @@ def run_local(trials: list[Trial], settings: BackendSettings) -> list[TrialResul
         from concurrent.futures import ProcessPoolExecutor
 
         ctx = multiprocessing.get_context("spawn")  # no inherited GL or torch thread state
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
-            futures = [(t, pool.submit(run_trial, t, settings.progress)) for t in trials]
+        with ProcessPoolExecutor(
+            max_workers=jobs, mp_context=ctx, initializer=die_with_parent,
+            initargs=(os.getpid(),),
+        ) as pool:  # fmt: skip
+            futures = [(t, pool.submit(run_trial_in_worker, t, settings.progress, os.getpid()))
+                       for t in trials]  # fmt: skip
             for t, f in futures:
                 done(t, f.result)
     if failed:

@@ -55,3 +55,49 @@ def test_welch_test_against_rpe_matches_the_formula():
     assert welch_vs_baseline([5.0, 6.0], [5.0, 6.0])[1] == 1.0
     assert all(math.isnan(x) for x in welch_vs_baseline([5.0], [1.0, 2.0]))
     assert all(math.isnan(x) for x in welch_vs_baseline([3.0, 3.0], [3.0, 3.0]))
+
+
+def _alive(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie, dead but not reaped, counts as ended)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+def test_a_campaign_killed_with_sigkill_leaves_no_worker_running(tmp_path):
+    """Its workers end with it (they would run their trials on and hold the trial locks
+    against the rerun), and the rerun resumes the trials."""
+    import json
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "campaign"
+    args = ["experiment", "--strategies", "rpe", "--seeds", "0,1", "--episodes", "80",
+            "--out", str(out), "--jobs", "2", "--no-progress"]  # fmt: skip
+    driver = subprocess.Popen([sys.executable, "-m", "explore.cli", *args],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+    trials = [out / "rpe" / f"seed-{s}" for s in (0, 1)]
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not all(
+        (t / "metrics.csv").exists() and len((t / "metrics.csv").read_text().splitlines()) > 3
+        for t in trials
+    ):
+        time.sleep(0.05)
+    workers = [json.loads((t / "trial.json").read_text())["pid"] for t in trials]
+    assert driver.pid not in workers and all(_alive(p) for p in workers)
+    os.kill(driver.pid, signal.SIGKILL)
+    driver.wait()
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and any(_alive(p) for p in workers):
+        time.sleep(0.05)
+    assert not any(_alive(p) for p in workers), "a worker outlived its campaign"
+    left = [len((t / "metrics.csv").read_text().splitlines()) - 1 for t in trials]
+    assert all(0 < n < 80 for n in left), left
+    assert main(args) == 0  # resumes both
+    rows = _summary(out)
+    assert [int(r["episodes"]) for r in rows] == [80]
