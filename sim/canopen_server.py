@@ -29,9 +29,9 @@ import sys
 import termios
 import threading
 import time
-import tty
 from typing import Any
 
+from sim.pty_port import PtyPort
 from sim.slcan import CanFrame, LineSplitter, SlcanAdapter, SlcanError, encode_frame
 
 log = logging.getLogger(__name__)
@@ -44,16 +44,14 @@ DEFAULT_OVERLOAD_AFTER_S = 2.0
 
 
 class SlcanPtyBridge:
-    """An SLCAN adapter on a new pseudo-terminal, bridged to a python-can bus.
+    """An SLCAN adapter on a new pseudo-terminal (``sim.pty_port.PtyPort``), bridged to a
+    python-can bus.
 
     The host writes SLCAN lines to ``path``; frames it transmits go onto ``bus``; frames on
-    ``bus`` are written back as SLCAN lines while the adapter is open. The bridge keeps its own
-    slave descriptor open, so clients may come and go; frames left unread by a client that died
-    with the channel open are flushed when the next one sends ``C``.
-
-    ``unplug()`` closes the pty as a USB adapter pulled out would; ``replug()`` opens a new one
-    (a new path). With ``link`` the bridge keeps a symbolic link at that path pointing to the
-    current pty (a stable name, as ``/dev/serial/by-id/...``), for ``slcan:LINK``.
+    ``bus`` are written back as SLCAN lines while the adapter is open. Clients may come and go;
+    frames left unread by a client that died with the channel open are flushed when the next one
+    sends ``C``. ``unplug()`` and ``replug()`` pull the adapter out and plug it back (a new
+    path; the adapter closed, as at power-on); with ``link``, ``slcan:LINK`` follows it.
 
     Args:
         bus: a python-can bus (the emulated drives' side).
@@ -62,55 +60,34 @@ class SlcanPtyBridge:
 
     def __init__(self, bus: Any, link: str | os.PathLike[str] | None = None) -> None:
         self.bus = bus
-        self.link = None if link is None else os.fspath(link)
         self.adapter = SlcanAdapter()
         self._splitter = LineSplitter()
-        self._master: int | None = None
-        self._slave: int | None = None
-        self.path = ""
-        self._open_pty()
+        self.pty = PtyPort(link, on_open=self._power_on)
         self._write_lock = threading.Lock()
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
         self.frames_in = 0  # host -> bus
         self.frames_out = 0  # bus -> host
         self.frames_dropped = 0  # bus -> host, pty full or adapter closed
-        self.unplugs = 0
 
-    @property
-    def port(self) -> str:
-        """What a client should open: the link when there is one, else the pty itself."""
-        return self.link or self.path
+    # the pty's state, as attributes of the bridge
+    link = property(lambda self: self.pty.link)
+    path = property(lambda self: self.pty.path, doc="the current pty, e.g. /dev/pts/7")
+    port = property(lambda self: self.pty.port, doc="the link when there is one, else path")
+    unplugs = property(lambda self: self.pty.unplugs)
 
-    def _open_pty(self) -> None:
-        master, slave = os.openpty()
-        tty.setraw(slave, termios.TCSANOW)  # no echo, no CR/NL translation
-        tty.setraw(master, termios.TCSANOW)
+    def _power_on(self) -> None:
         self.adapter = SlcanAdapter()  # a freshly plugged adapter starts closed
         self._splitter = LineSplitter()
-        self._master, self._slave = master, slave
-        self.path = os.ttyname(slave)
-        if self.link is not None:
-            tmp = f"{self.link}.{os.getpid()}.tmp"
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(tmp)
-            os.symlink(self.path, tmp)
-            os.replace(tmp, self.link)  # atomic: a client never sees the link missing
 
     def unplug(self) -> None:
         """Close the pty, as an adapter pulled out of its USB socket (the CAN bus and the
         drives stay; the host's next read or write of the port fails)."""
-        fds, self._master, self._slave = (self._master, self._slave), None, None
-        for fd in fds:
-            if fd is not None:
-                with contextlib.suppress(OSError):
-                    os.close(fd)
-        self.unplugs += 1
+        self.pty.unplug()
 
     def replug(self) -> None:
         """A new pty (a new path; the link, if any, follows it), its adapter closed."""
-        if self._master is None:
-            self._open_pty()
+        self.pty.replug()
 
     # ---- lifecycle -------------------------------------------------------------------------
     def start(self) -> None:
@@ -130,11 +107,7 @@ class SlcanPtyBridge:
 
     def close(self) -> None:
         self.stop()
-        self.unplug()
-        self.unplugs -= 1
-        if self.link is not None and os.path.islink(self.link):
-            with contextlib.suppress(OSError):
-                os.unlink(self.link)
+        self.pty.close()
 
     def __enter__(self) -> SlcanPtyBridge:
         self.start()
@@ -148,7 +121,7 @@ class SlcanPtyBridge:
         """Write whole lines to the host; with ``drop_if_full`` give up (whole) when the pty is
         full, so a host that stopped reading never blocks the bus."""
         with self._write_lock:
-            master = self._master
+            master = self.pty.master
             if master is None:  # unplugged
                 return False
             try:
@@ -165,7 +138,7 @@ class SlcanPtyBridge:
         import can
 
         while not self._stop.is_set():
-            master, slave = self._master, self._slave
+            master, slave = self.pty.fds()
             if master is None or slave is None:  # unplugged
                 time.sleep(POLL_S)
                 continue

@@ -14,17 +14,15 @@ Any program that drives a real Ergo Jr through a serial port then drives the twi
 from __future__ import annotations
 
 import argparse
-import contextlib
 import logging
 import os
 import select
 import sys
-import termios
 import threading
 import time
-import tty
 
 from sim.dynamixel_emulator import DEFAULT_OVERLOAD_AFTER_S, DynamixelEmulator, FaultConfig
+from sim.pty_port import PtyPort
 
 log = logging.getLogger(__name__)
 
@@ -33,15 +31,10 @@ POLL_S = 0.05
 
 
 class PtyBusServer:
-    """Serves a ``DynamixelEmulator`` on a new pseudo-terminal.
+    """Serves a ``DynamixelEmulator`` on a new pseudo-terminal (``sim.pty_port.PtyPort``).
 
-    ``path`` is the slave side to open with pyserial (e.g. ``/dev/pts/7``). The server keeps its
-    own slave descriptor open, so clients may come and go without the pty closing.
-
-    ``unplug()`` closes the pty as a USB adapter pulled out would (the client's next read or
-    write fails with EIO); ``replug()`` opens a new one, whose path differs. With ``link`` the
-    server keeps a symbolic link at that path pointing to the current pty (a stable name, as
-    ``/dev/serial/by-id/...`` is for a real adapter), so a client can reopen it by name.
+    ``path`` is the slave side to open with pyserial (e.g. ``/dev/pts/7``); ``port`` the link
+    when there is one. ``unplug()`` and ``replug()`` pull the adapter out and plug it back.
 
     Args:
         emulator: who answers.
@@ -50,60 +43,31 @@ class PtyBusServer:
 
     def __init__(self, emulator: DynamixelEmulator, link: str | os.PathLike[str] | None = None):
         self.emulator = emulator
-        self.link = None if link is None else os.fspath(link)
-        self._fd_lock = threading.Lock()
-        self._master: int | None = None
-        self._slave: int | None = None
-        self.path = ""
-        self._open_pty()
+        self.pty = PtyPort(link)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.bytes_in = 0
         self.bytes_out = 0
-        self.unplugs = 0
 
-    @property
-    def port(self) -> str:
-        """What a client should open: the link when there is one, else the pty itself."""
-        return self.link or self.path
-
-    @property
-    def plugged(self) -> bool:
-        return self._master is not None
-
-    def _open_pty(self) -> None:
-        master, slave = os.openpty()
-        tty.setraw(slave, termios.TCSANOW)  # no echo, no line discipline: bytes as sent
-        tty.setraw(master, termios.TCSANOW)
-        with self._fd_lock:
-            self._master, self._slave = master, slave
-            self.path = os.ttyname(slave)
-        if self.link is not None:
-            tmp = f"{self.link}.{os.getpid()}.tmp"
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(tmp)
-            os.symlink(self.path, tmp)
-            os.replace(tmp, self.link)  # atomic: a client never sees the link missing
+    # the pty's state, as attributes of the server
+    link = property(lambda self: self.pty.link)
+    path = property(lambda self: self.pty.path, doc="the current pty, e.g. /dev/pts/7")
+    port = property(lambda self: self.pty.port, doc="the link when there is one, else path")
+    plugged = property(lambda self: self.pty.plugged)
+    unplugs = property(lambda self: self.pty.unplugs)
 
     def unplug(self) -> None:
         """Close the pty, as an adapter pulled out of its USB socket."""
-        with self._fd_lock:
-            fds, self._master, self._slave = (self._master, self._slave), None, None
-        for fd in fds:
-            if fd is not None:
-                with contextlib.suppress(OSError):
-                    os.close(fd)
-        self.unplugs += 1
+        self.pty.unplug()
 
     def replug(self) -> None:
         """Open a new pty (a new path; the link, if any, follows it)."""
-        if self._master is None:
-            self._open_pty()
+        self.pty.replug()
 
     def serve_forever(self) -> None:
         """Answer packets until ``stop()`` (call from any thread) or KeyboardInterrupt."""
         while not self._stop.is_set():
-            master = self._master
+            master = self.pty.master
             if master is None:  # unplugged
                 time.sleep(POLL_S)
                 continue
@@ -146,12 +110,7 @@ class PtyBusServer:
 
     def close(self) -> None:
         self.stop()
-        self.unplug()
-        self.unplugs -= 1
-        if self.link is not None:
-            with contextlib.suppress(OSError):
-                if os.path.islink(self.link):
-                    os.unlink(self.link)
+        self.pty.close()
 
     def __enter__(self) -> PtyBusServer:
         self.start()
