@@ -9,7 +9,7 @@ TORCH_VERSION ?= 2.13.0
 EPISODES ?= 300
 export MUJOCO_GL ?= egl
 
-.PHONY: run test install lint format bench clean
+.PHONY: run test install lint format bench bench-all clean
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -32,8 +32,21 @@ lint: $(STAMP)
 format: $(STAMP)
 	$(BIN)/ruff format . && $(BIN)/ruff check --fix .
 
+# Benchmarks that need no data: a few minutes each (bench/*.py say what they measure).
+BENCH_QUICK := canopen dynamixel episodes meta_policy rerun touch
+BENCH_VAE := runs/bench-vae
+
 bench: $(STAMP)
-	for f in bench/bench_*.py; do echo "== $$f"; $(BIN)/python $$f || exit 1; done
+	for b in $(BENCH_QUICK); do echo "== bench/bench_$$b.py"; $(BIN)/python bench/bench_$$b.py || exit 1; done
+
+# Also Ray against local processes (about 20 min) and the learned goal space: 3000 twin scenes
+# rendered into $(BENCH_VAE) (about 5 CPU min), a VAE trained on them (about 10 CPU min), how
+# faithful its latents are to the ball.
+bench-all: bench
+	$(BIN)/python bench/bench_ray.py
+	$(BIN)/python bench/bench_vae.py --out $(BENCH_VAE) --beta 10 --capacity 10 \
+	    --capacity-iterations 500 --iterations 700 --every 100
+	$(BIN)/python bench/bench_goal_space.py --data $(BENCH_VAE)/dataset.npz --vae $(BENCH_VAE)
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache
