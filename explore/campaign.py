@@ -439,9 +439,16 @@ def load_backend(name: str) -> Callable[[list[Trial], BackendSettings], list[Tri
 def strategy_options(
     name: str, vae: Path | None, betavae: Path | None, common: dict[str, Any]
 ) -> dict[str, Any]:
-    """Options of one strategy in a campaign; raises CampaignError naming the command that makes
-    a missing VAE."""
-    opts: dict[str, Any] = {} if name == "rpe" else dict(common)
+    """Options of one strategy in a campaign: every plain ``KEY`` of ``common`` (goal-exploration
+    strategies, not rpe) and every ``NAME:KEY`` for this strategy (e.g. ``rge-vae:latents``);
+    raises CampaignError naming the command that makes a missing VAE."""
+    opts: dict[str, Any] = {}
+    for key, value in common.items():
+        target, scoped, option = key.rpartition(":")
+        if scoped and target == name:
+            opts[option] = value
+        elif not scoped and name != "rpe":
+            opts[key] = value
     flag = VAE_FLAGS.get(name)
     if flag is not None:
         path = vae if flag == "vae" else betavae
@@ -526,6 +533,13 @@ def run_campaign(
     for name in strategies:
         if name not in STRATEGIES:
             raise CampaignError(f"unknown strategy {name!r}; choose among {', '.join(STRATEGIES)}")
+    for key in options or {}:
+        target, scoped, _ = key.rpartition(":")
+        if scoped and target not in strategies:
+            raise CampaignError(
+                f"--option {key}: {target!r} is not a strategy of this campaign "
+                f"({', '.join(strategies)})"
+            )
     rig = dict(TWIN_RIG) if rig is None else rig
     if is_physical(rig):
         try:

@@ -62,7 +62,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--betavae", type=Path, help="beta-VAE model for the *-betavae strategies")
     p.add_argument(
         "--option", action="append", default=[], metavar="KEY=JSON",
-        help="strategy option for every goal-exploration run, e.g. bootstrap=100",
+        help="strategy option for every goal-exploration run, e.g. bootstrap=100, or for one "
+        "strategy: STRATEGY:KEY=JSON, e.g. 'rge-vae:latents=\"zscore\"'",
     )  # fmt: skip
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     add_rig_arguments(p)

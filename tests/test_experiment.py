@@ -32,6 +32,27 @@ def test_tiny_campaign_writes_summary_and_skips_finished_runs(tmp_path, capsys):
     assert all(int(r["episodes"]) == 25 for r in rows)
 
 
+def test_an_option_can_go_to_one_strategy_of_the_campaign(tmp_path, capsys):
+    import json
+
+    out = tmp_path / "campaign"
+    args = ["experiment", "--strategies", "rpe,rge-efr,mge-efr", "--seeds", "0", "--episodes",
+            "12", "--out", str(out), "--option", "bootstrap=10", "--option", "rge-efr:form=polar",
+            "--no-progress"]  # fmt: skip
+    assert main(args) == 0
+
+    def options(strategy: str) -> dict:
+        run = json.loads((out / strategy / "seed-0" / "run.json").read_text())
+        return run["config"]["strategy"]["options"]
+
+    assert options("rpe") == {}
+    assert options("rge-efr") == {"bootstrap": 10, "form": "polar"}
+    assert options("mge-efr") == {"bootstrap": 10}
+    bad = [*args[:-1], "--option", "rge-vae:latents=zscore", "--no-progress"]
+    assert main(bad) == 2
+    assert "'rge-vae' is not a strategy of this campaign" in capsys.readouterr().err
+
+
 def test_a_vae_strategy_without_a_model_names_the_command(tmp_path, capsys):
     code = main(["experiment", "--strategies", "rge-vae", "--episodes", "5",
                  "--out", str(tmp_path / "c"), "--no-progress"])  # fmt: skip
