@@ -31,7 +31,7 @@ import threading
 import time
 from typing import Any
 
-from sim.pty_port import PtyPort
+from sim.pty_port import OnPty, PtyPort
 from sim.slcan import CanFrame, LineSplitter, SlcanAdapter, SlcanError, encode_frame
 
 log = logging.getLogger(__name__)
@@ -43,7 +43,7 @@ POLL_S = 0.05
 DEFAULT_OVERLOAD_AFTER_S = 2.0
 
 
-class SlcanPtyBridge:
+class SlcanPtyBridge(OnPty):
     """An SLCAN adapter on a new pseudo-terminal (``sim.pty_port.PtyPort``), bridged to a
     python-can bus.
 
@@ -70,24 +70,9 @@ class SlcanPtyBridge:
         self.frames_out = 0  # bus -> host
         self.frames_dropped = 0  # bus -> host, pty full or adapter closed
 
-    # the pty's state, as attributes of the bridge
-    link = property(lambda self: self.pty.link)
-    path = property(lambda self: self.pty.path, doc="the current pty, e.g. /dev/pts/7")
-    port = property(lambda self: self.pty.port, doc="the link when there is one, else path")
-    unplugs = property(lambda self: self.pty.unplugs)
-
     def _power_on(self) -> None:
         self.adapter = SlcanAdapter()  # a freshly plugged adapter starts closed
         self._splitter = LineSplitter()
-
-    def unplug(self) -> None:
-        """Close the pty, as an adapter pulled out of its USB socket (the CAN bus and the
-        drives stay; the host's next read or write of the port fails)."""
-        self.pty.unplug()
-
-    def replug(self) -> None:
-        """A new pty (a new path; the link, if any, follows it), its adapter closed."""
-        self.pty.replug()
 
     # ---- lifecycle -------------------------------------------------------------------------
     def start(self) -> None:

@@ -22,7 +22,7 @@ import threading
 import time
 
 from sim.dynamixel_emulator import DEFAULT_OVERLOAD_AFTER_S, DynamixelEmulator, FaultConfig
-from sim.pty_port import PtyPort
+from sim.pty_port import OnPty, PtyPort
 
 log = logging.getLogger(__name__)
 
@@ -30,7 +30,7 @@ log = logging.getLogger(__name__)
 POLL_S = 0.05
 
 
-class PtyBusServer:
+class PtyBusServer(OnPty):
     """Serves a ``DynamixelEmulator`` on a new pseudo-terminal (``sim.pty_port.PtyPort``).
 
     ``path`` is the slave side to open with pyserial (e.g. ``/dev/pts/7``); ``port`` the link
@@ -48,21 +48,6 @@ class PtyBusServer:
         self._thread: threading.Thread | None = None
         self.bytes_in = 0
         self.bytes_out = 0
-
-    # the pty's state, as attributes of the server
-    link = property(lambda self: self.pty.link)
-    path = property(lambda self: self.pty.path, doc="the current pty, e.g. /dev/pts/7")
-    port = property(lambda self: self.pty.port, doc="the link when there is one, else path")
-    plugged = property(lambda self: self.pty.plugged)
-    unplugs = property(lambda self: self.pty.unplugs)
-
-    def unplug(self) -> None:
-        """Close the pty, as an adapter pulled out of its USB socket."""
-        self.pty.unplug()
-
-    def replug(self) -> None:
-        """Open a new pty (a new path; the link, if any, follows it)."""
-        self.pty.replug()
 
     def serve_forever(self) -> None:
         """Answer packets until ``stop()`` (call from any thread) or KeyboardInterrupt."""

@@ -21,6 +21,26 @@ import tty
 from collections.abc import Callable
 
 
+class OnPty:
+    """What a server on a ``PtyPort`` (its attribute ``pty``) shows of it: the paths, the unplug
+    count, unplug and replug."""
+
+    pty: PtyPort
+    link = property(lambda self: self.pty.link)
+    path = property(lambda self: self.pty.path, doc="the current pty, e.g. /dev/pts/7")
+    port = property(lambda self: self.pty.port, doc="the link when there is one, else path")
+    plugged = property(lambda self: self.pty.plugged)
+    unplugs = property(lambda self: self.pty.unplugs)
+
+    def unplug(self) -> None:
+        """Close the pty, as an adapter pulled out of its USB socket."""
+        self.pty.unplug()
+
+    def replug(self) -> None:
+        """Open a new pty (a new path; the link, if any, follows it)."""
+        self.pty.replug()
+
+
 class PtyPort:
     """A pseudo-terminal with unplug/replug and an optional stable link.
 

@@ -255,13 +255,21 @@ class LatentGoalExploration(GoalExploration):
 LATENT_FORMS = ("raw", "zscore")
 
 
+def check_latents(latents: str, where: str) -> str:
+    """The ``latents`` option, or StrategyError naming ``where`` if it is not a known form."""
+    if latents not in LATENT_FORMS:
+        raise StrategyError(
+            f"{where}: latents must be one of {', '.join(LATENT_FORMS)}, got {latents!r}"
+        )
+    return latents
+
+
 def latent_space(
     vae: Any, modular: bool, latents: str = "raw", where: Any = "the VAE"
 ) -> LatentGoalSpace:
     """A ``LatentGoalSpace`` over a loaded ``vision.vae.Vae``: its raw latent means, or
     (``latents="zscore"``) the means z-scored with the statistics saved with the VAE."""
-    if latents not in LATENT_FORMS:
-        raise StrategyError(f"latents must be one of {', '.join(LATENT_FORMS)}, got {latents!r}")
+    check_latents(latents, str(where))
     stats = None
     if latents == "zscore":
         cfg = vae.config

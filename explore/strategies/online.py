@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from explore.strategies.base import StrategyError
-from explore.strategies.goal_exploration import LATENT_FORMS, GoalExploration, latent_space
+from explore.strategies.goal_exploration import GoalExploration, check_latents, latent_space
 
 ONLINE_BOOTSTRAP = 2000  # paper: 2000 random episodes before the online VAE (rig)
 # CPU schedule (docs/goal_exploration.md): Adam lr 1e-3, batch 64; the paper used 200k
@@ -33,11 +33,7 @@ class OnlineLatentGoalExploration(GoalExploration):
     def __init__(self, **options: Any) -> None:
         options.setdefault("bootstrap", ONLINE_BOOTSTRAP)
         super().__init__(**options)
-        if self.options.get("latents", "raw") not in LATENT_FORMS:
-            raise StrategyError(
-                f"{self.name}: latents must be one of {', '.join(LATENT_FORMS)}, "
-                f"got {self.options['latents']!r}"
-            )
+        check_latents(self.options.get("latents", "raw"), self.name)
         if self.bootstrap < 1:
             raise StrategyError(f"{self.name}: bootstrap must be at least 1 (the VAE's data)")
         self.vae = None
