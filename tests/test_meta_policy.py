@@ -12,16 +12,19 @@ from explore.meta_policy import MetaPolicy, NearestNeighbourIndex
 
 @settings(max_examples=40, deadline=None)
 @given(
-    n=st.integers(1, 300),
+    n=st.integers(1, 400),
     dim=st.integers(1, 5),
     seed=st.integers(0, 2**31 - 1),
     grid=st.booleans(),
+    rebuild_tail=st.sampled_from([1, 7, 40, 1024]),
+    tree=st.booleans(),
 )
-def test_nearest_equals_brute_force_across_rebuilds(n, dim, seed, grid):
+def test_nearest_equals_brute_force_across_rebuilds(n, dim, seed, grid, rebuild_tail, tree):
     rng = np.random.default_rng(seed)
     # grid points make many exact ties: the lowest index must win, as in a brute-force argmin
     pts = rng.integers(-2, 3, (n, dim)).astype(float) if grid else rng.normal(size=(n, dim))
-    index = NearestNeighbourIndex(dim)
+    index = NearestNeighbourIndex(dim, rebuild_tail, tree_max_dim=8 if tree else 0)
+    assert index.uses_tree == tree
     for k, p in enumerate(pts):
         index.add(p)
         if k % 17 == 0 or k == n - 1:  # query while the tree is stale and after rebuilds
@@ -30,6 +33,39 @@ def test_nearest_equals_brute_force_across_rebuilds(n, dim, seed, grid):
                 i, dist = index.nearest(q)
                 assert dist == pytest.approx(d.min(), abs=1e-12)
                 assert i == int(np.argmin(d))
+
+
+@pytest.mark.parametrize("offset", [0.0, 1e3])
+def test_the_high_dimensional_scan_is_exact_with_ties_and_far_from_the_origin(offset):
+    # 20-D points take the matrix-vector scan (no tree). A grid of step 0.1 and queries halfway
+    # between grid points make many exact ties; an offset of 1e3 makes the norm expansion
+    # round them apart, which the exact recheck must undo (lowest index wins, as in argmin)
+    rng = np.random.default_rng(3)
+    grid = rng.integers(-1, 2, (1500, 20)) * 0.1
+    pts = np.concatenate([grid, rng.normal(size=(1500, 20))]) + offset
+    index = NearestNeighbourIndex(20)
+    assert not index.uses_tree
+    for p in pts:
+        index.add(p)
+    half = rng.integers(-1, 1, (100, 20)) * 0.1 + 0.05 + offset
+    for q in np.concatenate([half, pts[rng.integers(0, len(pts), 50)], rng.normal(size=(50, 20))]):
+        d = np.linalg.norm(pts - q, axis=1)
+        i, dist = index.nearest(q)
+        assert i == int(np.argmin(d))
+        assert dist == d.min()
+
+
+def test_points_left_outside_the_tree_stay_bounded_as_the_history_grows():
+    # the doubling-only schedule left up to half of the points outside the tree
+    index = NearestNeighbourIndex(2, rebuild_tail=50)
+    worst = 0
+    for k, p in enumerate(np.random.default_rng(0).normal(size=(5000, 2))):
+        index.add(p)
+        if k >= 64:
+            worst = max(worst, index.outside_tree)
+            assert index.outside_tree < max(50, (k + 1) // 32) + 1
+    assert worst > 100  # the n / 32 regime was reached (past the fixed tail of 50)
+    assert index.nearest(np.zeros(2))[0] == int(np.argmin(np.linalg.norm(index.points, axis=1)))
 
 
 def test_index_rejects_bad_points():
