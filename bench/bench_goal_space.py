@@ -70,7 +70,11 @@ def main() -> None:
         first = kl_ranked_modules(kl)[0]
         spaces["VAE latent means (RGE)"] = mu
         spaces[f"VAE latents {first[0]},{first[1]} (MGE module 1)"] = mu[:, first]
-        spaces["VAE latent means z-scored"] = (mu - mu.mean(axis=0)) / mu.std(axis=0)
+        if vae.config.latent_mean is not None:  # as rge-vae's latents="zscore" uses them
+            mean, std = np.asarray(vae.config.latent_mean), np.asarray(vae.config.latent_std)
+            spaces["VAE latent means z-scored (saved stats)"] = (mu - mean) / std
+        else:
+            spaces["VAE latent means z-scored (these outcomes)"] = (mu - mu.mean(0)) / mu.std(0)
         print("KL per latent (nats):", " ".join(f"{k:.2f}" for k in kl))
         print("spread of latent means:", " ".join(f"{s:.1e}" for s in mu.std(axis=0)))
     print(f"{len(ball)} outcomes of {args.data}")

@@ -19,7 +19,7 @@ and the final ``vae.pt`` + ``vae.json`` (``Vae.save``).
 from __future__ import annotations
 
 import sys
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -127,9 +127,8 @@ def train_vae(
     state = None
     if ckpt_path.exists():
         state = torch.load(ckpt_path, map_location="cpu", weights_only=True)
-        saved = VaeConfig(**state["model_config"])
-        saved = _without_statistics(saved)
-        given = _without_statistics(VaeConfig(**asdict(model_config)))
+        saved = _without_statistics(VaeConfig(**state["model_config"]))
+        given = _without_statistics(model_config)
         if asdict(saved) != asdict(given):
             raise VaeError(
                 f"{ckpt_path} was trained with {asdict(saved)}; remove it or use the same "
@@ -185,13 +184,13 @@ def train_vae(
 
 
 def _without_statistics(config: VaeConfig) -> VaeConfig:
-    """``config`` with the statistics measured after training cleared (they are not settings)."""
-    config.kl_per_latent = config.latent_mean = config.latent_std = None
-    return config
+    """A copy of ``config`` with the statistics measured after training cleared (they are not
+    settings)."""
+    return replace(config, kl_per_latent=None, latent_mean=None, latent_std=None)
 
 
 def _checkpoint(path: Path, vae: Vae, optim: torch.optim.Optimizer, iteration: int) -> None:
-    cfg = asdict(_without_statistics(VaeConfig(**asdict(vae.config))))
+    cfg = asdict(_without_statistics(vae.config))
     tmp = path.with_name(path.name + ".tmp")
     torch.save(
         {"model": vae.state_dict(), "optim": optim.state_dict(), "iteration": iteration,
