@@ -1,0 +1,39 @@
+"""bench/diagnose_inverse_model.py re-finds the neighbour the meta-policy really used."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+from explore.cli_experiment import run_one
+from vision.vae import Vae, VaeConfig
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+from diagnose_inverse_model import diagnose
+
+torch.set_num_threads(1)
+
+
+@pytest.mark.parametrize("strategy", ["rge-efr", "rge-vae"])
+def test_the_neighbour_found_again_is_the_one_whose_parameters_were_played(strategy, tmp_path):
+    # with the exploration noise off, a goal episode plays its neighbour's theta exactly: the
+    # diagnostic's |theta_k - theta_j| is 0 only if it found the same neighbour (the bootstrap's
+    # thetas are distinct random draws)
+    opts = {"bootstrap": 12, "random_episodes": 0, "sigma": 0.0}
+    if strategy == "rge-vae":
+        torch.manual_seed(0)
+        opts["vae"] = str(Vae(VaeConfig()).save(tmp_path / "vae"))
+    run_one(str(tmp_path / "run"), strategy, opts, 0, 30, False)
+    d = diagnose(tmp_path / "run")
+    assert d["goal_episodes"] == 18
+    assert d["theta_gap"] == 0.0
+    assert 0.0 <= d["new_cell"] <= 1.0 and d["start_gap_m"] >= 0.0
+
+
+def test_a_run_without_an_inverse_model_is_a_one_line_error(tmp_path):
+    run_one(str(tmp_path / "rpe"), "rpe", {}, 0, 3, False)
+    with pytest.raises(SystemExit, match="'rpe' has no inverse model"):
+        diagnose(tmp_path / "rpe")
