@@ -19,7 +19,11 @@ outcome's latent as context, for the learned ones). Prints:
   noise, clipped, so this is about 0.67 sigma (0.13 at the default 0.2, 0 with the noise
   off); a wrong neighbour gives about 0.6 (two uniform draws).
 
-    .venv/bin/python bench/diagnose_inverse_model.py RUN [RUN ...] [--vae DIR]
+    .venv/bin/python bench/diagnose_inverse_model.py RUN [RUN ...] [--vae DIR] [--figure PNG]
+
+``--figure``: per run, the arena distance of pairs of its outcomes against their distance in
+its goal space, and the distribution of the context mismatch (the first of the two distances
+above) over its goal episodes.
 
 ``--vae`` overrides the VAE folder recorded in a latent run's config.
 """
@@ -37,6 +41,38 @@ from explore.store import RunStore
 
 ENGINEERED = ("rge-efr", "mge-efr")
 LEARNED = ("rge-vae", "mge-vae", "rge-betavae")
+PAIRS = 20000  # random outcome pairs for the distance profile of the figure
+
+
+def figure(results: dict[str, dict[str, np.ndarray]], path: Path) -> None:
+    """Two panels per run label: the arena distance of outcome pairs against their distance
+    in the goal space (binned median), and the distribution of the context mismatch."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2), dpi=100)
+    edges = np.linspace(0, 2.5, 26)
+    for label, arr in results.items():
+        x, y = arr["pair_space"], arr["pair_arena"] * 1000
+        which = np.digitize(x, edges) - 1
+        med = [np.median(y[which == b]) if np.sum(which == b) >= 20 else np.nan for b in range(25)]
+        left.plot((edges[:-1] + edges[1:]) / 2, med, marker=".", label=label)
+        gaps = np.sort(arr["start_gap"] * 1000)
+        right.plot(gaps, np.arange(1, len(gaps) + 1) / len(gaps), label=label)
+    left.set(xlabel="distance of two outcomes in the goal space / its median",
+             ylabel="distance of their balls in the arena (mm), median",
+             title="Does closeness in the goal space mean closeness in the arena?")  # fmt: skip
+    right.set(xlabel="ball start of the episode vs of the neighbour it replayed (mm)",
+              ylabel="fraction of goal episodes",
+              title="How well the neighbour's context matched")  # fmt: skip
+    for ax in (left, right):
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
 
 
 def goal_space_vectors(
@@ -67,8 +103,15 @@ def goal_space_vectors(
     return ctx, out, list(space.modules)
 
 
-def diagnose(run: Path, vae_dir: Path | None = None) -> dict[str, float]:
-    """Statistics of one run's goal-directed episodes (fractions in [0, 1], distances in m)."""
+def diagnose(
+    run: Path, vae_dir: Path | None = None, arrays: dict[str, np.ndarray] | None = None
+) -> dict[str, float]:
+    """Statistics of one run's goal-directed episodes (fractions in [0, 1], distances in m).
+
+    ``arrays``, when given, receives the figure's data: ``start_gap`` (g,) m, per goal
+    episode; ``pair_space`` and ``pair_arena`` (p,): goal-space distance (over the median
+    one) and arena distance (m) of random pairs of outcomes.
+    """
     recs = RunStore.open(run).records
     ctx, out, modules = goal_space_vectors(run, recs, vae_dir)
     moved = np.array([r.ball_moved for r in recs])
@@ -99,6 +142,13 @@ def diagnose(run: Path, vae_dir: Path | None = None) -> dict[str, float]:
     a, b = np.array(nn_moved, dtype=bool), np.array(k_moved, dtype=bool)
     if len(a) == 0:
         raise SystemExit(f"{run}: no goal-directed episode")
+    if arrays is not None:
+        arrays["start_gap"] = np.array(start_gap)
+        ok = np.flatnonzero(np.all(np.isfinite(out), axis=1) & np.all(np.isfinite(balls), axis=1))
+        i, j = np.random.default_rng(0).choice(ok, (2, PAIRS))
+        space = np.linalg.norm(out[i] - out[j], axis=1)
+        arrays["pair_space"] = space / np.median(space)
+        arrays["pair_arena"] = np.linalg.norm(balls[i] - balls[j], axis=1)
     return {
         "goal_episodes": float(len(a)),
         "neighbour_moved": float(a.mean()),
@@ -117,9 +167,13 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", type=Path, nargs="+")
     ap.add_argument("--vae", type=Path, help="VAE folder for latent runs (default: the run's)")
+    ap.add_argument("--figure", type=Path, help="write the two-panel figure (PNG) here")
     args = ap.parse_args()
+    results: dict[str, dict[str, np.ndarray]] = {}
     for run in args.runs:
-        d = diagnose(run, args.vae)
+        arrays: dict[str, np.ndarray] = {}
+        d = diagnose(run, args.vae, arrays)
+        results[f"{run.parent.parent.name}/{run.parent.name}/{run.name}"] = arrays
         print(
             f"{run}: {d['goal_episodes']:.0f} goal episodes; the neighbour had moved the ball in "
             f"{d['neighbour_moved']:.1%}; the ball moved in {d['moved']:.1%} (after a moving "
@@ -130,6 +184,9 @@ def main() -> None:
             f"|theta - neighbour's| {d['theta_gap']:.2f}; moved in "
             f"{d['moved_all_episodes']:.1%} of all episodes"
         )
+    if args.figure:
+        figure(results, args.figure)
+        print(f"figure: {args.figure}")
 
 
 if __name__ == "__main__":

@@ -12,7 +12,7 @@ from explore.cli_experiment import run_one
 from vision.vae import Vae, VaeConfig
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from diagnose_inverse_model import diagnose
+from diagnose_inverse_model import PAIRS, diagnose, figure
 
 torch.set_num_threads(1)
 
@@ -27,10 +27,15 @@ def test_the_neighbour_found_again_is_the_one_whose_parameters_were_played(strat
         torch.manual_seed(0)
         opts["vae"] = str(Vae(VaeConfig()).save(tmp_path / "vae"))
     run_one(str(tmp_path / "run"), strategy, opts, 0, 30, False)
-    d = diagnose(tmp_path / "run")
+    arrays: dict = {}
+    d = diagnose(tmp_path / "run", arrays=arrays)
     assert d["goal_episodes"] == 18
     assert d["theta_gap"] == 0.0
     assert 0.0 <= d["new_cell"] <= 1.0 and d["start_gap_m"] >= 0.0
+    assert arrays["start_gap"].shape == (18,)
+    assert arrays["pair_space"].shape == arrays["pair_arena"].shape == (PAIRS,)
+    figure({strategy: arrays}, tmp_path / "diag.png")
+    assert (tmp_path / "diag.png").read_bytes()[:4] == b"\x89PNG"
 
 
 def test_a_run_without_an_inverse_model_is_a_one_line_error(tmp_path):
