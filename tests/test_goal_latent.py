@@ -67,3 +67,16 @@ def test_zscored_latents_use_the_statistics_saved_with_the_vae(vae_dir, tmp_path
     zs = np.stack([z.outcome(type("R", (), {"image": im})) for im in images])
     assert np.allclose(zs.mean(axis=0), 0.0, atol=1e-4)  # float32 encodings
     assert np.allclose(zs.std(axis=0), 1.0, atol=1e-4)
+
+
+def test_online_vae_options_are_checked_before_the_bootstrap():
+    from explore.strategies import make_strategy
+    from explore.strategies.base import StrategyError
+
+    for bad in ({"vae_beta": -1}, {"vae_capacity": "lots"}, {"vae_iterations": 0}):
+        with pytest.raises(StrategyError, match="rge-online: bad VAE option"):
+            make_strategy("rge-online", **bad)
+    plain = make_strategy("rge-online", vae_capacity=None, vae_beta=1)._vae_config()
+    assert plain.capacity is None and plain.beta == 1.0
+    default = make_strategy("rge-online")._vae_config()  # the pre-trained VAE's schedule
+    assert (default.beta, default.capacity, default.capacity_iterations) == (10.0, 10.0, 500)
