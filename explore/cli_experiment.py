@@ -37,11 +37,15 @@ def register(sub: argparse._SubParsersAction) -> None:
         "runs are skipped and unfinished ones resumed.",
     )
     p.add_argument("--strategies", required=True, help="comma-separated, e.g. rpe,rge-efr")
-    p.add_argument("--seeds", default="0", help="comma-separated seeds (default 0)")
+    p.add_argument(
+        "--seeds", default="1",
+        help="a count N (seeds 0..N-1, e.g. 8), a list (0,2,5) or a range (3-7); one seed S "
+        "alone: S-S (default 1: seed 0)",
+    )  # fmt: skip
     p.add_argument("--episodes", type=int, required=True, help="episodes per run")
     p.add_argument("--out", type=Path, required=True, help="campaign folder")
     p.add_argument(
-        "--jobs", type=int, default=None,
+        "--jobs", "--workers", type=int, default=None,
         help="local: runs in parallel (processes, default 1); ray: CPUs of the Ray instance "
         "started for the campaign (default all; a cluster joined with --ray-address has its own)",
     )  # fmt: skip
@@ -120,6 +124,35 @@ def _csv_list(text: str, what: str) -> list[str]:
     return items
 
 
+def parse_seeds(text: str) -> list[int]:
+    """``--seeds``: "8" -> [0..7] (a count, as in ``--seeds 8``), "0,2,5" -> [0, 2, 5],
+    "3-7" -> [3..7], "4-4" -> [4]; lists may mix both ("0,3-5"). Raises CliError."""
+    text = text.strip()
+    if "," not in text and "-" not in text:
+        try:
+            count = int(text)
+        except ValueError:
+            raise CliError(f"--seeds {text!r}: give a count, a list or a range") from None
+        if count < 1:
+            raise CliError(f"--seeds {count}: a count must be at least 1 (one seed S: S-S)")
+        return list(range(count))
+    seeds: list[int] = []
+    for item in _csv_list(text, "seeds"):
+        try:
+            if "-" in item:
+                lo, hi = (int(v) for v in item.split("-"))
+                if hi < lo:
+                    raise CliError(f"--seeds {item}: an empty range")
+                seeds.extend(range(lo, hi + 1))
+            else:
+                seeds.append(int(item))
+        except ValueError:
+            raise CliError(f"--seeds {item!r}: not a seed or a range of seeds") from None
+    if min(seeds) < 0:
+        raise CliError(f"--seeds {text}: seeds are non-negative")
+    return sorted(set(seeds), key=seeds.index)
+
+
 def run_experiment(args: argparse.Namespace) -> int:
     if args.episodes < 1:
         raise CliError(f"--episodes must be at least 1, got {args.episodes}")
@@ -128,10 +161,7 @@ def run_experiment(args: argparse.Namespace) -> int:
     if args.retries < 0:
         raise CliError(f"--retries must be at least 0, got {args.retries}")
     strategies = _csv_list(args.strategies, "strategies")
-    try:
-        seeds = [int(s) for s in _csv_list(args.seeds, "seeds")]
-    except ValueError as exc:
-        raise CliError(f"--seeds must be integers: {exc}") from exc
+    seeds = parse_seeds(args.seeds)
     rig = {"name": args.rig or "sim", "rig_id": args.rig_id or "twin",
            "options": rig_options(args)}  # fmt: skip
     try:

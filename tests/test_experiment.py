@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import csv
 
+import pytest
+
 from explore.cli import main
 
 
@@ -14,7 +16,7 @@ def _summary(out):
 
 def test_tiny_campaign_writes_summary_and_skips_finished_runs(tmp_path, capsys):
     out = tmp_path / "campaign"
-    args = ["experiment", "--strategies", "rpe,rge-efr", "--seeds", "0", "--episodes", "20",
+    args = ["experiment", "--strategies", "rpe,rge-efr", "--seeds", "0-0", "--episodes", "20",
             "--out", str(out), "--option", "bootstrap=10", "--no-progress"]  # fmt: skip
     assert main(args) == 0
     rows = _summary(out)
@@ -36,7 +38,7 @@ def test_an_option_can_go_to_one_strategy_of_the_campaign(tmp_path, capsys):
     import json
 
     out = tmp_path / "campaign"
-    args = ["experiment", "--strategies", "rpe,rge-efr,mge-efr", "--seeds", "0", "--episodes",
+    args = ["experiment", "--strategies", "rpe,rge-efr,mge-efr", "--seeds", "0-0", "--episodes",
             "12", "--out", str(out), "--option", "bootstrap=10", "--option", "rge-efr:form=polar",
             "--no-progress"]  # fmt: skip
     assert main(args) == 0
@@ -122,3 +124,28 @@ def test_a_campaign_killed_with_sigkill_leaves_no_worker_running(tmp_path):
     assert main(args) == 0  # resumes both
     rows = _summary(out)
     assert [int(r["episodes"]) for r in rows] == [80]
+
+
+def test_seeds_are_a_count_a_list_or_a_range_as_the_issue_writes_them():
+    from explore.cli import CliError
+    from explore.cli_experiment import parse_seeds
+
+    assert parse_seeds("8") == list(range(8))  # `--seeds 8`: eight seeds
+    assert parse_seeds("0,2,5") == [0, 2, 5]
+    assert parse_seeds("3-5,0") == [3, 4, 5, 0]
+    assert parse_seeds("4-4") == [4]
+    for bad, says in (("0", "at least 1"), ("5-3", "empty range"), ("a", "count, a list")):
+        with pytest.raises(CliError, match=says):
+            parse_seeds(bad)
+
+
+def test_workers_is_another_name_for_jobs(tmp_path):
+    import argparse
+
+    from explore import cli_experiment
+
+    parser = argparse.ArgumentParser()
+    cli_experiment.register(parser.add_subparsers())
+    args = parser.parse_args(["experiment", "--strategies", "rpe", "--seeds", "8", "--episodes",
+                              "5", "--workers", "2", "--out", str(tmp_path)])  # fmt: skip
+    assert args.jobs == 2 and cli_experiment.parse_seeds(args.seeds) == list(range(8))
