@@ -5,7 +5,9 @@ one per (strategy, seed), each run by the usual ``Explorer`` as a trial (explore
 on this machine's processes (``--backend local``) or as Ray tasks (``--backend ray``,
 explore/campaign_ray.py). It is resumable: finished runs are skipped, unfinished ones resumed.
 At the end the final number of ball cells per strategy (mean +- std over seeds) is printed and
-written to ``CAMPAIGN/summary.csv``.
+written to ``CAMPAIGN/summary.csv`` with a Welch t-test against RPE, and ``CAMPAIGN/report``
+gets the coverage curves (mean and spread over seeds), the scatter plots of end-effector and
+ball positions per strategy, and summary.md / summary.html (``--no-report`` skips it).
 """
 
 from __future__ import annotations
@@ -70,6 +72,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "strategy: STRATEGY:KEY=JSON, e.g. 'rge-vae:latents=\"zscore\"'",
     )  # fmt: skip
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.add_argument(
+        "--no-report", action="store_true",
+        help="skip CAMPAIGN/report (coverage curves, scatter plots, summary.md with the Welch "
+        "test), written at the end by default; `ergo report CAMPAIGN` writes it any time",
+    )  # fmt: skip
     add_rig_arguments(p)
     p.set_defaults(func=run_experiment)
 
@@ -174,6 +181,16 @@ def run_experiment(args: argparse.Namespace) -> int:
         raise CliError(str(exc)) from exc
     print(format_table(rows))
     print(f"summary: {args.out / 'summary.csv'}")
+    if not args.no_report:
+        from explore.report import report_campaign
+        from explore.store import RunStoreError
+
+        try:
+            written = report_campaign(args.out)
+        except (OSError, RunStoreError, ValueError) as exc:  # the runs are safe either way
+            print(f"report not written ({exc}); try `ergo report {args.out}`")
+        else:
+            print(f"report: {written[-2]} (figures beside it)")
     return 0
 
 

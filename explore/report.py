@@ -104,14 +104,23 @@ class RunData:
         }
 
 
-def load_run(path: Path) -> RunData:
-    """Read a run folder (config, history; metrics recomputed from the history)."""
+def load_run(path: Path, goal_outcomes: bool = True) -> RunData:
+    """Read a run folder (config, history; metrics recomputed from the history).
+
+    ``goal_outcomes``: also map each outcome into the run's goal space (``RunData.reached``,
+    for the goals figure). For a latent run that encodes every outcome image with its VAE, the
+    slow part of a report; campaign reports do without it.
+    """
     path = Path(path)
     meta = RunStore.read_meta(path)
     metrics = MetricsLog(path / "metrics.csv")  # never written here
     cols: dict[str, list[Any]] = {k: [] for k in ("ball", "context_ball", "ee_final", "goals")}
     module, reached = [], []
-    outcome_of = goal_outcome_of(meta["config"].get("strategy", {}), load_models=True)
+    outcome_of = (
+        goal_outcome_of(meta["config"].get("strategy", {}), load_models=True)
+        if goal_outcomes
+        else None
+    )
     for rec in iter_history(path):
         metrics.update(rec)
         cols["ball"].append(np.asarray(rec.ball, dtype=float))
@@ -443,10 +452,14 @@ def _run_markdown(run: RunData, figures: list[Path], out_dir: Path) -> str:
 def _campaign_markdown(
     campaign: Path, groups: dict[str, list[RunData]], figures: list[Path], out_dir: Path
 ) -> str:
+    from explore.campaign import welch_vs_baseline
+
+    baseline = [r.final()["ball_cells"] for r in groups.get("rpe", [])]
     rows = []
     for name, runs in sorted(groups.items()):
         finals = [r.final() for r in runs]
         cells = np.array([x["ball_cells"] for x in finals])
+        _, p = welch_vs_baseline(cells, baseline) if name != "rpe" and baseline else (0, np.nan)
         ee = np.array([x["ee_cells"] for x in finals])
         moved = np.array([x["moved_fraction"] for x in finals])
         eps = sorted({int(x["episodes"]) for x in finals})
@@ -459,6 +472,7 @@ def _campaign_markdown(
                 f"[{cells.min():.0f}-{cells.max():.0f}]",
                 f"{ee.mean():.1f} +- {sample_std(ee):.1f}",
                 f"{100 * moved.mean():.1f} %",
+                "" if np.isnan(p) else f"{p:.2g}",
             ]
         )
     parts = [
@@ -476,6 +490,7 @@ def _campaign_markdown(
                 "ball cells",
                 "end-effector cells",
                 "episodes that moved the ball",
+                "Welch p vs rpe (ball cells)",
             ],
             rows,
         ),
@@ -590,7 +605,9 @@ def report_campaign(campaign: Path, out_dir: Path | None = None) -> list[Path]:
     paths = find_campaign_runs(campaign)
     if not paths:
         raise FileNotFoundError(f"{campaign} holds no runs (expected CAMPAIGN/STRATEGY/RUN/)")
-    groups = {name: [load_run(p) for p in runs] for name, runs in paths.items()}
+    groups = {
+        name: [load_run(p, goal_outcomes=False) for p in runs] for name, runs in paths.items()
+    }
     out_dir = Path(out_dir) if out_dir is not None else campaign / "report"
     out_dir.mkdir(parents=True, exist_ok=True)
     figures = [

@@ -72,6 +72,9 @@ def test_campaign_report_has_mean_and_spread(runs, tmp_path):
     md = (out / "summary.md").read_text()
     assert "| rpe | 2 |" in md and "| rpe-copy | 2 |" in md
     assert "+-" in md  # mean +- std over seeds
+    row = md.split("| rpe-copy |")[1].splitlines()[0]
+    cells = md.split("| rpe |")[1].split("|")[2]  # the same runs: Welch p 1, or none if no spread
+    assert row.rstrip().endswith("| 1 |") or ("+- 0.0" in cells and row.endswith("|  |"))
 
 
 def test_report_refuses_a_folder_without_runs(tmp_path):
