@@ -240,8 +240,9 @@ class LatentGoalExploration(GoalExploration):
         if not path:
             raise StrategyError(
                 f"{self.name} needs option vae=PATH (make one with: ergo dataset outcomes "
-                "--n 10000 --out data/outcomes.npz && ergo vae train --data "
-                "data/outcomes.npz --out models/vae)"
+                "--n 3000 --out data/outcomes.npz && ergo vae train --data data/outcomes.npz "
+                "--out models/vae --beta 10 --capacity 10 --capacity-iterations 500 "
+                "--iterations 700)"
             )
         from vision.vae import VaeError, load_vae
 
