@@ -62,14 +62,6 @@ DEFAULT_RETRIES = 2
 VAE_FLAGS = {
     "rge-vae": "vae", "mge-vae": "vae", "rge-betavae": "betavae", "mge-betavae": "betavae",
 }  # fmt: skip
-MAKE_VAE = {
-    # the recipe of docs/results.md: a plain VAE (beta 1) collapses at CPU-sized schedules
-    "vae": "ergo dataset outcomes --n 3000 --out data/outcomes.npz && "
-    "ergo vae train --data data/outcomes.npz --out models/vae --beta 10 --capacity 10 "
-    "--capacity-iterations 500 --iterations 700",
-    "betavae": "ergo dataset outcomes --n 10000 --out data/outcomes.npz && "
-    "ergo vae train --data data/outcomes.npz --out models/betavae --beta 4 --capacity 10",
-}
 
 
 class CampaignError(RuntimeError):
@@ -451,6 +443,8 @@ def strategy_options(
             opts[option] = value
         elif not scoped and name != "rpe":
             opts[key] = value
+    from explore.strategies import MAKE_VAE
+
     flag = VAE_FLAGS.get(name)
     if flag is not None:
         path = vae if flag == "vae" else betavae

@@ -59,6 +59,17 @@ class Strategy(ABC):
 
 
 # name -> "module:Class"
+# How to make the model a latent strategy needs (option ``vae``; the campaign's ``--vae`` or
+# ``--betavae``). "vae" is the recipe of docs/results.md: a plain VAE (beta 1) collapses at
+# CPU-sized schedules.
+MAKE_VAE = {
+    "vae": "ergo dataset outcomes --n 3000 --out data/outcomes.npz && "
+    "ergo vae train --data data/outcomes.npz --out models/vae --beta 10 --capacity 10 "
+    "--capacity-iterations 500 --iterations 700",
+    "betavae": "ergo dataset outcomes --n 10000 --out data/outcomes.npz && "
+    "ergo vae train --data data/outcomes.npz --out models/betavae --beta 4 --capacity 10",
+}
+
 STRATEGIES: dict[str, str] = {
     "rpe": "explore.strategies.rpe:RandomParameterExploration",
     "rge-efr": "explore.strategies.goal_exploration:EngineeredGoalExploration",

@@ -23,7 +23,7 @@ from explore.episode import Observation
 from explore.goal_spaces import EngineeredGoalSpace, GoalSpace, LatentGoalSpace
 from explore.meta_policy import MetaPolicy
 from explore.record import EpisodeRecord
-from explore.strategies.base import Proposal, Strategy, StrategyError
+from explore.strategies.base import MAKE_VAE, Proposal, Strategy, StrategyError
 from explore.strategies.interest import RANDOM_CHOICE, WINDOW, ModuleInterest
 
 BOOTSTRAP = 100  # paper: 100-400 random episodes in the simulations
@@ -239,10 +239,7 @@ class LatentGoalExploration(GoalExploration):
         path = self.options.get("vae")
         if not path:
             raise StrategyError(
-                f"{self.name} needs option vae=PATH (make one with: ergo dataset outcomes "
-                "--n 3000 --out data/outcomes.npz && ergo vae train --data data/outcomes.npz "
-                "--out models/vae --beta 10 --capacity 10 --capacity-iterations 500 "
-                "--iterations 700)"
+                f"{self.name} needs option vae=PATH (make one with: {MAKE_VAE['vae']})"
             )
         from vision.vae import VaeError, load_vae
 
