@@ -3,9 +3,10 @@ model in finished runs, engineered (rge-efr, mge-efr) or learned (rge-vae, mge-v
 
 For every goal-directed episode k of a run, the nearest stored episode j < k in (context,
 outcome) space to (context_k, goal_k) is found again: the 1-NN the meta-policy used, in the
-run's own goal space (wrap-safe features of the ball for the engineered strategies; the VAE's
-latent means of the outcome image, raw or z-scored as the run had them, with the previous
-outcome's latent as context, for the learned ones). Prints:
+run's own goal space, rebuilt from its run.json (the ball's polar features in the run's form
+for the engineered strategies, plus the tool tip for mge-efr's second module; the VAE's latent
+means of the outcome image, raw or z-scored as the run had them, with the previous outcome's
+latent as context, for the learned ones). Prints:
 
 - how often that neighbour had moved the ball, and how often episode k then moved it (after a
   moving neighbour and after a still one);
@@ -35,9 +36,10 @@ from pathlib import Path
 
 import numpy as np
 
-from explore.goal_spaces import wrap_safe_features
+from explore.goal_spaces import LatentGoalSpace
 from explore.metrics import ARENA_HALF_WIDTH, CellCounter
 from explore.store import RunStore
+from explore.strategies import StrategyError, make_strategy
 
 ENGINEERED = ("rge-efr", "mge-efr")
 LEARNED = ("rge-vae", "mge-vae", "rge-betavae")
@@ -78,28 +80,26 @@ def figure(results: dict[str, dict[str, np.ndarray]], path: Path) -> None:
 def goal_space_vectors(
     run: Path, recs: list, vae_dir: Path | None
 ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
-    """The vectors the run's meta-policy stored: contexts (n, c), outcomes (n, d), modules
-    (coordinate index arrays of the outcome)."""
+    """The vectors the run's meta-policy stored, in the run's own goal space (its strategy
+    rebuilt from ``run.json``, as ``explore.recording.goal_outcome_of`` does): contexts (n, c),
+    outcomes (n, d) (NaN where not seen), modules (coordinate index arrays of the outcome)."""
     strategy = RunStore.read_meta(run)["config"]["strategy"]
-    name, options = strategy["name"], strategy.get("options", {})
-    if name in ENGINEERED:
-        ctx = np.array([wrap_safe_features(r.context_ball) for r in recs])
-        ctx[~np.all(np.isfinite(ctx), axis=1)] = 0.0  # as context_of_ball: zeros when unseen
-        out = np.array([wrap_safe_features(r.ball) for r in recs])
-        return ctx, out, [np.arange(3)]
-    if name not in LEARNED:
+    name, options = strategy["name"], dict(strategy.get("options", {}))
+    if name not in ENGINEERED + LEARNED:
         raise SystemExit(f"{run}: strategy {name!r} has no inverse model to diagnose")
-    from explore.strategies.goal_exploration import latent_space
-    from vision.vae import load_vae
-
-    path = vae_dir or options.get("vae")
-    if path is None:
-        raise SystemExit(f"{run}: no VAE recorded in its config: pass --vae DIR")
-    modular = bool(options.get("modular", name == "mge-vae"))
-    space = latent_space(load_vae(path), modular, options.get("latents", "raw"), path)
-    mu = np.asarray(space.encode(np.stack([r.image for r in recs])), dtype=float)
-    out = (mu - space.shift) / space.scale  # space.outcome, for all records at once
-    ctx = np.vstack([np.zeros((1, out.shape[1])), out[:-1]])  # previous outcome; zeros first
+    if vae_dir is not None and name in LEARNED:
+        options["vae"] = str(vae_dir)
+    try:
+        space = make_strategy(name, **options).space
+    except StrategyError as exc:
+        raise SystemExit(f"{run}: {exc}") from None
+    if isinstance(space, LatentGoalSpace):
+        out = space.outcomes(np.stack([r.image for r in recs]))
+        ctx = np.vstack([np.zeros((1, space.dim)), out[:-1]])  # previous outcome; zeros first
+    else:
+        ctx = np.array([space.context(r) for r in recs])
+        unseen = np.full(space.dim, np.nan)
+        out = np.array([o if (o := space.outcome(r)) is not None else unseen for r in recs])
     return ctx, out, list(space.modules)
 
 
@@ -124,7 +124,7 @@ def diagnose(
     starts = np.array([np.asarray(r.context_ball, dtype=float)[:2] for r in recs])
     nn_moved, k_moved, k_new, ball_gap, start_gap, theta_gap = [], [], [], [], [], []
     for k, r in enumerate(recs):
-        if r.kind not in ("explore", "exploit") or k == 0 or r.module >= len(modules):
+        if r.kind not in ("explore", "exploit") or k == 0:
             continue
         m = modules[r.module]
         if r.goal.shape != (len(m),):

@@ -183,7 +183,11 @@ class LatentGoalSpace(GoalSpace):
         image = np.asarray(record.image)
         if image.ndim != 3:
             return None
-        mu = np.asarray(self.encode(image[None]), dtype=float)[0]
+        return self.outcomes(image[None])[0]
+
+    def outcomes(self, images: np.ndarray) -> np.ndarray:
+        """Outcomes of BGR uint8 images (n, 64, 64, 3) at once, shape (n, dim)."""
+        mu = np.asarray(self.encode(images), dtype=float)
         return (mu - self.shift) / self.scale
 
     def context(self, record: Any) -> np.ndarray:

@@ -17,12 +17,17 @@ from diagnose_inverse_model import PAIRS, diagnose, figure
 torch.set_num_threads(1)
 
 
-@pytest.mark.parametrize("strategy", ["rge-efr", "rge-vae"])
-def test_the_neighbour_found_again_is_the_one_whose_parameters_were_played(strategy, tmp_path):
+@pytest.mark.parametrize(
+    "strategy, extra",
+    [("rge-efr", {}), ("rge-efr", {"form": "polar"}), ("mge-efr", {}), ("rge-vae", {})],
+)
+def test_the_neighbour_found_again_is_the_one_whose_parameters_were_played(
+    strategy, extra, tmp_path
+):
     # with the exploration noise off, a goal episode plays its neighbour's theta exactly: the
     # diagnostic's |theta_k - theta_j| is 0 only if it found the same neighbour (the bootstrap's
     # thetas are distinct random draws)
-    opts = {"bootstrap": 12, "random_episodes": 0, "sigma": 0.0}
+    opts = {"bootstrap": 12, "random_episodes": 0, "sigma": 0.0, **extra}
     if strategy == "rge-vae":
         torch.manual_seed(0)
         opts["vae"] = str(Vae(VaeConfig()).save(tmp_path / "vae"))
