@@ -430,6 +430,13 @@ def load_backend(name: str) -> Callable[[list[Trial], BackendSettings], list[Tri
 
 
 # ---- planning --------------------------------------------------------------------------------
+def option_target(key: str) -> tuple[str | None, str]:
+    """``"NAME:KEY"`` -> (NAME, KEY), an option for that strategy only; ``"KEY"`` -> (None,
+    KEY), one for every goal-exploration strategy."""
+    target, scoped, option = key.rpartition(":")
+    return (target, option) if scoped else (None, key)
+
+
 def strategy_options(
     name: str, vae: Path | None, betavae: Path | None, common: dict[str, Any]
 ) -> dict[str, Any]:
@@ -438,11 +445,9 @@ def strategy_options(
     raises CampaignError naming the command that makes a missing VAE."""
     opts: dict[str, Any] = {}
     for key, value in common.items():
-        target, scoped, option = key.rpartition(":")
-        if scoped and target == name:
+        target, option = option_target(key)
+        if target == name or (target is None and name != "rpe"):
             opts[option] = value
-        elif not scoped and name != "rpe":
-            opts[key] = value
     from explore.strategies import MAKE_VAE
 
     flag = VAE_FLAGS.get(name)
@@ -530,8 +535,8 @@ def run_campaign(
         if name not in STRATEGIES:
             raise CampaignError(f"unknown strategy {name!r}; choose among {', '.join(STRATEGIES)}")
     for key in options or {}:
-        target, scoped, _ = key.rpartition(":")
-        if scoped and target not in strategies:
+        target, _ = option_target(key)
+        if target is not None and target not in strategies:
             raise CampaignError(
                 f"--option {key}: {target!r} is not a strategy of this campaign "
                 f"({', '.join(strategies)})"

@@ -459,7 +459,7 @@ def _campaign_markdown(
     for name, runs in sorted(groups.items()):
         finals = [r.final() for r in runs]
         cells = np.array([x["ball_cells"] for x in finals])
-        _, p = welch_vs_baseline(cells, baseline) if name != "rpe" and baseline else (0, np.nan)
+        p = np.nan if name == "rpe" else welch_vs_baseline(cells, baseline)[1]  # nan: < 2 seeds
         ee = np.array([x["ee_cells"] for x in finals])
         moved = np.array([x["moved_fraction"] for x in finals])
         eps = sorted({int(x["episodes"]) for x in finals})
