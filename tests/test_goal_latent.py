@@ -76,7 +76,8 @@ def test_online_vae_options_are_checked_before_the_bootstrap():
     for bad in ({"vae_beta": -1}, {"vae_capacity": "lots"}, {"vae_iterations": 0}):
         with pytest.raises(StrategyError, match="rge-online: bad VAE option"):
             make_strategy("rge-online", **bad)
-    plain = make_strategy("rge-online", vae_capacity=None, vae_beta=1)._vae_config()
+    plain, _ = make_strategy("rge-online", vae_capacity=None, vae_beta=1)._configs
     assert plain.capacity is None and plain.beta == 1.0
-    default = make_strategy("rge-online")._vae_config()  # the pre-trained VAE's schedule
+    default, train = make_strategy("rge-online")._configs  # the pre-trained VAE's schedule
     assert (default.beta, default.capacity, default.capacity_iterations) == (10.0, 10.0, 500)
+    assert train.iterations == 700

@@ -44,7 +44,7 @@ class OnlineLatentGoalExploration(GoalExploration):
         check_latents(self.options.get("latents", "raw"), self.name)
         if self.bootstrap < 1:
             raise StrategyError(f"{self.name}: bootstrap must be at least 1 (the VAE's data)")
-        self._vae_config(), self._train_config()  # bad options fail now, not after the bootstrap
+        self._configs = self._vae_configs()  # bad options fail now, not after the bootstrap
         self.vae = None
 
     def extra_options(self) -> tuple[str, ...]:
@@ -64,7 +64,7 @@ class OnlineLatentGoalExploration(GoalExploration):
         images = np.stack([r.image for r in self._pending])
         with tempfile.TemporaryDirectory(prefix="ergo-online-vae-") as tmp:
             self.vae = train_vae(
-                images, tmp, self._vae_config(), self._train_config(),
+                images, tmp, *self._configs,
                 progress=False,
             )  # fmt: skip
         self._init_space(
@@ -74,38 +74,30 @@ class OnlineLatentGoalExploration(GoalExploration):
         for rec in pending:
             self._learn(rec)
 
-    def _vae_config(self) -> Any:
-        """The online VAE's ``VaeConfig`` from the options (a bad value: a StrategyError)."""
+    def _vae_configs(self) -> tuple[Any, Any]:
+        """The online VAE's ``VaeConfig`` and ``TrainConfig`` from the options (a bad value: a
+        StrategyError)."""
         from vision.vae import VaeConfig, VaeError
+        from vision.vae_train import TrainConfig
 
         capacity = self.options.get("vae_capacity", ONLINE_CAPACITY)
         try:
-            config = VaeConfig(
+            model = VaeConfig(
                 beta=float(self.options.get("vae_beta", ONLINE_BETA)),
                 capacity=None if capacity is None else float(capacity),
                 capacity_iterations=int(
                     self.options.get("vae_capacity_iterations", ONLINE_CAPACITY_ITERATIONS)
                 ),
             )
-            config.validate()
-        except (TypeError, ValueError, VaeError) as exc:
-            raise StrategyError(f"{self.name}: bad VAE option: {exc}") from exc
-        return config
-
-    def _train_config(self) -> Any:
-        """The online VAE's ``TrainConfig`` from the options (a bad value: a StrategyError)."""
-        from vision.vae import VaeError
-        from vision.vae_train import TrainConfig
-
-        try:
-            config = TrainConfig(
+            train = TrainConfig(
                 iterations=int(self.options.get("vae_iterations", ONLINE_ITERATIONS)),
                 seed=int(self.options.get("vae_seed", 0)),
             )
-            config.validate()
+            model.validate()
+            train.validate()
         except (TypeError, ValueError, VaeError) as exc:
             raise StrategyError(f"{self.name}: bad VAE option: {exc}") from exc
-        return config
+        return model, train
 
     def phase(self) -> str:
         return "bootstrap" if self.space is None else "rge-online"
