@@ -111,6 +111,7 @@ def _raise_priority() -> bool:
 def torque_off_on_signals(arm: Arm) -> Iterator[None]:
     """Within the block, SIGINT and SIGTERM turn the arm's torque off at once, then raise
     ``KeyboardInterrupt`` (SIGINT) or ``SystemExit(143)`` (SIGTERM) in the main thread as usual.
+    If code inside turns that into another exception, the block still ends with it (chained).
 
     Why a thread: Python runs a signal handler in the main thread between two bytecodes, so a
     handler alone waits for the C call in progress (a MuJoCo render of 0.1-0.2 s, a camera
@@ -139,11 +140,15 @@ def torque_off_on_signals(arm: Arm) -> Iterator[None]:
         arm._emergency_torque_off()
         log.warning("signal %d: torque off (%s)", signum, who)
 
+    raised: list[int] = []  # the signals whose handler raised in the main thread
+
+    def interrupt(signum: int) -> BaseException:
+        return KeyboardInterrupt() if signum == signal.SIGINT else SystemExit(128 + signum)
+
     def handler(signum: int, _frame: object) -> None:
         cut(signum, "signal handler")
-        if signum == signal.SIGINT:
-            raise KeyboardInterrupt
-        raise SystemExit(128 + signum)
+        raised.append(signum)
+        raise interrupt(signum)
 
     reader, writer = socket.socketpair()
     writer.setblocking(False)  # set_wakeup_fd needs a non-blocking fd
@@ -168,6 +173,15 @@ def torque_off_on_signals(arm: Arm) -> Iterator[None]:
     watcher.start()
     try:
         yield
+    except (KeyboardInterrupt, SystemExit):
+        raise
+    except BaseException as exc:
+        # Library code hit by the interrupt may turn it into its own error (zipfile, in
+        # numpy.savez: "Can't close the ZIP file while there is an open writing handle"): the
+        # block still ends as the signal asked, so the caller exits with 130 or 143.
+        if raised:
+            raise interrupt(raised[0]) from exc
+        raise
     finally:
         signal.set_wakeup_fd(previous_fd)
         for s, h in previous.items():
