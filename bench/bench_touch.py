@@ -1,6 +1,6 @@
 """How often random motor parameters move the ball on the twin, and the cells RPE reaches.
 
-The science depends on it (shared/REFERENCE.md, twin notes): goal exploration only has
+The science depends on it (docs/facts.md, the twin): goal exploration only has
 something to work with once random episodes have touched the ball. Prints, per seed, the
 fraction of RPE episodes that moved the ball by more than 1 cm and the ball cells reached
 (30 x 30 grid over the arena's square), then the mean.

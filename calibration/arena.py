@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from calibration.store import CalibrationError
+from sim.models.make_scene import ARENA_RADIUS, BALL_RADIUS
 from vision.rectify import (
     ArenaModel,
     apply_homography,
@@ -41,7 +42,7 @@ DEFAULT_MARKERS: dict[int, tuple[float, float]] = {
     3: (-0.19, -0.19),
 }
 DEFAULT_MARKER_SIZE_M = 0.03
-DEFAULT_RADIUS_M = 0.20  # the twin's arena (OUTER_RADIUS in sim/models/make_scene.py)
+DEFAULT_RADIUS_M = ARENA_RADIUS  # the twin's arena, m (sim/models/make_scene.py)
 MAX_RESIDUAL_MM = 5.0  # refuse an arena whose points disagree with the fit by more (guess)
 
 
@@ -246,7 +247,7 @@ def _check_residuals(fit: ArenaFit) -> None:
 def find_saturated_blob(
     image: np.ndarray,
     model: ArenaModel | None = None,
-    ball_radius_m: float = 0.03,
+    ball_radius_m: float = BALL_RADIUS,
     min_saturation: int = 90,
 ) -> tuple[float, float]:
     """Pixel (u, v) of the most ball-like saturated blob whose hue differs from the floor's.

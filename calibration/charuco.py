@@ -19,13 +19,13 @@ import numpy as np
 
 from calibration.store import CalibrationError
 
-MIN_VIEWS = 8  # the floor; OpenCV's guide recommends 10-15 (shared/REFERENCE.md)
+MIN_VIEWS = 8  # the floor; OpenCV's tutorial: 10-15 (docs/facts.md)
 MIN_CORNERS = 6  # per view; fewer constrain a homography poorly (guess; >= 4 is the minimum)
 COVERAGE_GRID = 4  # the image is split into GRID x GRID cells for the coverage check
 MIN_COVERED_CELLS = 10  # of 16 (guess: the corners and edges must be seen, not only the middle)
 MIN_TILTED_VIEWS = 3  # views whose board normal is at least MIN_TILT_DEG off the optical axis
 MIN_TILT_DEG = 10.0  # guess
-MAX_RMS_PX = 1.0  # above this the result is refused (good: < 0.5 px, REFERENCE.md)
+MAX_RMS_PX = 1.0  # above this the result is refused (good: < 0.5 px, OpenCV's tutorial)
 
 
 @dataclass(frozen=True)

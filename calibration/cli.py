@@ -9,12 +9,14 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from sim.models.make_scene import BALL_RADIUS
+
 # --port / --can -> "module:Class" of the arm backend used by ``calibrate joints``.
 ARM_BACKENDS: dict[str, str] = {
     "port": "robot.dynamixel.arm:DynamixelArm",
     "can": "robot.canopen.arm:CanArm",
 }
-DEFAULT_VIEWS = 15  # views to collect from a live camera (OpenCV's guide: 10-15, REFERENCE.md)
+DEFAULT_VIEWS = 15  # views to collect from a live camera (OpenCV's tutorial: 10-15, docs/facts.md)
 MIN_VIEW_SHIFT_PX = 25.0  # a live view is kept only if the corners moved this much (guess)
 
 
@@ -80,7 +82,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     arena.add_argument("--radius", type=float, default=None, help="arena radius, m")
     arena.add_argument("--ball-pixel", metavar="U,V", help="a pixel on the ball (default: find)")
     arena.add_argument("--no-ball", action="store_true", help="do not sample the ball's colour")
-    arena.add_argument("--ball-radius", type=float, default=0.03, help="ball radius, m")
+    arena.add_argument(
+        "--ball-radius",
+        type=float,
+        default=BALL_RADIUS,
+        help="ball radius, m (default: the twin's)",
+    )
     arena.add_argument(
         "--fovy",
         type=float,

@@ -65,13 +65,15 @@ def calibrated_locator(rig_id: str, directory: str | None = None) -> BallLocator
 def locator_from_calibration(data: dict[str, Any]) -> BallLocator:
     """The tracker from an ``arena`` calibration's data (its model and ball colour ranges)."""
     from vision.rectify import ArenaModel
-    from vision.tracker import HSVRange, TrackerConfig
+    from vision.tracker import BALL_RADIUS_M, HSVRange, TrackerConfig
 
     arena = ArenaModel.from_dict(data)
     config = None
     if data.get("ball_hsv_ranges"):
         ranges = tuple(HSVRange.from_list(r) for r in data["ball_hsv_ranges"])
-        config = TrackerConfig(ranges=ranges, ball_radius_m=float(data.get("ball_radius_m", 0.03)))
+        config = TrackerConfig(
+            ranges=ranges, ball_radius_m=float(data.get("ball_radius_m", BALL_RADIUS_M))
+        )
     return tracker_locator(arena, config)
 
 

@@ -1,7 +1,7 @@
 """Discrete dynamic movement primitives: 48 parameters in [-1, 1] -> a 6-joint trajectory.
 
 One DMP per joint, 7 Gaussian basis functions and one goal each (the paper's rig,
-shared/REFERENCE.md). Vectorised over joints.
+docs/facts.md). Vectorised over joints.
 
 Constants from the original implementation (flowersteam/APEX ``poppimage``, read for facts):
 weights scaled by 200, goals by 1, 40 points at dt = 1/40 s, alpha_y = 25, beta_y = alpha_y / 4,
@@ -20,6 +20,8 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from robot.spec import CONTROL_RATE_HZ
 
 N_JOINTS = 6
 N_BASIS = 7
@@ -59,7 +61,7 @@ class DmpConfig:
     """
 
     n_points: int = 40
-    rate_hz: float = 40.0
+    rate_hz: float = CONTROL_RATE_HZ
     substeps: int = 10
     lower: tuple[float, ...] = field(default=TWIN_LOWER)
     upper: tuple[float, ...] = field(default=TWIN_UPPER)

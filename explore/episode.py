@@ -19,6 +19,8 @@ import numpy as np
 
 from explore.dmp import Dmp
 from explore.rig import Rig
+from robot.spec import CONTROL_RATE_HZ
+from vision.observation import OBSERVATION_SIZE
 
 
 @dataclass(frozen=True)
@@ -40,13 +42,13 @@ class EpisodeConfig:
         obs_size: side of the square observation the representation sees, pixels (64, paper).
     """
 
-    rate_hz: float = 40.0
+    rate_hz: float = CONTROL_RATE_HZ
     reset_s: float = 1.0
     settle_speed: float = 0.01
     arm_settle_speed: float = 0.05
     settle_max_s: float = 3.0
     settle_check_s: float = 0.1
-    obs_size: int = 64
+    obs_size: int = OBSERVATION_SIZE
 
 
 @dataclass

@@ -21,13 +21,17 @@ from typing import Any
 
 import numpy as np
 
-# The ball's centre lies between these radii (sim/models/make_scene.py: ring 0.10-0.20 m, ball
-# radius 0.03 m): r_n = (r - R_MID) / R_HALF maps that band onto [-1, 1].
-R_MIN, R_MAX = 0.13, 0.17  # m
+from robot.spec import ERGO_JR_REACH_M
+from sim.models.make_scene import BALL_RADIUS, INNER_RADIUS, OUTER_RADIUS
+
+# The ball's centre lies between these radii, m (the twin's ring between its kerb and its wall,
+# less the ball's radius: 0.13-0.17 m; sim/models/make_scene.py): r_n = (r - R_MID) / R_HALF maps
+# that band onto [-1, 1].
+R_MIN, R_MAX = INNER_RADIUS + BALL_RADIUS, OUTER_RADIUS - BALL_RADIUS
 R_MID = (R_MIN + R_MAX) / 2
 R_HALF = (R_MAX - R_MIN) / 2
-# End-effector module (MGE-EFR): the arm's horizontal reach, 0.30 m (explore/metrics.py).
-REACH = 0.30  # m
+# End-effector module (MGE-EFR): the arm's horizontal reach, m (robot/spec.py).
+REACH = ERGO_JR_REACH_M
 POLAR_FORMS = ("wrap-safe", "polar")
 
 

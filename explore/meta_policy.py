@@ -1,6 +1,6 @@
 """The meta-policy: (context, goal) -> motor parameters, by nearest neighbour.
 
-The paper's inverse model (shared/REFERENCE.md): for a goal in a module's goal space, play the
+The paper's inverse model (docs/facts.md): for a goal in a module's goal space, play the
 parameters of the past episode whose (context, outcome) is nearest to (context, goal), plus
 Gaussian exploration noise (sigma 0.05 in the [-1, 1] parameter space in simulation), clipped
 to [-1, 1].

@@ -1,6 +1,6 @@
 """Exploration metric: distinct cells reached on a grid over the arena's bounding square.
 
-The paper's measure (shared/REFERENCE.md): ball positions binned into 30 x 30 cells over the
+The paper's measure (docs/facts.md): ball positions binned into 30 x 30 cells over the
 arena's square, performance = number of non-empty cells. End-effector positions are counted
 the same way over the arm's reach, for the paper's scatter plots.
 """
@@ -12,12 +12,15 @@ from pathlib import Path
 
 import numpy as np
 
+from robot.spec import ERGO_JR_REACH_M
+from sim.models.make_scene import ARENA_RADIUS
+
 N_BINS = 30  # paper
-# Bounding square of the ball's arena: the outer wall's inner radius (sim/models/make_scene.py).
-ARENA_HALF_WIDTH = 0.20  # m
-# End-effector grid: the arm's horizontal reach, 0.054+0.0298+0.048+0.054+0.07 = 0.256 m from
-# the shoulder, rounded up (ARCHITECTURE.md kinematics).
-REACH_HALF_WIDTH = 0.30  # m
+# Bounding square of the ball's arena: the outer wall's inner radius (the twin's, and the rig's
+# as built: sim/models/make_scene.py), m.
+ARENA_HALF_WIDTH = ARENA_RADIUS
+# End-effector grid: the arm's horizontal reach (robot/spec.py), m.
+REACH_HALF_WIDTH = ERGO_JR_REACH_M
 
 
 class CellCounter:

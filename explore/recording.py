@@ -51,6 +51,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from explore.metrics import ARENA_HALF_WIDTH, REACH_HALF_WIDTH, CellCounter
+from robot.spec import CONTROL_RATE_HZ, ERGO_JR_JOINTS
 
 if TYPE_CHECKING:
     from explore.record import EpisodeRecord
@@ -60,12 +61,12 @@ log = logging.getLogger(__name__)
 APP_ID = "ergo-explore"
 RERUN_MODES = ("save", "spawn", "off")
 RECORDING_NAME = "recording"  # RUN/recording.rrd, then RUN/recording-2.rrd, ... on resumes
-JOINT_NAMES = ("m1", "m2", "m3", "m4", "m5", "m6")
+JOINT_NAMES = ERGO_JR_JOINTS
 TIMELINES = ("episode", "time")
 BATCH_FLUSH_S = 1.0  # latency of a live viewer, s
 JPEG_QUALITY = 80  # 64x64 frames: about 2 kB each
 # Defaults of explore.episode.EpisodeConfig (kept here so that this module imports nothing heavy).
-DEFAULT_RATE_HZ = 40.0
+DEFAULT_RATE_HZ = CONTROL_RATE_HZ
 DEFAULT_RESET_S = 1.0
 
 # Entity paths every recording has (the documented layout; docs/viewing.md).

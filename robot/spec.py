@@ -126,7 +126,8 @@ def _deg(lo: float, hi: float) -> tuple[float, float]:
     return math.radians(lo), math.radians(hi)
 
 
-# Poppy Ergo Jr joint limits in degrees (shared/ARCHITECTURE.md, from the Poppy Ergo Jr config).
+# Poppy Ergo Jr motor names (servo ids 1..6 in this order) and angle limits in degrees: the
+# Poppy project's Ergo Jr configuration (docs/facts.md).
 ERGO_JR_LIMITS_DEG: dict[str, tuple[float, float]] = {
     "m1": (-150.0, 150.0),
     "m2": (-90.0, 125.0),
@@ -136,6 +137,18 @@ ERGO_JR_LIMITS_DEG: dict[str, tuple[float, float]] = {
     "m6": (-110.0, 90.0),
 }
 
+ERGO_JR_JOINTS: tuple[str, ...] = tuple(ERGO_JR_LIMITS_DEG)  # m1..m6, command order
+
+# The rate the arm is commanded at, Hz: the DMP's 40 points at dt = 1/40 s, as on the paper's
+# rig (the original implementation; docs/facts.md). Episodes, the DMP's time scale and the
+# recorder's time line all run at it; the step bound below is per tick of it.
+CONTROL_RATE_HZ = 40.0
+
+# Horizontal reach of the tool tip from the axis of m1, m: 0.054 + 0.0298 + 0.048 + 0.054 +
+# 0.07 = 0.256 m from the shoulder (the Ergo Jr kinematics, sim/models/README.md), rounded up.
+# The end-effector grid and MGE-EFR's hand module are scaled by it.
+ERGO_JR_REACH_M = 0.30
+
 # Maximum step per command: 0.15 rad at the 40 Hz control rate is 6 rad/s, about half the
 # XL-320's no-load speed (114 rpm = 11.9 rad/s at 7.4 V, ROBOTIS datasheet). Guess, on the
 # safe side.
@@ -143,7 +156,8 @@ ERGO_JR_MAX_STEP = 0.15
 
 
 def ergo_jr_spec(max_step: float = ERGO_JR_MAX_STEP) -> ArmSpec:
-    """The Poppy Ergo Jr: joints m1..m6, servo ids 1..6, rest pose all zeros."""
+    """The Poppy Ergo Jr: joints ``ERGO_JR_JOINTS`` (m1..m6), servo ids 1..6, rest pose all
+    zeros."""
     joints = tuple(
         JointSpec(name, i + 1, *_deg(*lim), rest=0.0)
         for i, (name, lim) in enumerate(ERGO_JR_LIMITS_DEG.items())

@@ -13,6 +13,7 @@ import contextlib
 import threading
 from pathlib import Path
 
+from robot.spec import ERGO_JR_JOINTS
 from sim.headless import ensure_headless_gl
 
 ensure_headless_gl()
@@ -22,7 +23,7 @@ import numpy as np  # noqa: E402
 
 MODELS = Path(__file__).parent / "models"
 SCENE = MODELS / "scene.xml"
-JOINTS = ("m1", "m2", "m3", "m4", "m5", "m6")
+JOINTS = ERGO_JR_JOINTS  # the MJCF's joint and actuator names (sim/models/ergo_jr.xml)
 
 
 class TwinError(RuntimeError):

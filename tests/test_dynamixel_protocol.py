@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from robot.dynamixel import protocol as p
 from robot.dynamixel.control_table import XL320, XL330_M288, ControlTableError, model_by_name
 
-# Golden vectors from shared/ARCHITECTURE.md (ROBOTIS e-manual examples): packet without CRC,
+# Golden vectors from the ROBOTIS e-manual examples (docs/facts.md): packet without CRC,
 # then the CRC bytes as sent (low byte first).
 GOLDEN = [
     ("FF FF FD 00 01 03 00 01", "19 4E"),

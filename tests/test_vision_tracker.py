@@ -196,3 +196,11 @@ def test_without_arena_reports_pixels_only(twin):
     expected = cam.project(twin.ball_position()[None])[0]
     assert np.hypot(*(np.asarray(obs.pixel) - expected)) < 1.0  # pixels
     assert "seen at pixel" in obs.describe()
+
+
+def test_default_ball_radius_is_the_twins():
+    """vision imports no other package, so its default is a copy: it must stay the twin's."""
+    from sim.models import make_scene
+    from vision.tracker import BALL_RADIUS_M
+
+    assert BALL_RADIUS_M == make_scene.BALL_RADIUS

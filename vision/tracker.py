@@ -6,7 +6,7 @@ image border, outside the arena, or when two ball-coloured blobs make it ambiguo
 has ``seen=False`` and a ``reason`` in words.
 
 The default colour range is the original rig's (flowersteam/APEX ``poppimage``, see
-shared/REFERENCE.md): OpenCV HSV [27, 45, 70] - [38, 255, 255], hue 0..179.
+docs/facts.md): OpenCV HSV [27, 45, 70] - [38, 255, 255], hue 0..179.
 """
 
 from __future__ import annotations
@@ -19,11 +19,12 @@ import numpy as np
 
 from vision.rectify import ArenaModel, arena_to_pixels, pixels_to_arena, polar
 
-# Original rig's ball range (REFERENCE.md). Hue 0..179, saturation and value 0..255.
+# Original rig's ball range (the original implementation). Hue 0..179, saturation and value 0..255.
 BALL_HSV_LOWER = (27, 45, 70)
 BALL_HSV_UPPER = (38, 255, 255)
 # Ball radius used when an arena model is given, metres: the twin's ball (sim/models/
-# make_scene.py BALL_RADIUS); the real rig's foam ball is of that size (a guess there).
+# make_scene.py BALL_RADIUS; vision imports no other package, so a test checks the two agree);
+# the real rig's foam ball is of that size (a guess there).
 BALL_RADIUS_M = 0.03
 
 

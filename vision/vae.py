@@ -1,6 +1,6 @@
 """The paper's variational autoencoder (VAE / beta-VAE) over 64x64 colour observations.
 
-Architecture (shared/REFERENCE.md, the paper's method section): encoder of 4 convolutions of 32
+Architecture (the paper's method section; docs/facts.md): encoder of 4 convolutions of 32
 channels, 4x4 kernels, stride 2 (64 -> 32 -> 16 -> 8 -> 4 pixels), 2 dense layers of 256 units,
 then the means and log-variances of 10 Gaussian latents; the decoder mirrors it and outputs
 Bernoulli logits over pixels. Loss per image: BCE-with-logits summed over pixels + beta * KL
@@ -26,7 +26,9 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-IMAGE_SIZE = 64  # paper
+from vision.observation import OBSERVATION_SIZE
+
+IMAGE_SIZE = OBSERVATION_SIZE  # 64, the paper (vision/observation.py)
 CHANNELS = 32  # paper: 4 conv layers of 32 channels, 4x4, stride 2
 HIDDEN = 256  # paper: 2 dense layers of 256
 LATENT_DIM = 10  # paper: 10 Gaussian latents

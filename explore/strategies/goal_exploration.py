@@ -30,11 +30,11 @@ BOOTSTRAP = 100  # paper: 100-400 random episodes in the simulations
 EXPLOIT_MGE = 0.2  # paper: about 1 episode in 5 is a noise-free exploit episode (MGE)
 NORMAL_CLIP = 2.5  # paper: latent goals N(0, 1) clipped at +-2.5
 GOAL_SAMPLINGS = ("uniform", "normal")
-# The original rig's settings (shared/REFERENCE.md), the defaults here because the ball is not
-# reset between episodes, on the rig as on the twin. With the paper's simulation settings
-# (sigma 0.05, no random episodes), rge-efr replayed bootstrap motions that never touched the
-# ball where it lay in 2 of 3 seeds (0 touches in 1400 goal episodes) and reached fewer cells
-# than RPE (docs/results.md).
+# The original rig's settings (the original implementation, docs/facts.md), the defaults here
+# because the ball is not reset between episodes, on the rig as on the twin. With the paper's
+# simulation settings (sigma 0.05, no random episodes), rge-efr replayed bootstrap motions that
+# never touched the ball where it lay in 2 of 3 seeds (0 touches in 1400 goal episodes) and
+# reached fewer cells than RPE (docs/results.md).
 SIGMA_RIG = 0.2  # exploration noise in the [-1, 1] parameter space, original rig
 RANDOM_EPISODES_RIG = 0.1  # share of random motor babbling episodes after the bootstrap, rig
 

@@ -1,6 +1,6 @@
 """Learning-progress interest of goal-space modules (the paper's MGE module selection).
 
-Per module k (shared/REFERENCE.md, "Modular (MGE)"):
+Per module k (the paper's modular goal exploration, docs/facts.md):
 - competence of reaching o for goal g: c(g, o) = -min(||g - o|| / scale, 1), in [-1, 0];
 - progress of an exploit episode: c(g, o) - c(g, o_old), where o_old is the outcome reached for
   the previous goal of module k nearest to g (0 for the first goal);

@@ -3,7 +3,7 @@ drive-side transition function (used by the emulated drives and by the tests).
 
 Pure: no I/O, no python-can. Sources: CiA 402-2 (device profile for drives and motion control),
 section "Finite state automaton"; the same tables appear in the ``canopen`` library's
-``profiles/p402.py`` (shared/REFERENCE.md).
+``profiles/p402.py`` (docs/facts.md).
 
 Statusword bits (0x6041): 0 ready to switch on, 1 switched on, 2 operation enabled, 3 fault,
 4 voltage enabled, 5 quick stop (0 = active), 6 switch on disabled, 9 remote,
@@ -30,7 +30,7 @@ class State(Enum):
     FAULT = "fault"
 
 
-# Statusword (mask, value) per state (CiA 402-2, table "State coding"; REFERENCE.md).
+# Statusword (mask, value) per state (CiA 402-2, table "State coding").
 STATUSWORD_TABLE: dict[State, tuple[int, int]] = {
     State.NOT_READY_TO_SWITCH_ON: (0x4F, 0x00),
     State.SWITCH_ON_DISABLED: (0x4F, 0x40),
@@ -42,7 +42,7 @@ STATUSWORD_TABLE: dict[State, tuple[int, int]] = {
     State.FAULT: (0x4F, 0x08),
 }
 
-# Controlword commands (CiA 402-2, table "Command coding"; REFERENCE.md).
+# Controlword commands (CiA 402-2, table "Command coding").
 CW_DISABLE_VOLTAGE = 0x00
 CW_QUICK_STOP = 0x02
 CW_SHUTDOWN = 0x06

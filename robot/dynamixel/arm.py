@@ -50,7 +50,7 @@ log = logging.getLogger(__name__)
 # for 2 s): read them on every 10th read only (guess; 4 Hz at a 40 Hz control rate).
 DEFAULT_SLOW_EVERY = 10
 # Return delay time written at connect, us: 0 as recommended for a fast bus
-# (shared/REFERENCE.md: default 250 x 2 us = 500 us per servo).
+# (ROBOTIS e-manual: default 250 x 2 us = 500 us per servo).
 DEFAULT_RETURN_DELAY_US = 0
 
 

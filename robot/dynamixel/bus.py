@@ -46,7 +46,7 @@ BITS_PER_BYTE = 10
 # it to 0 when it can, and tells the bus.
 DEFAULT_RETURN_DELAY_S = 500e-6
 # Slack added to every timeout for the USB-serial adapter and the OS: an FTDI adapter's
-# latency timer is 16 ms by default (shared/REFERENCE.md), plus 4 ms of scheduling slack
+# latency timer is 16 ms by default (FTDI AN232B-04; docs/facts.md), plus 4 ms of scheduling slack
 # (guess). Tune it down (e.g. 3 ms) with a latency timer of 1 ms.
 DEFAULT_LATENCY_S = 0.020
 # Retries per call after the first attempt. Guess: two lost packets in a row are rare on a

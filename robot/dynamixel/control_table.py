@@ -273,7 +273,7 @@ XL320 = Model(
     load_unit=0.001,  # e-manual "Present Load": about 0.1 % per unit, bit 10 direction
     sign_bit=10,  # "Present Speed"/"Present Load": 0..1023 CCW, 1024..2047 CW
     voltage_unit=0.1,  # e-manual "Present Voltage": 0.1 V per unit
-    # Hardware Error Status (50) uses the bits of Shutdown (18) (e-manual; shared/REFERENCE.md).
+    # Hardware Error Status (50) uses the bits of Shutdown (18) (ROBOTIS e-manual).
     hardware_error_bits={0: "overload", 1: "overheating", 2: "input voltage"},
     roles={
         "position": "present_position",

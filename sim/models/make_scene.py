@@ -97,7 +97,7 @@ def scene_xml() -> str:
     <geom name="kerb" type="cylinder" size="{INNER_RADIUS} {KERB_HEIGHT / 2}" pos="0 0 {KERB_HEIGHT / 2}"
           contype="0" conaffinity="2" rgba="0.2 0.3 0.75 1"/>
 {wall_boxes()}
-    <!-- yellow-green ball; condim 6 with rolling friction so that it stops (REFERENCE.md) -->
+    <!-- yellow-green ball; condim 6 with rolling friction so that it stops (measured, README.md) -->
     <body name="ball" pos="{BALL_START[0]} {BALL_START[1]} {BALL_RADIUS}">
       <freejoint name="ball"/>
       <geom name="ball" type="sphere" size="{BALL_RADIUS}" mass="{BALL_MASS}" condim="6"
