@@ -66,7 +66,7 @@ def run_cycles(arm: CanArm, cycles: int) -> float:
 
 
 def bench_virtual(cycles: int) -> float:
-    from sim.canopen_drives import EmulatedDrives
+    from sim.canopen.drives import EmulatedDrives
     from sim.realtime import RealtimeLoop
     from sim.twin import Twin
 
@@ -77,7 +77,7 @@ def bench_virtual(cycles: int) -> float:
 
 
 def bench_pty(cycles: int) -> float:
-    cmd = [sys.executable, "-m", "sim.canopen_server", "--no-camera"]
+    cmd = [sys.executable, "-m", "sim.canopen.server", "--no-camera"]
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, text=True)
     try:

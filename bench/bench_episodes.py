@@ -16,10 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from explore.explorer import Explorer
-from explore.rig import RigConfig, make_rig
-from explore.store import RunStore
-from explore.strategies import make_strategy
+from explore.learner.strategies import make_strategy
+from explore.rigs.rig import RigConfig, make_rig
+from explore.runs.explorer import Explorer
+from explore.runs.store import RunStore
 from sim.twin import Twin
 
 

@@ -25,7 +25,7 @@ import argparse
 import numpy as np
 from scipy.spatial import cKDTree
 
-from explore.goal_spaces import kl_ranked_modules, wrap_safe_features
+from explore.learner.goal_spaces import kl_ranked_modules, wrap_safe_features
 
 N_GOALS = 20_000  # goals drawn per space (enough for a stable entropy; guess)
 N_SECTORS = 36  # 10-degree sectors of the ring for the coverage entropy

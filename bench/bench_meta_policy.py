@@ -30,8 +30,8 @@ import time
 
 import numpy as np
 
-from explore.dmp import N_PARAMS
-from explore.meta_policy import MetaPolicy
+from explore.learner.dmp import N_PARAMS
+from explore.learner.meta_policy import MetaPolicy
 
 
 class Uniform:

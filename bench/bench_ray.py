@@ -34,8 +34,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from explore.campaign import TRIAL_FILE, run_campaign
-from explore.campaign_ray import LOCAL_OBJECT_STORE_BYTES, import_ray
+from explore.campaigns.plan import run_campaign
+from explore.campaigns.ray_backend import LOCAL_OBJECT_STORE_BYTES, import_ray
+from explore.campaigns.trial import TRIAL_FILE
 
 
 def trial_walls(out: Path, strategies: list[str], seeds: list[int]) -> list[float]:

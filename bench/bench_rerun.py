@@ -23,11 +23,11 @@ if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY"):
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from explore.explorer import Explorer
-from explore.recording import Recorder
-from explore.rig import RigConfig, make_rig
-from explore.store import RunStore
-from explore.strategies import make_strategy
+from explore.learner.strategies import make_strategy
+from explore.report.recorder import Recorder
+from explore.rigs.rig import RigConfig, make_rig
+from explore.runs.explorer import Explorer
+from explore.runs.store import RunStore
 
 
 def run_once(out: Path, episodes: int, record: bool, stride: int) -> tuple[float, float]:

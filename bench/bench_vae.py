@@ -76,7 +76,7 @@ def main() -> None:
     if args.data is None:
         args.data = args.out / "dataset.npz"
         if not args.data.exists():
-            from explore.dataset import make_outcome_dataset, save_dataset
+            from explore.rigs.sim_dataset import make_outcome_dataset, save_dataset
 
             save_dataset(args.data, make_outcome_dataset(N_DEFAULT, seed=args.seed))
     with np.load(args.data, allow_pickle=False) as z:

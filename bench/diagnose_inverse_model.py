@@ -36,10 +36,10 @@ from pathlib import Path
 
 import numpy as np
 
-from explore.goal_spaces import LatentGoalSpace
-from explore.metrics import ARENA_HALF_WIDTH, CellCounter
-from explore.store import RunStore
-from explore.strategies import StrategyError, make_strategy
+from explore.learner.goal_spaces import LatentGoalSpace
+from explore.learner.strategies import StrategyError, make_strategy
+from explore.runs.metrics import ARENA_HALF_WIDTH, CellCounter
+from explore.runs.store import RunStore
 
 ENGINEERED = ("rge-efr", "mge-efr")
 LEARNED = ("rge-vae", "mge-vae", "rge-betavae")
@@ -81,8 +81,9 @@ def goal_space_vectors(
     run: Path, recs: list, vae_dir: Path | None
 ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
     """The vectors the run's meta-policy stored, in the run's own goal space (its strategy
-    rebuilt from ``run.json``, as ``explore.recording.goal_outcome_of`` does): contexts (n, c),
-    outcomes (n, d) (NaN where not seen), modules (coordinate index arrays of the outcome)."""
+    rebuilt from ``run.json``, as ``explore.learner.goal_outcomes.goal_outcome_of`` does):
+    contexts (n, c), outcomes (n, d) (NaN where not seen), modules (coordinate index arrays of
+    the outcome)."""
     strategy = RunStore.read_meta(run)["config"]["strategy"]
     name, options = strategy["name"], dict(strategy.get("options", {}))
     if name not in ENGINEERED + LEARNED:

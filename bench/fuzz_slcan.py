@@ -1,4 +1,4 @@
-"""Fuzz the SLCAN codec, line splitter and adapter state machine (sim/slcan.py).
+"""Fuzz the SLCAN codec, line splitter and adapter state machine (sim/canopen/slcan.py).
 
     python bench/fuzz_slcan.py                 # atheris if installed, else hypothesis
     python bench/fuzz_slcan.py --examples 200000
@@ -21,7 +21,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from sim import slcan
+from sim.canopen import slcan
 
 
 def one_input(data: bytes) -> None:

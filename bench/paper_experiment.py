@@ -25,7 +25,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from explore.cli_experiment import format_table, run_campaign
+from explore.campaigns.plan import run_campaign
+from explore.campaigns.stats import format_table
 
 
 def main() -> int:

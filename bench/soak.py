@@ -5,11 +5,11 @@
     python bench/soak.py --bus arm              # twin rig, faults injected at the Arm level
 
 ``--bus serial``: the real ``DynamixelArm`` and ``DynamixelBus`` (retries, typed errors)
-talk Protocol 2.0 to ``sim.dynamixel_emulator.DynamixelEmulator`` driving the twin, through
+talk Protocol 2.0 to ``sim.dynamixel.emulator.DynamixelEmulator`` driving the twin, through
 its in-process ``EmulatedSerial`` (the byte stream of the pty server without the pty and
 without real-time pacing). Status packets are dropped, corrupted and sent late (past the
 timeout), each at rate/3.
-``--bus arm``: the ``sim`` rig's arm wrapped in ``explore.faults.FaultyArm`` (reads and sends
+``--bus arm``: the ``sim`` rig's arm wrapped in ``robot.faulty_arm.FaultyArm`` (reads and sends
 raise at the rate).
 
 When an episode fails after the bus's retries, the rig is disconnected (torque off), and
@@ -38,11 +38,11 @@ from sim.headless import ensure_headless_gl
 
 ensure_headless_gl()  # before MuJoCo is imported
 
-from explore.clock import TwinClock  # noqa: E402
-from explore.explorer import Explorer  # noqa: E402
-from explore.rig import Rig, RigConfig  # noqa: E402
-from explore.store import RunStore  # noqa: E402
-from explore.strategies import make_strategy  # noqa: E402
+from explore.learner.strategies import make_strategy  # noqa: E402
+from explore.rigs.clock import TwinClock  # noqa: E402
+from explore.rigs.rig import Rig, RigConfig  # noqa: E402
+from explore.runs.explorer import Explorer  # noqa: E402
+from explore.runs.store import RunStore  # noqa: E402
 from robot.errors import RobotError  # noqa: E402
 from sim.camera import SimCamera  # noqa: E402
 from sim.twin import Twin  # noqa: E402
@@ -54,7 +54,7 @@ def build_rig(bus: str, rate: float, seed: int) -> Rig:
     twin = Twin(render_size=RENDER)
     if bus == "serial":
         from robot.dynamixel.arm import DynamixelArm
-        from sim.dynamixel_emulator import DynamixelEmulator, EmulatedSerial, FaultConfig
+        from sim.dynamixel.emulator import DynamixelEmulator, EmulatedSerial, FaultConfig
 
         third = rate / 3
         faults = FaultConfig(drop_rate=third, corrupt_rate=third, late_rate=third, seed=seed)
@@ -63,7 +63,7 @@ def build_rig(bus: str, rate: float, seed: int) -> Rig:
         # (a late one comes 30 ms late: past the timeout, it is retried like a lost one)
         arm = DynamixelArm("emulated", connection=EmulatedSerial(emulator), latency_s=0.002)
     else:
-        from explore.faults import FaultyArm
+        from robot.faulty_arm import FaultyArm
         from sim.arm import SimArm
 
         arm = FaultyArm(SimArm(twin), rate=rate, seed=seed)

@@ -9,8 +9,8 @@ from pathlib import Path
 
 # --bus NAME -> "module:function(args) -> int" that serves until interrupted.
 BUS_SERVERS: dict[str, str] = {
-    "dynamixel": "sim.dynamixel_server:serve",
-    "canopen": "sim.canopen_server:serve",
+    "dynamixel": "sim.dynamixel.server:serve",
+    "canopen": "sim.canopen.server:serve",
 }
 
 

@@ -17,23 +17,17 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-# read when Ray is imported (explore/campaign_ray.py import_ray says why)
+# read when Ray is imported (explore/campaigns/ray_backend.py import_ray says why)
 os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
 os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
 
 import pytest
 import ray
 
-from explore.campaign import (
-    BackendSettings,
-    CampaignError,
-    Trial,
-    campaign_id,
-    run_campaign,
-    run_trial,
-    trial_resources,
-)
-from explore.campaign_ray import LOCAL_OBJECT_STORE_BYTES, check_rig_resources, run_ray
+from explore.campaigns.backends import BackendSettings
+from explore.campaigns.plan import campaign_id, run_campaign
+from explore.campaigns.ray_backend import LOCAL_OBJECT_STORE_BYTES, check_rig_resources, run_ray
+from explore.campaigns.trial import CampaignError, Trial, run_trial, trial_resources
 from explore.cli import main
 
 EPISODES = 20

@@ -16,12 +16,12 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from explore.dmp import Dmp, DmpConfig
+from explore.learner.dmp import Dmp, DmpConfig
 from robot import SafetyStop, torque_off_on_signals
 from robot.arm import RecoveryPolicy
 from robot.canopen.arm import CanArm, CanArmConfig, CanNodeError
 from robot.canopen.cia402 import State
-from sim.canopen_drives import EmulatedDrives
+from sim.canopen.drives import EmulatedDrives
 from sim.twin import Twin
 
 PERIOD_S = 0.025  # 40 Hz, the episode's control rate

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from explore.clock import RealClock
+from explore.rigs.clock import RealClock
 from robot.canopen.arm import CanArm, CanArmConfig
 from robot.canopen.scan import scan_cli
 
@@ -48,7 +48,7 @@ def server() -> Iterator[str]:
 
 
 def test_arm_over_slcan_follows_and_turns_torque_off(server: str) -> None:
-    # the pty rig's heartbeat (explore/rig_canopen.py): at 200 ms a loaded CI machine
+    # the pty rig's heartbeat (explore/rigs/canopen.py): at 200 ms a loaded CI machine
     # stalled the server's heartbeats past 0.3 s twice in a full suite on 2026-11-23
     cfg = CanArmConfig(heartbeat_ms=500, pdo_timeout_s=0.05)
     target = np.array([0.3, 0.2, -0.3, 0.3, 0.2, -0.2])

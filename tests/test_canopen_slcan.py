@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sim.slcan import (
+from sim.canopen.slcan import (
     BITRATES,
     ERROR,
     OK,

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from explore.rig import RigConfig, RigError, make_rig
+from explore.rigs.rig import RigConfig, RigError, make_rig
 from robot.canopen import emcy
 from robot.canopen.bus import CanBusError, CanBusSpec, open_bus, parse_can_spec
 from robot.canopen.units import JointScaling, UnitsError
@@ -154,7 +154,7 @@ def test_rig_builds_unconnected() -> None:
 def test_server_flag_errors(flags, message, capsys) -> None:
     import argparse
 
-    from sim.canopen_server import serve
+    from sim.canopen.server import serve
 
     args = argparse.Namespace(
         **{"drop_rate": 0.0, "delay_ms": 0.0, "overload_servo": None, **flags}

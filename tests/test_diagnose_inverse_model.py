@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from explore.cli_experiment import run_one
+from explore.campaigns.trial import run_one
 from vision.vae import Vae, VaeConfig
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from explore.dmp import N_PARAMS, Dmp, DmpConfig, ParameterError
+from explore.learner.dmp import N_PARAMS, Dmp, DmpConfig, ParameterError
 
 params = arrays(np.float64, (N_PARAMS,), elements=st.floats(-1.0, 1.0))
 DMP = Dmp()

@@ -23,7 +23,7 @@ from robot.dynamixel.bus import (
 from robot.dynamixel.control_table import XL320, XL330_M288
 from robot.dynamixel.scan import scan, scan_cli
 from robot.errors import BusError
-from sim.dynamixel_emulator import DynamixelEmulator, EmulatedSerial, FaultConfig
+from sim.dynamixel.emulator import DynamixelEmulator, EmulatedSerial, FaultConfig
 
 # Short slack: the fake answers in-process, so a lost reply costs only this long.
 LATENCY_S = 0.005

@@ -1,5 +1,5 @@
 """Hardware in the loop without hardware: the twin behind a real pseudo-terminal speaking
-Protocol 2.0 (``sim.dynamixel_server.PtyBusServer`` in a thread), driven by ``DynamixelArm``
+Protocol 2.0 (``sim.dynamixel.server.PtyBusServer`` in a thread), driven by ``DynamixelArm``
 and the bus; plus the emulator's packet logic in-process, the MJPEG camera and the rig.
 
 No assertion is on durations; loops that wait for physics are bounded by a count."""
@@ -17,17 +17,17 @@ import numpy as np
 import pytest
 import serial
 
-from explore.clock import RealClock
-from explore.rig import RigConfig, RigError
-from explore.rig_dynamixel import make_dynamixel_rig
+from explore.rigs.clock import RealClock
+from explore.rigs.dynamixel import make_dynamixel_rig
+from explore.rigs.rig import RigConfig, RigError
 from robot.dynamixel import protocol as proto
 from robot.dynamixel.arm import DynamixelArm
 from robot.dynamixel.bus import DynamixelBus, HardwareAlertError, ServoError
 from robot.dynamixel.control_table import XL320
 from robot.dynamixel.scan import scan_cli
 from robot.errors import SafetyStop
-from sim.dynamixel_emulator import DynamixelEmulator, FaultConfig
-from sim.dynamixel_server import PtyBusServer
+from sim.dynamixel.emulator import DynamixelEmulator, FaultConfig
+from sim.dynamixel.server import PtyBusServer
 from sim.mjpeg_server import MjpegServer, TwinFrames
 from sim.realtime import RealtimeLoop
 from sim.twin import Twin

@@ -72,7 +72,7 @@ def test_a_vae_strategy_without_a_model_names_the_command(tmp_path, capsys):
 def test_welch_test_against_rpe_matches_the_formula():
     import math
 
-    from explore.campaign import welch_vs_baseline
+    from explore.campaigns.stats import welch_vs_baseline
 
     a, b = [10.0, 12.0, 14.0], [1.0, 2.0, 3.0]  # variances 4 and 1, 3 seeds each
     t, p = welch_vs_baseline(a, b)
@@ -133,7 +133,7 @@ def test_a_campaign_killed_with_sigkill_leaves_no_worker_running(tmp_path):
 
 def test_seeds_are_a_count_a_list_or_a_range_as_the_issue_writes_them():
     from explore.cli import CliError
-    from explore.cli_experiment import parse_seeds
+    from explore.cli.experiment import parse_seeds
 
     assert parse_seeds("8") == list(range(8))  # `--seeds 8`: eight seeds
     assert parse_seeds("0,2,5") == [0, 2, 5]
@@ -147,7 +147,7 @@ def test_seeds_are_a_count_a_list_or_a_range_as_the_issue_writes_them():
 def test_workers_is_another_name_for_jobs(tmp_path):
     import argparse
 
-    from explore import cli_experiment
+    from explore.cli import experiment as cli_experiment
 
     parser = argparse.ArgumentParser()
     cli_experiment.register(parser.add_subparsers())

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from explore.cli import main
-from explore.metrics import CellCounter, read_metrics
-from explore.store import RunStore
+from explore.runs.metrics import CellCounter, read_metrics
+from explore.runs.store import RunStore
 
 N = 50
 
@@ -104,8 +104,9 @@ def test_strategy_options_are_stored_and_kept_on_resume(tmp_path, capsys):
 def test_the_outcome_is_observed_with_the_arm_back_at_rest():
     """The arm lags its last rest command by 1-2 degrees, a few pixels of the 64x64 outcome
     image (more than a ball moved by a centimetre): the outcome waits until it has stopped."""
-    from explore.episode import EpisodeRunner, square_observation
-    from explore.rig import RigConfig, make_rig
+    from explore.rigs.rig import RigConfig, make_rig
+    from explore.runs.episode import EpisodeRunner
+    from vision.observation import square_observation
 
     with make_rig(RigConfig()) as rig:
         runner = EpisodeRunner(rig)
@@ -131,8 +132,8 @@ def test_the_outcome_is_observed_with_the_arm_back_at_rest():
 def test_a_reading_that_flickers_by_one_servo_unit_does_not_hold_the_settle(monkeypatch):
     """A real XL-320 at rest can read one unit (0.29 degrees) apart from one check to the
     next, just over what arm_settle_speed allows in a check: that is not motion."""
-    from explore.episode import EpisodeRunner
-    from explore.rig import RigConfig, make_rig
+    from explore.rigs.rig import RigConfig, make_rig
+    from explore.runs.episode import EpisodeRunner
     from sim.arm import SimArm
 
     unit = np.radians(300.0 / 1023.0)  # XL-320 position unit (e-manual)
@@ -220,9 +221,9 @@ def test_every_command_has_help(capsys):
 def test_fault_counters_are_summed_per_session_and_never_mask_the_runs_error(tmp_path):
     import json
 
-    from explore.explorer import Explorer, add_fault_counts
-    from explore.rig import RigConfig, make_rig
-    from explore.strategies import make_strategy
+    from explore.learner.strategies import make_strategy
+    from explore.rigs.rig import RigConfig, make_rig
+    from explore.runs.explorer import Explorer, add_fault_counts
 
     assert add_fault_counts(tmp_path, {"bus_retries": 2, "recovery_s": 0.5})["bus_retries"] == 2
     totals = add_fault_counts(tmp_path, {"bus_retries": 3, "links_lost": 1})

@@ -8,7 +8,7 @@ import itertools
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sim import slcan
+from sim.canopen import slcan
 
 lines = st.one_of(
     st.binary(max_size=80),

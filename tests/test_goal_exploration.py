@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from explore.cli_experiment import run_one
-from explore.episode import Observation
-from explore.store import RunStore
-from explore.strategies import StrategyError, make_strategy
+from explore.campaigns.trial import run_one
+from explore.learner.experience import Observation
+from explore.learner.strategies import StrategyError, make_strategy
+from explore.runs.store import RunStore
 
 N, BOOT = 150, 50
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from explore.cli_experiment import run_one
-from explore.store import RunStore
+from explore.campaigns.trial import run_one
+from explore.runs.store import RunStore
 from vision.vae import Vae, VaeConfig
 
 torch.set_num_threads(1)
@@ -44,8 +44,8 @@ def test_online_variant_trains_after_bootstrap_and_resumes_identically(tmp_path)
 
 
 def test_zscored_latents_use_the_statistics_saved_with_the_vae(vae_dir, tmp_path):
-    from explore.strategies import make_strategy
-    from explore.strategies.base import StrategyError
+    from explore.learner.strategies import make_strategy
+    from explore.learner.strategies.base import StrategyError
     from vision.vae import load_vae
 
     with pytest.raises(StrategyError, match="no latent statistics"):
@@ -70,8 +70,8 @@ def test_zscored_latents_use_the_statistics_saved_with_the_vae(vae_dir, tmp_path
 
 
 def test_online_vae_options_are_checked_before_the_bootstrap():
-    from explore.strategies import make_strategy
-    from explore.strategies.base import StrategyError
+    from explore.learner.strategies import make_strategy
+    from explore.learner.strategies.base import StrategyError
 
     for bad in ({"vae_beta": -1}, {"vae_capacity": "lots"}, {"vae_iterations": 0}):
         with pytest.raises(StrategyError, match="rge-online: bad VAE option"):

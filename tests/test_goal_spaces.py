@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from explore.goal_spaces import (
+from explore.learner.goal_spaces import (
     R_MAX,
     R_MIN,
     EngineeredGoalSpace,
@@ -13,7 +13,7 @@ from explore.goal_spaces import (
     polar_features,
     wrap_safe_features,
 )
-from explore.strategies.interest import ModuleInterest
+from explore.learner.interest import ModuleInterest
 
 
 def test_polar_features_normalise_the_ring_to_minus_one_one():

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from explore.meta_policy import MetaPolicy, NearestNeighbourIndex
+from explore.learner.meta_policy import MetaPolicy, NearestNeighbourIndex
 
 
 @settings(max_examples=40, deadline=None)

@@ -13,26 +13,23 @@ import pytest
 import rerun.chunk as rrc
 
 from explore.cli import CliError, main
-from explore.explorer import Explorer
-from explore.recording import (
+from explore.cli.rerun_flags import add_rerun_arguments, make_recorder
+from explore.learner.goal_outcomes import goal_outcome_of, strategy_outcome_of
+from explore.learner.strategies import make_strategy
+from explore.report.recorder import (
     EPISODE_ENTITIES,
     GOAL_ENTITIES,
     JOINT_NAMES,
     STATIC_ENTITIES,
     STRIDE_ENTITIES,
     Recorder,
-    add_rerun_arguments,
-    goal_outcome_of,
-    iter_history,
-    make_recorder,
     next_recording_path,
     recording_paths,
     run_recording_id,
-    strategy_outcome_of,
 )
-from explore.rig import RigConfig, make_rig
-from explore.store import RunStore
-from explore.strategies import make_strategy
+from explore.rigs.rig import RigConfig, make_rig
+from explore.runs.explorer import Explorer
+from explore.runs.store import RunStore, iter_history
 
 N = 8
 # one line of ChunkStore.summary(): "{entity}  rows={n}  static={bool}  timelines=[...]  cols=[...]"
@@ -132,7 +129,7 @@ def test_recording_has_the_documented_entities_and_timelines(recorded_run):
 
 
 def test_cells_logged_match_the_run_metrics(recorded_run):
-    from explore.metrics import read_metrics
+    from explore.runs.metrics import read_metrics
 
     m = read_metrics(recorded_run / "metrics.csv")
     rec = Recorder("save", path=recorded_run / "check.rrd")
@@ -186,7 +183,7 @@ def test_goal_exploration_logs_goal_and_reached_in_goal_space(goal_run):
         assert rows[entity] == len(seen), entity
         assert {"episode", "time"} <= timelines[entity]
     # the reached outcome is the record's ball in the goal's coordinates (wrap-safe polar)
-    from explore.goal_spaces import wrap_safe_features
+    from explore.learner.goal_spaces import wrap_safe_features
 
     outcome_of = goal_outcome_of(GOAL_RUN)  # from the config alone: the same map
     assert outcome_of is not None

@@ -25,7 +25,7 @@ from robot.arm import RecoveryPolicy
 from robot.canopen.arm import CanArm, CanArmConfig
 from robot.canopen.cia402 import State
 from robot.errors import SafetyStop
-from sim.canopen_drives import EmulatedDrives
+from sim.canopen.drives import EmulatedDrives
 from sim.twin import Twin
 
 PERIOD_S = 0.025  # 40 Hz, the episode's control rate
@@ -124,7 +124,7 @@ def test_an_slcan_adapter_unplugged_from_its_pty_and_plugged_back_is_reopened(ri
     goes on."""
     import can
 
-    from sim.canopen_server import SlcanPtyBridge
+    from sim.canopen.server import SlcanPtyBridge
 
     _twin, drives, can_spec = rig
     bridge_bus = can.Bus(interface="virtual", channel=can_spec.split(":", 1)[1])

@@ -27,8 +27,8 @@ from pathlib import Path
 import pytest
 
 from explore.cli import main
-from explore.record import EpisodeRecord
-from explore.store import RunStore, _scan
+from explore.runs.record import EpisodeRecord
+from explore.runs.store import RunStore, _scan
 
 EPISODES = 70
 SEED = 11

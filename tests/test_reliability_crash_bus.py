@@ -31,9 +31,9 @@ from pathlib import Path
 
 import pytest
 
-from explore.episode import EpisodeConfig
-from explore.record import EpisodeRecord
-from explore.store import RunStore, _scan
+from explore.runs.episode import EpisodeConfig
+from explore.runs.record import EpisodeRecord
+from explore.runs.store import RunStore, _scan
 
 ROOT = Path(__file__).resolve().parent.parent
 EPISODES = 10
@@ -47,8 +47,8 @@ CHILD_BOUND_S = 120.0  # a bound against hangs, not an expectation
 def _served(tmp: Path) -> Iterator[tuple[str, str, object]]:
     """The twin in real time behind a pty (stable link ``tmp/ttyERGO``) and its camera;
     yields (port, camera URL, emulator)."""
-    from sim.dynamixel_emulator import DynamixelEmulator
-    from sim.dynamixel_server import PtyBusServer
+    from sim.dynamixel.emulator import DynamixelEmulator
+    from sim.dynamixel.server import PtyBusServer
     from sim.mjpeg_server import MjpegServer, TwinFrames
     from sim.realtime import RealtimeLoop
     from sim.twin import Twin

@@ -14,7 +14,7 @@ import pytest
 from robot.dynamixel.arm import DynamixelArm
 from robot.dynamixel.bus import NoStatusError
 from robot.errors import RobotError, SafetyStop
-from sim.dynamixel_emulator import DynamixelEmulator, EmulatedSerial, FaultConfig
+from sim.dynamixel.emulator import DynamixelEmulator, EmulatedSerial, FaultConfig
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from explore.cli import main
-from explore.config_check import RunConfigError, validate_run_config
+from explore.runs.config_check import RunConfigError, validate_run_config
 
 RIG_OPTION = "render_size=[64,64]"
 

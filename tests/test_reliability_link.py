@@ -26,17 +26,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from explore.clock import TwinClock
-from explore.explorer import Explorer
-from explore.rig import Rig, RigConfig
-from explore.store import RunStore
-from explore.strategies import make_strategy
+from explore.learner.strategies import make_strategy
+from explore.rigs.clock import TwinClock
+from explore.rigs.rig import Rig, RigConfig
+from explore.runs.explorer import Explorer
+from explore.runs.store import RunStore
 from robot.arm import RecoveryPolicy
 from robot.dynamixel.arm import DynamixelArm
 from robot.errors import SafetyStop
 from sim.camera import SimCamera
-from sim.dynamixel_emulator import DynamixelEmulator, EmulatedSerial
-from sim.dynamixel_server import PtyBusServer
+from sim.dynamixel.emulator import DynamixelEmulator, EmulatedSerial
+from sim.dynamixel.server import PtyBusServer
 from sim.twin import Twin
 
 LATENCY_S = 0.05  # slack per exchange: the emulator thread shares two busy cores (at 20 ms a

@@ -23,7 +23,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from explore.dmp import Dmp, DmpConfig
+from explore.learner.dmp import Dmp, DmpConfig
 from robot.arm import Arm, JointState, RecoveryPolicy
 from robot.errors import BusError, LinkLost, SafetyStop
 from robot.spec import ArmSpec, JointSpec, ergo_jr_spec

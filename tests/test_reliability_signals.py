@@ -43,7 +43,7 @@ CHILD = textwrap.dedent(
             tmp.write_text(repr(time.monotonic()))
             os.replace(tmp, stamp)
     SimArm._set_torque = _set_torque
-    from explore.explorer import Explorer
+    from explore.runs.explorer import Explorer
     _step = Explorer.step
     def step(self, k):
         row = _step(self, k)

@@ -149,8 +149,8 @@ def _report(kind: str, lats: list[float]) -> None:
 
 @contextlib.contextmanager
 def _serial_bus() -> Iterator[tuple[str, Callable[[], float | None]]]:
-    from sim.dynamixel_emulator import DynamixelEmulator
-    from sim.dynamixel_server import PtyBusServer
+    from sim.dynamixel.emulator import DynamixelEmulator
+    from sim.dynamixel.server import PtyBusServer
 
     emulator = DynamixelEmulator(None)  # ideal servos: the latency is the host's
 
@@ -167,8 +167,8 @@ def _serial_bus() -> Iterator[tuple[str, Callable[[], float | None]]]:
 def _can_bus() -> Iterator[tuple[str, Callable[[], float | None]]]:
     import can
 
-    from sim.canopen_drives import EmulatedDrives
-    from sim.canopen_server import SlcanPtyBridge
+    from sim.canopen.drives import EmulatedDrives
+    from sim.canopen.server import SlcanPtyBridge
     from sim.twin import Twin
 
     channel = f"sig-{uuid.uuid4().hex[:8]}"

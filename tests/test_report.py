@@ -11,7 +11,9 @@ import numpy as np
 import pytest
 
 from explore.cli import main
-from explore.report import FIG_PX, goal_panels, goals_figure, load_run, markdown_to_html
+from explore.report.figures import FIG_PX, goal_panels, goals_figure
+from explore.report.run_data import load_run
+from explore.report.summary import markdown_to_html
 
 N = 10
 
@@ -106,10 +108,10 @@ def test_goal_panels_follow_the_modules(runs):
 @pytest.fixture(scope="module")
 def goal_run(tmp_path_factory) -> Path:
     """A goal-exploration run on the twin: 3 random episodes, then 4 with goals."""
-    from explore.explorer import Explorer
-    from explore.rig import RigConfig, make_rig
-    from explore.store import RunStore
-    from explore.strategies import make_strategy
+    from explore.learner.strategies import make_strategy
+    from explore.rigs.rig import RigConfig, make_rig
+    from explore.runs.explorer import Explorer
+    from explore.runs.store import RunStore
 
     out = tmp_path_factory.mktemp("goal") / "rge-efr-s1"
     config = {
@@ -130,7 +132,7 @@ def goal_run(tmp_path_factory) -> Path:
 
 
 def test_report_of_a_goal_run_has_the_reached_outcomes(goal_run, tmp_path):
-    from explore.goal_spaces import wrap_safe_features
+    from explore.learner.goal_spaces import wrap_safe_features
 
     run = load_run(goal_run)
     assert run.goals.shape == (7, 3) and run.reached is not None

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from explore.explorer import Explorer
-from explore.rig import RigConfig, RigError, make_rig
-from explore.store import RunStore
-from explore.strategies import make_strategy
+from explore.learner.strategies import make_strategy
+from explore.rigs.rig import RigConfig, RigError, make_rig
+from explore.runs.explorer import Explorer
+from explore.runs.store import RunStore
 from sim.twin import Twin
 
 

@@ -1,4 +1,4 @@
-"""The SLCAN adapter emulated on a pty (``sim.canopen_server.SlcanPtyBridge``), seen by a
+"""The SLCAN adapter emulated on a pty (``sim.canopen.server.SlcanPtyBridge``), seen by a
 client on its serial port: what it keeps and what it drops of the bytes queued for the host."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import can
 import pytest
 import serial
 
-from sim.canopen_server import SlcanPtyBridge
+from sim.canopen.server import SlcanPtyBridge
 
 BOUND_S = 5.0  # a bound against hangs, not an expectation
 

@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from explore.record import EpisodeRecord
-from explore.store import RunStore, RunStoreError
+from explore.runs.record import EpisodeRecord
+from explore.runs.store import RunStore, RunStoreError
 
 
 def make_record(k: int) -> EpisodeRecord:

@@ -154,7 +154,7 @@ def test_vae_train_command_takes_the_capacity_schedule(tmp_path):
 
 
 def test_outcome_dataset_arm_at_rest_or_random():
-    from explore.dataset import make_outcome_dataset
+    from explore.rigs.sim_dataset import make_outcome_dataset
 
     rest = make_outcome_dataset(3, seed=1, progress=False)
     assert np.allclose(rest["joints"], 0.0, atol=0.02)  # the rest pose, as in an episode's outcome

@@ -1,7 +1,8 @@
-"""``ergo find-cameras`` (device indices that open, with their resolution) and ``ergo track``
-(the ball tracker on any camera source, one line per frame).
+"""``ergo find-cameras`` (device indices that open, with their resolution), ``ergo track``
+(the ball tracker on any camera source, one line per frame) and ``ergo vae train`` (the learned
+goal space's representation, on a dataset of outcome images).
 
-Imports nothing heavy at module level: OpenCV is imported inside the commands.
+Imports nothing heavy at module level: OpenCV and torch are imported inside the commands.
 """
 
 from __future__ import annotations
@@ -45,6 +46,32 @@ def register(sub: argparse._SubParsersAction) -> None:
     track.add_argument("--fps", type=float, default=None, help="requested frame rate")
     track.add_argument("--fourcc", default=None, help="requested pixel format, e.g. MJPG")
     track.set_defaults(func=_track)
+
+    v = sub.add_parser("vae", help="representation learning (VAE)")
+    vsub = v.add_subparsers(dest="vae_command", metavar="COMMAND")
+    vsub.required = True
+    t = vsub.add_parser(
+        "train", help="train a VAE on an outcome database", description="Resumable: rerun the "
+        "same command to continue from the last checkpoint in --out.",
+    )  # fmt: skip
+    t.add_argument("--data", type=Path, required=True, help="dataset .npz (ergo dataset outcomes)")
+    t.add_argument("--out", type=Path, required=True, help="model folder")
+    t.add_argument("--iterations", type=int, default=None, help="total iterations (default 3000)")
+    t.add_argument("--beta", type=float, default=None, help="KL weight (default 1: plain VAE)")
+    t.add_argument("--capacity", type=float, default=None, help="final KL capacity C, nats")
+    t.add_argument(
+        "--capacity-iterations", type=int, default=None, metavar="N",
+        help="iterations over which C rises from 0 (default 2000; docs/results.md: 500)",
+    )  # fmt: skip
+    t.add_argument("--lr", type=float, default=None, help="Adam learning rate (default 1e-3)")
+    t.add_argument("--batch", type=int, default=None, help="batch size (default 64)")
+    t.add_argument("--seed", type=int, default=0, help="random seed")
+    t.add_argument(
+        "--device", choices=("auto", "cpu", "cuda"), default="auto",
+        help="where to train: a CUDA GPU where torch sees one (auto, the default), or cpu/cuda",
+    )  # fmt: skip
+    t.add_argument("--no-progress", action="store_true", help="no progress bar")
+    t.set_defaults(func=_vae_train)
 
 
 def _error(message: str) -> int:
@@ -165,4 +192,32 @@ def _track(args: argparse.Namespace) -> int:
         return _error(str(exc))
     except KeyboardInterrupt:
         pass
+    return 0
+
+
+def _vae_train(args: argparse.Namespace) -> int:
+    from vision.vae import VaeConfig, VaeError
+    from vision.vae_train import TrainConfig, load_images, resolve_device, train_vae
+
+    try:
+        images = load_images(args.data)
+        model_cfg = VaeConfig(
+            beta=1.0 if args.beta is None else args.beta,
+            capacity=args.capacity,
+            capacity_iterations=args.capacity_iterations or VaeConfig().capacity_iterations,
+        )
+        defaults = TrainConfig()
+        train_cfg = TrainConfig(
+            iterations=args.iterations or defaults.iterations,
+            lr=args.lr or defaults.lr,
+            batch=args.batch or defaults.batch,
+            seed=args.seed,
+            device=args.device,
+        )
+        vae = train_vae(images, args.out, model_cfg, train_cfg, progress=not args.no_progress)
+    except VaeError as exc:
+        return _error(str(exc))
+    kl = ", ".join(f"{v:.2f}" for v in vae.config.kl_per_latent or [])
+    print(f"{args.out}: VAE saved (trained on {resolve_device(args.device)}); "
+          f"KL per latent (nats): {kl}")  # fmt: skip
     return 0

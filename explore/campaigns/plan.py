@@ -1,0 +1,167 @@
+"""Planning a campaign: the strategies' options, the campaign's id, the trials not finished yet,
+and ``run_campaign``, which runs them on a backend and writes the summary.
+
+A campaign is a folder ``CAMPAIGN/STRATEGY/seed-S`` of ordinary run folders
+(explore/runs/store.py) plus ``CAMPAIGN/campaign.json`` (its id) and ``CAMPAIGN/summary.csv``.
+Resumable whatever dies: finished trials are skipped, unfinished ones resume from their run
+folder (the history is append-only and fsync'ed per episode, so a killed worker loses at most
+the episode in flight; on the twin the resumed history equals an uninterrupted one).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+import uuid
+from pathlib import Path
+from typing import Any
+
+from explore.campaigns.backends import DEFAULT_RETRIES, BackendSettings, load_backend
+from explore.campaigns.stats import final_cells, write_summary
+from explore.campaigns.trial import (
+    CAMPAIGN_FILE,
+    TWIN_RIG,
+    CampaignError,
+    Trial,
+    is_physical,
+    read_json,
+    trial_resources,
+)
+
+# strategies that need a representation trained beforehand, and the flag that gives it
+VAE_FLAGS = {
+    "rge-vae": "vae", "mge-vae": "vae", "rge-betavae": "betavae", "mge-betavae": "betavae",
+}  # fmt: skip
+
+
+def option_target(key: str) -> tuple[str | None, str]:
+    """``"NAME:KEY"`` -> (NAME, KEY), an option for that strategy only; ``"KEY"`` -> (None,
+    KEY), one for every goal-exploration strategy."""
+    target, scoped, option = key.rpartition(":")
+    return (target, option) if scoped else (None, key)
+
+
+def strategy_options(
+    name: str, vae: Path | None, betavae: Path | None, common: dict[str, Any]
+) -> dict[str, Any]:
+    """Options of one strategy in a campaign: every plain ``KEY`` of ``common`` (goal-exploration
+    strategies, not rpe) and every ``NAME:KEY`` for this strategy (e.g. ``rge-vae:latents``);
+    raises CampaignError naming the command that makes a missing VAE."""
+    opts: dict[str, Any] = {}
+    for key, value in common.items():
+        target, option = option_target(key)
+        if target == name or (target is None and name != "rpe"):
+            opts[option] = value
+    from explore.learner.strategies import MAKE_VAE
+
+    flag = VAE_FLAGS.get(name)
+    if flag is not None:
+        path = vae if flag == "vae" else betavae
+        if path is None:
+            raise CampaignError(f"{name} needs --{flag} PATH; make one with: {MAKE_VAE[flag]}")
+        if not path.exists():
+            raise CampaignError(f"--{flag} {path}: no such file or folder; make one with: "
+                                f"{MAKE_VAE[flag]}")  # fmt: skip
+        opts["vae"] = str(path.resolve())
+    return opts
+
+
+def campaign_id(out: Path) -> str:
+    """The id in ``out/campaign.json``, written (new) if the file is absent."""
+    from explore.runs.store import atomic_write_text
+
+    marker = out / CAMPAIGN_FILE
+    found = read_json(marker).get("id")
+    if isinstance(found, str) and found:
+        return found
+    out.mkdir(parents=True, exist_ok=True)
+    new = uuid.uuid4().hex
+    doc = {"app": "ergo-explore", "id": new, "created": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+    atomic_write_text(marker, json.dumps(doc, indent=2))
+    return new
+
+
+def plan_trials(
+    out: Path,
+    strategies: list[str],
+    seeds: list[int],
+    episodes: int,
+    options: dict[str, dict[str, Any]],
+    rig: dict[str, Any],
+    cid: str | None,
+) -> list[Trial]:
+    """The trials not finished yet. Raises CampaignError when a run folder holds another run
+    (strategy, seed or rig) than the campaign's."""
+    from explore.runs.store import RunStore, RunStoreError
+
+    todo = []
+    for s in strategies:
+        for seed in seeds:
+            run_dir = out / s / f"seed-{seed}"
+            if RunStore.is_run(run_dir):
+                try:
+                    cfg = RunStore.read_meta(run_dir)["config"]
+                except RunStoreError as exc:
+                    raise CampaignError(str(exc)) from exc
+                held = (cfg["strategy"]["name"], int(cfg["seed"]), cfg["rig"]["name"],
+                        cfg["rig"]["rig_id"])  # fmt: skip
+                if held != (s, seed, rig["name"], rig["rig_id"]):
+                    raise CampaignError(f"{run_dir} holds another run ({held[0]}, seed {held[1]}, "
+                                        f"rig {held[2]} {held[3]})")  # fmt: skip
+                if final_cells(run_dir)[0] >= episodes:
+                    continue  # finished
+            todo.append(Trial(str(run_dir), s, seed, episodes, options[s], rig, cid,
+                              trial_resources(rig)))  # fmt: skip
+    return todo
+
+
+def run_campaign(
+    out: Path,
+    strategies: list[str],
+    seeds: list[int],
+    episodes: int,
+    jobs: int | None = None,
+    vae: Path | None = None,
+    betavae: Path | None = None,
+    options: dict[str, Any] | None = None,
+    progress: bool = False,
+    backend: str = "local",
+    ray_address: str | None = None,
+    rig: dict[str, Any] | None = None,
+    retries: int = DEFAULT_RETRIES,
+) -> list[dict[str, Any]]:
+    """Run every (strategy, seed) not finished yet on ``backend``; returns the summary rows
+    (and writes ``out/summary.csv``). Raises ``CampaignError`` (one line)."""
+    from calibration.store import CalibrationError, check_rig_id
+    from explore.learner.strategies import STRATEGIES
+
+    for name in strategies:
+        if name not in STRATEGIES:
+            raise CampaignError(f"unknown strategy {name!r}; choose among {', '.join(STRATEGIES)}")
+    for key in options or {}:
+        target, _ = option_target(key)
+        if target is not None and target not in strategies:
+            raise CampaignError(
+                f"--option {key}: {target!r} is not a strategy of this campaign "
+                f"({', '.join(strategies)})"
+            )
+    rig = dict(TWIN_RIG) if rig is None else rig
+    if is_physical(rig):
+        try:
+            check_rig_id(rig["rig_id"])
+        except CalibrationError as exc:
+            raise CampaignError(str(exc)) from exc
+        if backend == "local" and (jobs or 1) > 1:
+            raise CampaignError(
+                f"rig {rig['rig_id']!r} is one arm: the local backend runs its trials one at a "
+                "time (--jobs 1), or use --backend ray"
+            )
+    if ray_address is not None and backend != "ray":
+        raise CampaignError("--ray-address goes with --backend ray")
+    run = load_backend(backend)
+    opts = {s: strategy_options(s, vae, betavae, options or {}) for s in strategies}
+    out = out.resolve()  # workers elsewhere see the same absolute path
+    todo = plan_trials(out, strategies, seeds, episodes, opts, rig, campaign_id(out))
+    if todo:
+        run(todo, BackendSettings(jobs, progress, ray_address, retries))
+    return write_summary(out, strategies, seeds)

@@ -1,0 +1,284 @@
+"""One trial of a campaign, the worker side: every (strategy, seed) of an experiment is a
+trial that creates or reopens one run folder, runs the usual ``Explorer`` until the campaign's
+episode count and returns a ``TrialResult``. It runs in a local worker process or a Ray task
+(explore/campaigns/backends.py).
+
+Physical rigs: a trial on a rig other than the twin needs that rig, named by its id; on Ray
+it asks for the custom resource ``rig:<rig_id>`` (see ``trial_resources``), which only the
+host with that arm advertises, with capacity 1 so that one trial at a time uses an arm. On
+the worker, the rig's arena calibration is found by rig id (calibration/store.py).
+
+Files a trial adds to its run folder: ``trial.json`` (host, pid, start and end times, unix
+seconds) and ``trial.lock`` (an exclusive ``flock`` held while the trial runs, so two
+processes never append to one history).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import fcntl
+import json
+import os
+import socket
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+CAMPAIGN_FILE = "campaign.json"
+TRIAL_FILE = "trial.json"
+LOCK_FILE = "trial.lock"
+
+# rigs with nothing physical attached: any host can run them (explore/rigs/rig.py RIG_FACTORIES)
+VIRTUAL_RIGS = frozenset({"sim"})
+RIG_RESOURCE_PREFIX = "rig:"  # Ray custom resource of a physical rig: "rig:<rig_id>"
+TWIN_RIG: dict[str, Any] = {"name": "sim", "rig_id": "twin", "options": {}}
+
+
+class CampaignError(RuntimeError):
+    """A campaign could not be planned or one of its trials failed; the message is one line."""
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One (strategy, seed) of a campaign: everything a worker needs, JSON-like and picklable.
+
+    Attributes:
+        run_dir: absolute path of the run folder; on a cluster it must be on a file system that
+            every worker mounts at the same path.
+        strategy: strategy name (explore/strategies).
+        seed: the run's seed.
+        episodes: episodes the run must hold when the trial ends.
+        options: the strategy's options.
+        rig: a ``RigConfig`` as a dict (name, rig_id, options).
+        campaign_id: the id in ``CAMPAIGN/campaign.json``; a worker that reads another id (or
+            none) is not looking at the driver's folder. None for a run outside a campaign.
+        resources: Ray custom resources the trial needs (``trial_resources(rig)``).
+    """
+
+    run_dir: str
+    strategy: str
+    seed: int
+    episodes: int
+    options: dict[str, Any] = field(default_factory=dict)
+    rig: dict[str, Any] = field(default_factory=lambda: dict(TWIN_RIG))
+    campaign_id: str | None = None
+    resources: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def label(self) -> str:
+        return f"{self.strategy} seed {self.seed}"
+
+
+@dataclass(frozen=True)
+class TrialResult:
+    """What a finished trial reports.
+
+    Attributes:
+        strategy, seed: the trial's.
+        episodes: episodes in the run folder at the end.
+        cells: distinct ball cells reached after the last episode.
+        resumed_from: episodes already in the run folder when the trial started (0 = new run).
+        host, pid: where it ran.
+        started, finished: wall-clock times, unix seconds.
+    """
+
+    strategy: str
+    seed: int
+    episodes: int
+    cells: int
+    resumed_from: int
+    host: str
+    pid: int
+    started: float
+    finished: float
+
+    @property
+    def wall_s(self) -> float:
+        """Seconds the trial took inside its worker."""
+        return self.finished - self.started
+
+
+# ---- rigs as resources -----------------------------------------------------------------------
+def is_physical(rig: dict[str, Any]) -> bool:
+    """Whether a trial on this rig needs a real arm (a host that has it)."""
+    return rig["name"] not in VIRTUAL_RIGS
+
+
+def rig_resource(rig_id: str) -> str:
+    """The Ray custom resource a host with the arm ``rig_id`` advertises."""
+    return f"{RIG_RESOURCE_PREFIX}{rig_id}"
+
+
+def trial_resources(rig: dict[str, Any]) -> dict[str, float]:
+    """Ray custom resources a trial on ``rig`` asks for: ``{"rig:<rig_id>": 1}`` for a
+    physical rig (the host advertises capacity 1, so one trial at a time per arm), none for
+    the twin."""
+    return {rig_resource(rig["rig_id"]): 1.0} if is_physical(rig) else {}
+
+
+def check_rig_calibration(rig: dict[str, Any]) -> Path | None:
+    """On the host that runs a trial on a physical rig: the arena calibration file the rig will
+    use (found by rig id, calibration/store.py, or the ``arena_calibration`` option).
+
+    A campaign on an arm without ball tracking records only unknown (NaN) outcomes for hours,
+    so a missing file fails the trial before it starts. None for the twin.
+    """
+    if not is_physical(rig):
+        return None
+    from calibration.store import CalibrationError, calibration_path
+
+    named = rig.get("options", {}).get("arena_calibration")
+    try:
+        path = Path(named) if named else calibration_path("arena", rig["rig_id"])
+    except CalibrationError as exc:
+        raise CampaignError(str(exc)) from exc
+    if not path.is_file():
+        raise CampaignError(
+            f"host {socket.gethostname()}: no arena calibration for rig {rig['rig_id']!r} at "
+            f"{path}: run 'ergo calibrate arena --rig-id {rig['rig_id']}' on that host"
+        )
+    return path
+
+
+# ---- one trial -------------------------------------------------------------------------------
+def _check_campaign(trial: Trial) -> None:
+    if trial.campaign_id is None:
+        return
+    marker = Path(trial.run_dir).parents[1] / CAMPAIGN_FILE
+    try:
+        found = json.loads(marker.read_text()).get("id")
+    except (OSError, ValueError):
+        found = None
+    if found != trial.campaign_id:
+        raise CampaignError(
+            f"host {socket.gethostname()}: {marker} is missing or from another campaign: the "
+            "campaign folder must be on a file system every node mounts at the same path"
+        )
+
+
+@contextmanager
+def _trial_lock(run_dir: Path) -> Iterator[None]:
+    """Hold ``RUN/trial.lock`` exclusively, or fail at once naming who holds it."""
+    fd = os.open(run_dir / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = read_json(run_dir / TRIAL_FILE)
+            raise CampaignError(
+                f"{run_dir} is being run by another process (host {holder.get('host')}, "
+                f"pid {holder.get('pid')})"
+            ) from None
+        yield
+    finally:
+        os.close(fd)  # releases the lock
+
+
+def read_json(path: Path) -> dict[str, Any]:
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
+def _new_config(trial: Trial) -> dict[str, Any]:
+    from explore.runs.episode import EpisodeConfig
+
+    return {
+        "rig": {"name": trial.rig["name"], "rig_id": trial.rig["rig_id"],
+                "options": dict(trial.rig.get("options", {}))},
+        "strategy": {"name": trial.strategy, "options": trial.options},
+        "seed": trial.seed,
+        "episodes": trial.episodes,
+        "episode": dataclasses.asdict(EpisodeConfig()),
+    }  # fmt: skip
+
+
+def run_trial(trial: Trial, progress: bool = False) -> TrialResult:
+    """Run (or resume) one trial until ``trial.episodes``; runs in the worker (a local process
+    or a Ray task). Raises ``CampaignError`` (or the run store's, the rig's and the strategy's
+    errors) with a one-line message."""
+    from explore.learner.strategies import make_strategy
+    from explore.rigs.rig import RigConfig, make_rig
+    from explore.runs.episode import EpisodeConfig
+    from explore.runs.explorer import Explorer
+    from explore.runs.store import RunStore, RunStoreError, atomic_write_text
+
+    _check_campaign(trial)
+    check_rig_calibration(trial.rig)
+    path = Path(trial.run_dir)
+    started = time.time()
+    host, pid = socket.gethostname(), os.getpid()
+    with ExitStack() as held:  # unwinds in reverse: the store closes before the lock goes
+        store = None
+        if RunStore.is_run(path):
+            held.enter_context(_trial_lock(path))
+            store = RunStore.open(path)
+            held.callback(store.close)
+            config = store.config
+            config["episodes"] = trial.episodes
+            config["rig"]["options"].update(trial.rig.get("options", {}))  # ports change
+        else:
+            config = _new_config(trial)
+        # strategy and rig before a new run folder exists: a bad name leaves nothing
+        strat = make_strategy(config["strategy"]["name"], **config["strategy"]["options"])
+        rig = make_rig(RigConfig(**config["rig"]))
+        if store is None:
+            try:
+                store = RunStore.create(path, config)
+            except RunStoreError as exc:
+                raise CampaignError(str(exc)) from exc
+            held.enter_context(_trial_lock(path))
+            held.callback(store.close)
+        resumed_from = len(store)
+        info = {"host": host, "pid": pid, "started": started, "resumed_from": resumed_from}
+        atomic_write_text(path / TRIAL_FILE, json.dumps(info))
+        bar = _Bar(trial, resumed_from) if progress else None
+        if bar:
+            held.callback(bar.close)
+        explorer = Explorer(
+            rig, strat, store, seed=int(config["seed"]),
+            episode_config=EpisodeConfig(**config.get("episode", {})),
+            on_episode=bar.update if bar else None,
+        )  # fmt: skip
+        explorer.run(trial.episodes)
+        rows = explorer.metrics.rows
+        cells = int(rows[-1]["ball_cells"]) if rows else 0  # type: ignore[arg-type]
+        result = TrialResult(
+            trial.strategy, trial.seed, len(store), cells, resumed_from, host, pid, started,
+            time.time(),
+        )  # fmt: skip
+        atomic_write_text(path / TRIAL_FILE, json.dumps(dataclasses.asdict(result)))
+        return result
+
+
+class _Bar:
+    """tqdm bar of one trial, fed with the explorer's ``Progress``."""
+
+    def __init__(self, trial: Trial, initial: int) -> None:
+        from tqdm import tqdm
+
+        self.bar = tqdm(total=trial.episodes, initial=initial, unit="ep", mininterval=2.0,
+                        desc=f"{trial.strategy} s{trial.seed}", file=sys.stderr)  # fmt: skip
+
+    def update(self, p: Any) -> None:
+        self.bar.n = p.episode
+        self.bar.set_postfix(cells=p.ball_cells, phase=p.phase, refresh=False)
+        self.bar.update(0)
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def run_one(
+    run_dir: str, strategy: str, options: dict[str, Any], seed: int, episodes: int, progress: bool
+) -> tuple[str, int, int]:
+    """Run (or resume) one (strategy, seed) on the twin in ``run_dir``, outside any campaign;
+    returns (strategy, seed, final ball cells)."""
+    r = run_trial(Trial(str(run_dir), strategy, seed, episodes, dict(options)), progress)
+    return r.strategy, r.seed, r.cells

@@ -1,0 +1,75 @@
+"""The ``ergo`` command. Each package contributes its subcommands through a ``register``
+function in its own ``cli`` module (listed below); this root only assembles them."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+
+# Modules with ``register(subparsers) -> None``. Each must import quickly (no torch or MuJoCo at
+# module level) so that ``ergo --help`` stays fast.
+COMMAND_MODULES = (
+    "explore.cli.explore",
+    "sim.cli",
+    "robot.cli",
+    "vision.cli",
+    "calibration.cli",
+    "explore.cli.experiment",
+    "explore.cli.report",
+)
+
+
+class CliError(Exception):
+    """A user error: printed as one line ``ergo: error: ...`` with exit code 2."""
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """argparse with a one-line error (no usage dump) for bad flags."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _user_errors() -> tuple[type[BaseException], ...]:
+    """Exceptions that are the user's input or the hardware's state, not bugs: one line."""
+    from robot.errors import RobotError
+    from vision.camera import CameraError
+
+    return (CliError, RobotError, CameraError, FileNotFoundError, PermissionError)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = OneLineParser(
+        prog="ergo",
+        description="Intrinsically motivated goal exploration on a Poppy Ergo Jr and its twin.",
+    )
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for name in COMMAND_MODULES:
+        try:
+            module = importlib.import_module(name)
+        except ModuleNotFoundError as exc:
+            if exc.name == name:
+                continue  # that package has no commands yet
+            raise
+        module.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    for pkg in ("robot", "vision", "explore", "sim", "calibration"):
+        logging.getLogger(pkg).setLevel(logging.DEBUG if args.verbose else logging.INFO)
+    try:
+        return int(args.func(args) or 0)
+    except _user_errors() as exc:
+        print(f"ergo: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("ergo: interrupted", file=sys.stderr)
+        return 130

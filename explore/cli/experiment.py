@@ -1,0 +1,173 @@
+"""``ergo experiment`` (campaigns of runs) and ``ergo dataset outcomes``.
+
+A campaign is a folder ``CAMPAIGN/STRATEGY/seed-S`` of ordinary run folders
+(explore/runs/store.py), one per (strategy, seed), each run by the usual ``Explorer`` as a
+trial (explore/campaigns/trial.py), on this machine's processes (``--backend local``) or as Ray
+tasks (``--backend ray``). It is resumable: finished runs are skipped, unfinished ones resumed.
+At the end the final number of ball cells per strategy (mean +- std over seeds) is printed and
+written to ``CAMPAIGN/summary.csv`` with a Welch t-test against RPE, and ``CAMPAIGN/report``
+gets the coverage curves (mean and spread over seeds), the scatter plots of end-effector and
+ball positions per strategy, and summary.md / summary.html (``--no-report`` skips it).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from explore.campaigns.backends import BACKENDS, DEFAULT_RETRIES
+from explore.campaigns.trial import CampaignError
+from explore.cli import CliError
+from explore.cli.explore import add_rig_arguments, parse_key_values, rig_options
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "experiment",
+        help="run a campaign of strategies x seeds (twin or rig, local or Ray) and tabulate cells",
+        description="Each (strategy, seed) is a run folder CAMPAIGN/STRATEGY/seed-S; finished "
+        "runs are skipped and unfinished ones resumed.",
+    )
+    p.add_argument("--strategies", required=True, help="comma-separated, e.g. rpe,rge-efr")
+    p.add_argument(
+        "--seeds", default="1",
+        help="a count N (seeds 0..N-1, e.g. 8), a list (0,2,5) or a range (3-7); one seed S "
+        "alone: S-S (default 1: seed 0)",
+    )  # fmt: skip
+    p.add_argument("--episodes", type=int, required=True, help="episodes per run")
+    p.add_argument("--out", type=Path, required=True, help="campaign folder")
+    p.add_argument(
+        "--jobs", "--workers", type=int, default=None,
+        help="local: runs in parallel (processes, default 1); ray: CPUs of the Ray instance "
+        "started for the campaign (default all; a cluster joined with --ray-address has its own)",
+    )  # fmt: skip
+    p.add_argument(
+        "--backend", choices=sorted(BACKENDS), default="local",
+        help="local processes (default) or Ray tasks (pip install 'ergo-explore[ray]')",
+    )  # fmt: skip
+    p.add_argument(
+        "--ray-address", metavar="ADDR",
+        help="ray: join this cluster (HOST:PORT of its head, or auto); default: start Ray on "
+        "127.0.0.1 for this campaign",
+    )  # fmt: skip
+    p.add_argument(
+        "--retries", type=int, default=DEFAULT_RETRIES,
+        help="ray: restarts of a trial whose worker or node died; it resumes (default 2)",
+    )  # fmt: skip
+    p.add_argument("--vae", type=Path, help="VAE model for the *-vae strategies")
+    p.add_argument("--betavae", type=Path, help="beta-VAE model for the *-betavae strategies")
+    p.add_argument(
+        "--option", action="append", default=[], metavar="KEY=JSON",
+        help="strategy option for every goal-exploration run, e.g. bootstrap=100, or for one "
+        "strategy: STRATEGY:KEY=JSON, e.g. 'rge-vae:latents=\"zscore\"'",
+    )  # fmt: skip
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.add_argument(
+        "--no-report", action="store_true",
+        help="skip CAMPAIGN/report (coverage curves, scatter plots, summary.md with the Welch "
+        "test), written at the end by default; `ergo report CAMPAIGN` writes it any time",
+    )  # fmt: skip
+    add_rig_arguments(p)
+    p.set_defaults(func=run_experiment)
+
+    d = sub.add_parser("dataset", help="datasets rendered on the twin")
+    dsub = d.add_subparsers(dest="dataset_command", metavar="COMMAND")
+    dsub.required = True
+    o = dsub.add_parser(
+        "outcomes", help="render ball-on-ring scenes as episodes see them (VAE training data)"
+    )
+    o.add_argument("--n", type=int, default=10000, help="number of scenes (default 10000)")
+    o.add_argument("--out", type=Path, required=True, help="output .npz")
+    o.add_argument("--seed", type=int, default=0, help="random seed")
+    o.add_argument(
+        "--arm", choices=("rest", "random"), default="rest",
+        help="arm at rest (default: as in an episode's outcome image) or in random poses",
+    )  # fmt: skip
+    o.add_argument("--no-progress", action="store_true", help="no progress bar")
+    o.set_defaults(func=run_dataset_outcomes)
+
+
+# ---- campaigns ------------------------------------------------------------------------------
+def _csv_list(text: str, what: str) -> list[str]:
+    items = [s.strip() for s in text.split(",") if s.strip()]
+    if not items:
+        raise CliError(f"--{what}: give at least one value")
+    return items
+
+
+def parse_seeds(text: str) -> list[int]:
+    """``--seeds``: "8" -> [0..7] (a count, as in ``--seeds 8``), "0,2,5" -> [0, 2, 5],
+    "3-7" -> [3..7], "4-4" -> [4]; lists may mix both ("0,3-5"). Raises CliError."""
+    text = text.strip()
+    if "," not in text and "-" not in text:
+        try:
+            count = int(text)
+        except ValueError:
+            raise CliError(f"--seeds {text!r}: give a count, a list or a range") from None
+        if count < 1:
+            raise CliError(f"--seeds {count}: a count must be at least 1 (one seed S: S-S)")
+        return list(range(count))
+    seeds: list[int] = []
+    for item in _csv_list(text, "seeds"):
+        try:
+            if "-" in item:
+                lo, hi = (int(v) for v in item.split("-"))
+                if hi < lo:
+                    raise CliError(f"--seeds {item}: an empty range")
+                seeds.extend(range(lo, hi + 1))
+            else:
+                seeds.append(int(item))
+        except ValueError:  # also a negative seed: "-1" splits into "" and "1"
+            raise CliError(f"--seeds {item!r}: not a seed or a range of seeds") from None
+    return list(dict.fromkeys(seeds))  # each seed once, in the order given
+
+
+def run_experiment(args: argparse.Namespace) -> int:
+    if args.episodes < 1:
+        raise CliError(f"--episodes must be at least 1, got {args.episodes}")
+    if args.jobs is not None and args.jobs < 1:
+        raise CliError(f"--jobs must be at least 1, got {args.jobs}")
+    if args.retries < 0:
+        raise CliError(f"--retries must be at least 0, got {args.retries}")
+    strategies = _csv_list(args.strategies, "strategies")
+    seeds = parse_seeds(args.seeds)
+    rig = {"name": args.rig or "sim", "rig_id": args.rig_id or "twin",
+           "options": rig_options(args)}  # fmt: skip
+    from explore.campaigns.plan import run_campaign
+    from explore.campaigns.stats import format_table
+
+    try:
+        rows = run_campaign(
+            args.out, strategies, seeds, args.episodes, args.jobs, args.vae, args.betavae,
+            parse_key_values(args.option, "--option"), progress=not args.no_progress,
+            backend=args.backend, ray_address=args.ray_address, rig=rig, retries=args.retries,
+        )  # fmt: skip
+    except CampaignError as exc:
+        raise CliError(str(exc)) from exc
+    print(format_table(rows))
+    print(f"summary: {args.out / 'summary.csv'}")
+    if not args.no_report:
+        from explore.report.summary import report_campaign
+        from explore.runs.store import RunStoreError
+
+        try:
+            written = report_campaign(args.out)
+        except (OSError, RunStoreError, ValueError) as exc:  # the runs are safe either way
+            print(f"report not written ({exc}); try `ergo report {args.out}`")
+        else:
+            print(f"report: {written[-2]} (figures beside it)")
+    return 0
+
+
+# ---- dataset ---------------------------------------------------------------------------------
+def run_dataset_outcomes(args: argparse.Namespace) -> int:
+    from explore.rigs.sim_dataset import make_outcome_dataset, save_dataset
+
+    if args.n < 1:
+        raise CliError(f"--n must be at least 1, got {args.n}")
+    if args.out.suffix != ".npz":
+        raise CliError(f"--out {args.out}: expected a .npz file name")
+    data = make_outcome_dataset(args.n, seed=args.seed, progress=not args.no_progress, arm=args.arm)
+    save_dataset(args.out, data)
+    print(f"{args.out}: {args.n} images {data['images'].shape[1:]} with ball positions")
+    return 0

@@ -1,0 +1,225 @@
+"""``ergo explore``: run (or resume) an exploration on a rig."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from explore.cli import CliError
+from explore.cli.rerun_flags import add_rerun_arguments
+from explore.rigs.rig import RIG_FACTORIES
+
+
+def add_rig_arguments(p: argparse.ArgumentParser) -> None:
+    """Flags that choose and configure a rig (shared by the commands that drive one)."""
+    p.add_argument("--rig", choices=sorted(RIG_FACTORIES), default=None, help="rig (default sim)")
+    p.add_argument("--rig-id", default=None, help="physical rig id (finds its calibration)")
+    p.add_argument("--port", help="dynamixel: serial port, e.g. /dev/ttyUSB0 or /dev/pts/N")
+    p.add_argument("--baud", type=int, help="dynamixel: baud rate (default 1000000)")
+    p.add_argument("--can", help="canopen: python-can bus, e.g. socketcan:can0, slcan:/dev/pts/N")
+    p.add_argument("--bitrate", type=int, help="canopen: CAN bitrate (default 1000000)")
+    p.add_argument("--camera", help="hardware rigs: camera index, path or URL")
+    p.add_argument(
+        "--rig-option", action="append", default=[], metavar="KEY=JSON",
+        help="any other rig option, e.g. render_size=[240,240]",
+    )  # fmt: skip
+
+
+def rig_options(args: argparse.Namespace) -> dict[str, Any]:
+    opts: dict[str, Any] = {}
+    for key in ("port", "baud", "can", "bitrate", "camera"):
+        value = getattr(args, key, None)
+        if value is not None:
+            opts[key] = value
+    opts.update(parse_key_values(args.rig_option, "--rig-option"))
+    return opts
+
+
+def parse_key_values(items: list[str], flag: str) -> dict[str, Any]:
+    """``KEY=VALUE`` flags into a dict; VALUE is JSON when it parses, else a plain string."""
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, raw = item.partition("=")
+        if not sep or not key:
+            raise CliError(f"{flag} {item!r}: expected KEY=VALUE")
+        try:
+            out[key] = json.loads(raw)
+        except json.JSONDecodeError:
+            out[key] = raw
+    return out
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "explore",
+        help="run an exploration (or resume one) on the twin or a physical arm",
+        description="Explore with a strategy; every episode is stored durably in the run folder.",
+    )
+    add_rig_arguments(p)
+    p.add_argument("--strategy", default=None, help="exploration strategy (default rpe)")
+    p.add_argument(
+        "--strategy-option", action="append", default=[], metavar="KEY=JSON",
+        help="strategy option, repeatable (JSON or a string): bootstrap=100, vae=models/vae",
+    )  # fmt: skip
+    p.add_argument("--episodes", type=int, default=None, help="total episodes (default 300)")
+    p.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
+    p.add_argument("--out", type=Path, help="new run folder (default runs/STRATEGY-sSEED-TIME)")
+    p.add_argument("--resume", type=Path, metavar="RUN", help="continue the run in RUN")
+    p.add_argument(
+        "--resume-or-new", action="store_true",
+        help="with --out: continue the run there if it exists, else start it",
+    )  # fmt: skip
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_rerun_arguments(p)
+    p.set_defaults(func=run_explore)
+
+
+def _new_config(args: argparse.Namespace) -> dict[str, Any]:
+    from explore.runs.episode import EpisodeConfig
+
+    return {
+        "rig": {"name": args.rig or "sim", "rig_id": args.rig_id or "twin",
+                "options": rig_options(args)},
+        "strategy": {
+            "name": args.strategy or "rpe",
+            "options": parse_key_values(args.strategy_option, "--strategy-option"),
+        },
+        "seed": 0 if args.seed is None else args.seed,
+        "episodes": 300 if args.episodes is None else args.episodes,
+        "episode": dataclasses.asdict(EpisodeConfig()),
+    }  # fmt: skip
+
+
+def _check_resume_flags(args: argparse.Namespace, config: dict[str, Any]) -> None:
+    """On resume, the run's own config wins; flags that would change it are refused."""
+    for flag, value, key in (
+        ("--strategy", args.strategy, config["strategy"]["name"]),
+        ("--seed", args.seed, config["seed"]),
+        ("--rig", args.rig, config["rig"]["name"]),
+    ):
+        if value is not None and value != key:
+            raise CliError(f"{flag} {value} differs from the run's {key!r}: a run keeps its config")
+    given = parse_key_values(args.strategy_option, "--strategy-option")
+    if given and given != config["strategy"].get("options", {}):
+        raise CliError(
+            f"--strategy-option {given} differs from the run's {config['strategy']['options']}: "
+            "a run keeps the strategy options it started with"
+        )
+
+
+def run_explore(args: argparse.Namespace) -> int:
+    from explore.learner.strategies import StrategyError, make_strategy
+    from explore.report.figures import coverage_curve
+    from explore.rigs.rig import RigConfig, RigError, make_rig
+    from explore.runs.config_check import validate_run_config
+    from explore.runs.explorer import Explorer
+    from explore.runs.store import RunStore, RunStoreError
+    from robot.errors import RobotError
+
+    if args.episodes is not None and args.episodes < 1:
+        raise CliError(f"--episodes must be at least 1, got {args.episodes}")
+    if args.resume and args.out:
+        raise CliError("give either --resume RUN or --out DIR, not both")
+    if args.resume_or_new and not args.out:
+        raise CliError("--resume-or-new needs --out DIR")
+    resume_path = args.resume
+    if args.resume_or_new and RunStore.is_run(args.out):
+        resume_path = args.out
+    try:
+        if resume_path is not None:
+            store = RunStore.open(resume_path)
+            config = store.config
+            validate_run_config(config, where=resume_path / "run.json")
+            _check_resume_flags(args, config)
+            if args.episodes is not None:
+                config["episodes"] = args.episodes
+            config["rig"]["options"].update(rig_options(args))  # ports change between sessions
+            if store.truncated_bytes:
+                print(
+                    f"dropped a torn last record ({store.truncated_bytes} bytes)", file=sys.stderr
+                )
+        else:
+            config = _new_config(args)
+            store = None
+        if resume_path is None:
+            validate_run_config(config, where="command line")
+        # build strategy and rig before a new run folder exists: a bad name leaves nothing
+        strategy = make_strategy(config["strategy"]["name"], **config["strategy"]["options"])
+        rig = make_rig(RigConfig(**config["rig"]))
+        if store is None:
+            out = args.out or Path("runs") / (
+                f"{config['strategy']['name']}-s{config['seed']}-{time.strftime('%Y%m%d-%H%M%S')}"
+            )
+            store = RunStore.create(out, config)
+    except (RunStoreError, RigError, StrategyError) as exc:
+        raise CliError(str(exc)) from exc
+
+    from explore.cli.rerun_flags import make_recorder
+    from explore.runs.episode import EpisodeConfig
+
+    total = int(config["episodes"])
+    bar = _progress_bar(total, len(store), disabled=args.no_progress)
+    recorder = make_recorder(
+        args, store.path, records=store.records, config=config, strategy=strategy
+    )
+
+    def on_episode(p: Any) -> None:
+        if bar:
+            bar.update(p)
+        if recorder:
+            recorder.on_progress(p)
+
+    explorer = Explorer(
+        rig, strategy, store, seed=int(config["seed"]),
+        episode_config=EpisodeConfig(**config.get("episode", {})),
+        on_episode=on_episode,
+        on_record=recorder.on_record if recorder else None,
+    )  # fmt: skip
+    try:
+        explorer.run(total)
+    except RobotError as exc:
+        raise CliError(
+            f"{exc}; run paused after {len(store)} episodes: resume with "
+            f"ergo explore --resume {store.path}"
+        ) from exc
+    finally:
+        if recorder:
+            recorder.close()
+        store.close()
+        if bar:
+            bar.close()
+        if (store.path / "metrics.csv").exists() and len(store):
+            coverage_curve(store.path)
+    last = explorer.metrics.rows[-1] if explorer.metrics.rows else None
+    cells = last["ball_cells"] if last else 0
+    print(f"{store.path}: {len(store)} episodes, {cells} ball cells reached")
+    return 0
+
+
+class _Bar:
+    """tqdm bar fed with ``Progress`` objects."""
+
+    def __init__(self, total: int, initial: int) -> None:
+        from tqdm import tqdm
+
+        self.bar = tqdm(total=total, initial=initial, unit="ep", mininterval=1.0, file=sys.stderr)
+
+    def update(self, p: Any) -> None:
+        self.bar.n = p.episode
+        self.bar.set_postfix(
+            cells=p.ball_cells, ee=p.ee_cells, phase=p.phase, eps=f"{p.episodes_per_s:.1f}",
+            refresh=False,
+        )  # fmt: skip
+        self.bar.update(0)
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def _progress_bar(total: int, initial: int, disabled: bool) -> _Bar | None:
+    return None if disabled else _Bar(total, initial)

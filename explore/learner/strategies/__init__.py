@@ -1,0 +1,12 @@
+"""Exploration strategies behind one interface (``base.Strategy``), built by name."""
+
+from explore.learner.strategies.base import (
+    MAKE_VAE,
+    STRATEGIES,
+    Proposal,
+    Strategy,
+    StrategyError,
+    make_strategy,
+)
+
+__all__ = ["MAKE_VAE", "STRATEGIES", "Proposal", "Strategy", "StrategyError", "make_strategy"]

@@ -1,0 +1,145 @@
+"""What a report reads of a run folder (``RunData``, ``load_run``) and of a campaign folder
+(``find_campaign_runs``). Runs are read without modifying them (safe while an exploration is
+still writing)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from explore.learner.goal_outcomes import goal_outcome_of
+from explore.report.recorder import recording_paths
+from explore.runs.metrics import MetricsLog
+from explore.runs.store import RunStore, iter_history
+
+
+@dataclass
+class RunData:
+    """What a report needs from one run (N episodes).
+
+    Attributes:
+        episode, ball_cells, ee_cells, settle_s: (N,) per episode (cells reached so far).
+        ball_moved: (N,) bool. kind: (N,) str. module: (N,) int.
+        ball, context_ball: (N, 2) m, ball after / before each episode (NaN when not seen).
+        ee_final: (N, 2) m, tool tip (x, y) at the end of each movement.
+        goals: (N, g) goals, g = 0 when the strategy sets none (NaN-padded: a goal has the
+            size of its module, g is the largest).
+        reached: (N, g) each episode's outcome in its goal's coordinates (NaN where it has no
+            goal or was not seen), or None when the run's goal space cannot be rebuilt
+            (``explore.learner.goal_outcomes.goal_outcome_of``: engineered spaces, or a learned
+            one whose model is still there).
+    """
+
+    path: Path
+    meta: dict[str, Any]
+    episode: np.ndarray
+    ball_cells: np.ndarray
+    ee_cells: np.ndarray
+    settle_s: np.ndarray
+    ball_moved: np.ndarray
+    kind: np.ndarray
+    module: np.ndarray
+    ball: np.ndarray
+    context_ball: np.ndarray
+    ee_final: np.ndarray
+    goals: np.ndarray
+    reached: np.ndarray | None = None
+    recordings: list[Path] = field(default_factory=list)
+
+    @property
+    def config(self) -> dict[str, Any]:
+        return self.meta["config"]
+
+    @property
+    def n(self) -> int:
+        return len(self.episode)
+
+    @property
+    def strategy(self) -> str:
+        return str(self.config.get("strategy", {}).get("name", "?"))
+
+    @property
+    def seed(self) -> int:
+        return int(self.config.get("seed", 0))
+
+    def final(self) -> dict[str, float]:
+        """Final figures: episodes, ball and end-effector cells, fraction that moved the ball."""
+        return {
+            "episodes": float(self.n),
+            "ball_cells": float(self.ball_cells[-1]) if self.n else 0.0,
+            "ee_cells": float(self.ee_cells[-1]) if self.n else 0.0,
+            "moved_fraction": float(self.ball_moved.mean()) if self.n else 0.0,
+        }
+
+
+def load_run(path: Path, goal_outcomes: bool = True) -> RunData:
+    """Read a run folder (config, history; metrics recomputed from the history).
+
+    ``goal_outcomes``: also map each outcome into the run's goal space (``RunData.reached``,
+    for the goals figure). For a latent run that encodes every outcome image with its VAE, the
+    slow part of a report; campaign reports do without it.
+    """
+    path = Path(path)
+    meta = RunStore.read_meta(path)
+    metrics = MetricsLog(path / "metrics.csv")  # never written here
+    cols: dict[str, list[Any]] = {k: [] for k in ("ball", "context_ball", "ee_final", "goals")}
+    module, reached = [], []
+    outcome_of = (
+        goal_outcome_of(meta["config"].get("strategy", {}), load_models=True)
+        if goal_outcomes
+        else None
+    )
+    for rec in iter_history(path):
+        metrics.update(rec)
+        cols["ball"].append(np.asarray(rec.ball, dtype=float))
+        cols["context_ball"].append(np.asarray(rec.context_ball, dtype=float))
+        cols["ee_final"].append(np.asarray(rec.final_end_effector, dtype=float)[:2])
+        cols["goals"].append(np.asarray(rec.goal, dtype=float).ravel())
+        module.append(rec.module)
+        reached.append(outcome_of(rec) if outcome_of and rec.goal.size else None)
+    rows = metrics.rows
+    g = max((len(x) for x in cols["goals"]), default=0)
+    goals = np.full((len(rows), g), np.nan)
+    for i, x in enumerate(cols["goals"]):
+        goals[i, : len(x)] = x
+    reached_arr = None
+    if g and outcome_of is not None:
+        reached_arr = np.full((len(rows), g), np.nan)
+        for i, (x, r) in enumerate(zip(cols["goals"], reached, strict=True)):
+            if r is not None and np.size(r) == len(x):
+                reached_arr[i, : len(x)] = np.asarray(r, dtype=float).ravel()
+
+    def col(name: str, dtype: Any = float) -> np.ndarray:
+        return np.array([r[name] for r in rows], dtype=dtype)
+
+    def pts(name: str) -> np.ndarray:
+        return np.asarray(cols[name], dtype=float).reshape(-1, 2)
+
+    return RunData(
+        path=path,
+        meta=meta,
+        episode=col("episode", int),
+        ball_cells=col("ball_cells"),
+        ee_cells=col("ee_cells"),
+        settle_s=col("settle_s"),
+        ball_moved=col("ball_moved", int).astype(bool),
+        kind=col("kind", str),
+        module=np.asarray(module, dtype=int),
+        ball=pts("ball"),
+        context_ball=pts("context_ball"),
+        ee_final=pts("ee_final"),
+        goals=goals,
+        reached=reached_arr,
+        recordings=recording_paths(path),
+    )
+
+
+def find_campaign_runs(campaign: Path) -> dict[str, list[Path]]:
+    """Runs of a campaign, ``CAMPAIGN/STRATEGY/RUN/run.json``, by strategy folder name."""
+    groups: dict[str, list[Path]] = {}
+    for meta in sorted(Path(campaign).glob("*/*/run.json")):
+        groups.setdefault(meta.parent.parent.name, []).append(meta.parent)
+    return groups

@@ -1,0 +1,254 @@
+"""A one-page summary (Markdown, and HTML that embeds the figures) of a run or of a campaign
+of runs, with its figures (explore/report/figures.py).
+
+A run report (``report_run``) writes into its output folder ``coverage.png``, ``scatter.png``,
+``goals.png`` (only when the strategy set goals), ``summary.md`` and ``summary.html``.
+
+A campaign is a folder ``CAMPAIGN/STRATEGY/RUN/`` (e.g. ``CAMPAIGN/rpe/seed-0/``). Its report
+(``report_campaign``) writes ``campaign_coverage.png``, ``campaign_scatter.png`` and the
+summaries.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+from pathlib import Path
+
+import numpy as np
+
+from explore.report.figures import (
+    FIG_PX,
+    N_CELLS,
+    campaign_coverage_figure,
+    campaign_scatter_figure,
+    coverage_figure,
+    goals_figure,
+    sample_std,
+    scatter_figure,
+)
+from explore.report.run_data import RunData, find_campaign_runs, load_run
+from explore.runs.store import RunStore
+
+
+# ---- summaries -------------------------------------------------------------------------------
+def _md_table(header: list[str], rows: list[list[str]]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def _run_markdown(run: RunData, figures: list[Path], out_dir: Path) -> str:
+    f = run.final()
+    cfg = run.config
+    kinds = ", ".join(f"{k} {int((run.kind == k).sum())}" for k in sorted(set(run.kind.tolist())))
+    rows = [
+        ["episodes", f"{f['episodes']:.0f} (planned {cfg.get('episodes', '?')})"],
+        ["ball cells reached", f"{f['ball_cells']:.0f} of {N_CELLS}"],
+        ["end-effector cells reached", f"{f['ee_cells']:.0f} of {N_CELLS}"],
+        [
+            "episodes that moved the ball",
+            f"{int(run.ball_moved.sum())} ({100 * f['moved_fraction']:.1f} %)",
+        ],
+        ["kinds", kinds or "-"],
+        ["mean settle time", f"{run.settle_s.mean() if run.n else 0:.2f} s"],
+    ]
+    parts = [
+        f"# Run report: {run.path.name}",
+        "",
+        f"Run folder `{run.path}`, created {run.meta.get('created', '?')}; strategy "
+        f"**{run.strategy}**, seed {run.seed}, rig {cfg.get('rig', {}).get('name', '?')}.",
+        "",
+        "## Results",
+        "",
+        _md_table(["measure", "value"], rows),
+        "",
+        "## Figures",
+        "",
+    ]
+    parts += [f"![{p.stem}]({p.relative_to(out_dir)})\n" for p in figures]
+    parts += ["## Recording", ""]
+    if run.recordings:
+        files = " ".join(str(p) for p in run.recordings)
+        parts += [f"Open it with `ergo replay {run.path}` or `rerun {files}`.", ""]
+    else:
+        parts += [f"No rerun recording; `ergo replay {run.path}` writes one from the history.", ""]
+    parts += ["## Config", "", "```json", json.dumps(cfg, indent=2, sort_keys=True), "```", ""]
+    return "\n".join(parts)
+
+
+def _campaign_markdown(
+    campaign: Path, groups: dict[str, list[RunData]], figures: list[Path], out_dir: Path
+) -> str:
+    from explore.campaigns.stats import welch_vs_baseline
+
+    baseline = [r.final()["ball_cells"] for r in groups.get("rpe", [])]
+    rows = []
+    for name, runs in sorted(groups.items()):
+        finals = [r.final() for r in runs]
+        cells = np.array([x["ball_cells"] for x in finals])
+        p = np.nan if name == "rpe" else welch_vs_baseline(cells, baseline)[1]  # nan: < 2 seeds
+        ee = np.array([x["ee_cells"] for x in finals])
+        moved = np.array([x["moved_fraction"] for x in finals])
+        eps = sorted({int(x["episodes"]) for x in finals})
+        rows.append(
+            [
+                name,
+                str(len(runs)),
+                "/".join(map(str, eps)),
+                f"{cells.mean():.1f} +- {sample_std(cells):.1f} "
+                f"[{cells.min():.0f}-{cells.max():.0f}]",
+                f"{ee.mean():.1f} +- {sample_std(ee):.1f}",
+                f"{100 * moved.mean():.1f} %",
+                "" if np.isnan(p) else f"{p:.2g}",
+            ]
+        )
+    parts = [
+        f"# Campaign report: {campaign.name}",
+        "",
+        f"Campaign folder `{campaign}`: {sum(len(v) for v in groups.values())} runs.",
+        "",
+        "## Results (final values; mean +- std over seeds [min-max])",
+        "",
+        _md_table(
+            [
+                "strategy",
+                "seeds",
+                "episodes",
+                "ball cells",
+                "end-effector cells",
+                "episodes that moved the ball",
+                "Welch p vs rpe (ball cells)",
+            ],
+            rows,
+        ),
+        "",
+        "## Figures",
+        "",
+    ]
+    parts += [f"![{p.stem}]({p.relative_to(out_dir)})\n" for p in figures]
+    parts += ["## Runs", ""]
+    for name, runs in sorted(groups.items()):
+        for r in runs:
+            f = r.final()
+            parts.append(
+                f"- {name} `{r.path.name}` (seed {r.seed}): {f['episodes']:.0f} episodes, "
+                f"{f['ball_cells']:.0f} ball cells"
+            )
+    parts.append("")
+    return "\n".join(parts)
+
+
+def markdown_to_html(md: str, base: Path) -> str:
+    """A small converter for the summaries written here (headings, paragraphs, tables, images
+    embedded as base64, code blocks, lists): no Markdown package needed."""
+    out: list[str] = []
+    lines = md.splitlines()
+    i = 0
+    while i < len(lines):
+        line = lines[i]
+        if line.startswith("```"):
+            j = i + 1
+            while j < len(lines) and not lines[j].startswith("```"):
+                j += 1
+            out.append("<pre>" + html.escape("\n".join(lines[i + 1 : j])) + "</pre>")
+            i = j + 1
+            continue
+        if line.startswith("|"):
+            rows = []
+            while i < len(lines) and lines[i].startswith("|"):
+                if not set(lines[i]) <= set("|-: "):
+                    rows.append([c.strip() for c in lines[i].strip("|").split("|")])
+                i += 1
+            head, *body = rows
+            out.append("<table><tr>" + "".join(f"<th>{_inline(c)}</th>" for c in head) + "</tr>")
+            for r in body:
+                out.append("<tr>" + "".join(f"<td>{_inline(c)}</td>" for c in r) + "</tr>")
+            out.append("</table>")
+            continue
+        if line.startswith("!["):
+            alt, _, rest = line[2:].partition("](")
+            src = base / rest.rstrip(")")
+            data = base64.b64encode(src.read_bytes()).decode("ascii")
+            out.append(
+                f'<p><img alt="{html.escape(alt)}" src="data:image/png;base64,{data}" '
+                f'width="{FIG_PX[0]}" height="{FIG_PX[1]}"></p>'
+            )
+        elif line.startswith("#"):
+            level = len(line) - len(line.lstrip("#"))
+            out.append(f"<h{level}>{_inline(line[level:].strip())}</h{level}>")
+        elif line.startswith("- "):
+            out.append(f"<ul><li>{_inline(line[2:])}</li></ul>")
+        elif line.strip():
+            out.append(f"<p>{_inline(line)}</p>")
+        i += 1
+    body = "\n".join(out)
+    title = html.escape(lines[0].lstrip("# ")) if lines else "report"
+    style = (
+        "body{font-family:sans-serif;max-width:1000px;margin:auto}"
+        "table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:3px 8px}"
+        "pre{background:#f4f4f4;padding:8px}"
+    )
+    return (
+        f"<!doctype html>\n<html><head><meta charset='utf-8'><title>{title}</title>"
+        f"<style>{style}</style></head><body>\n{body}\n</body></html>\n"
+    )
+
+
+def _inline(text: str) -> str:
+    """Escape, then `code` and **bold**."""
+    import re
+
+    t = html.escape(text)
+    t = re.sub(r"`([^`]*)`", r"<code>\1</code>", t)
+    return re.sub(r"\*\*([^*]*)\*\*", r"<b>\1</b>", t)
+
+
+def _write_summaries(md: str, out_dir: Path) -> list[Path]:
+    md_path, html_path = out_dir / "summary.md", out_dir / "summary.html"
+    md_path.write_text(md)
+    html_path.write_text(markdown_to_html(md, out_dir))
+    return [md_path, html_path]
+
+
+# ---- entry points ----------------------------------------------------------------------------
+def report_run(run_path: Path, out_dir: Path | None = None) -> list[Path]:
+    """Figures and summaries of one run; returns the files written (default ``RUN/report``)."""
+    run = load_run(Path(run_path))
+    out_dir = Path(out_dir) if out_dir is not None else run.path / "report"
+    out_dir.mkdir(parents=True, exist_ok=True)
+    figures = [
+        coverage_figure(run, out_dir / "coverage.png"),
+        scatter_figure(run, out_dir / "scatter.png"),
+    ]
+    goals = goals_figure(run, out_dir / "goals.png")
+    if goals is not None:
+        figures.append(goals)
+    return figures + _write_summaries(_run_markdown(run, figures, out_dir), out_dir)
+
+
+def report_campaign(campaign: Path, out_dir: Path | None = None) -> list[Path]:
+    """Figures and summaries of a campaign folder (default ``CAMPAIGN/report``)."""
+    campaign = Path(campaign)
+    paths = find_campaign_runs(campaign)
+    if not paths:
+        raise FileNotFoundError(f"{campaign} holds no runs (expected CAMPAIGN/STRATEGY/RUN/)")
+    groups = {
+        name: [load_run(p, goal_outcomes=False) for p in runs] for name, runs in paths.items()
+    }
+    out_dir = Path(out_dir) if out_dir is not None else campaign / "report"
+    out_dir.mkdir(parents=True, exist_ok=True)
+    figures = [
+        campaign_coverage_figure(groups, out_dir / "campaign_coverage.png"),
+        campaign_scatter_figure(groups, out_dir / "campaign_scatter.png"),
+    ]
+    md = _campaign_markdown(campaign, groups, figures, out_dir)
+    return figures + _write_summaries(md, out_dir)
+
+
+def report(path: Path, out_dir: Path | None = None) -> list[Path]:
+    """A run's report when ``path`` is a run folder, else a campaign's."""
+    if RunStore.is_run(path):
+        return report_run(path, out_dir)
+    return report_campaign(path, out_dir)

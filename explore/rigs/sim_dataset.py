@@ -1,0 +1,95 @@
+"""Outcome database for pre-training representations: twin scenes rendered as the rig sees them.
+
+Each scene: the ball placed uniformly over its ring (uniform in area between radii 0.13 and 0.17
+m, where the ball's centre can lie; uniform angle), the arm at its rest pose (``arm="rest"``,
+the default: an episode's outcome is observed there, explore/runs/episode.py) or driven towards
+random joint targets inside its limits (``arm="random"``, the paper's database, in which the
+arm's pose varies), ``settle_s`` seconds of physics, then an overhead render reduced to 64x64
+exactly as an episode's outcome (``vision.observation.square_observation``). The ball's position
+is read after the arm moved (the arm may have pushed it).
+
+The paper pre-trained its VAEs on such a database of the environment's possible outcomes.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from explore.learner.goal_spaces import R_MAX, R_MIN
+from robot.spec import ergo_jr_spec
+from vision.observation import OBSERVATION_SIZE, square_observation
+
+SETTLE_S = 0.3  # s of physics towards the random pose: a 30-degree step takes ~0.2 s (docs/twin)
+RENDER_SIZE = (240, 240)  # the sim rig's default overhead frame (explore/rigs/sim.py)
+ARM_POSES = ("rest", "random")  # arm at its rest pose (as in an episode's outcome) or random
+
+
+def ring_positions(n: int, rng: np.random.Generator) -> np.ndarray:
+    """Ball centres uniform in area over the ring R_MIN..R_MAX, shape (n, 2), m."""
+    r = np.sqrt(rng.uniform(R_MIN**2, R_MAX**2, n))
+    t = rng.uniform(-np.pi, np.pi, n)
+    return np.stack([r * np.cos(t), r * np.sin(t)], axis=1)
+
+
+def make_outcome_dataset(
+    n: int,
+    seed: int = 0,
+    render_size: tuple[int, int] = RENDER_SIZE,
+    settle_s: float = SETTLE_S,
+    progress: bool = True,
+    arm: str = "rest",
+) -> dict[str, np.ndarray]:
+    """Render ``n`` scenes with the arm at rest (``arm="rest"``) or in random poses (``"random"``).
+
+    Returns:
+        images: (n, 64, 64, 3) BGR uint8; ball: (n, 2) m after the arm moved; placed: (n, 2) m
+        where the ball was put; joints: (n, 6) rad, the arm's pose at the render.
+    """
+    from sim.twin import JOINTS, Twin
+
+    if arm not in ARM_POSES:
+        raise ValueError(f"arm={arm!r}: expected one of {', '.join(ARM_POSES)}")
+    rng = np.random.default_rng(seed)
+    twin = Twin(render_size=render_size)
+    lo = np.array([twin.model.joint(j).range[0] for j in JOINTS])
+    hi = np.array([twin.model.joint(j).range[1] for j in JOINTS])
+    size = OBSERVATION_SIZE
+    placed = ring_positions(n, rng)
+    targets = rng.uniform(lo, hi, (n, len(JOINTS)))
+    if arm == "rest":
+        targets[:] = ergo_jr_spec().rest
+    images = np.empty((n, size, size, 3), dtype=np.uint8)
+    ball = np.empty((n, 2))
+    joints = np.empty((n, len(JOINTS)))
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=n, unit="img", file=sys.stderr, mininterval=1.0, desc="outcomes")
+    try:
+        for i in range(n):
+            twin.reset(tuple(placed[i]))
+            twin.set_targets(targets[i])
+            twin.step(settle_s)
+            images[i] = square_observation(twin.render(), size)
+            ball[i] = twin.ball_position()[:2]
+            joints[i] = twin.joint_positions()
+            if bar is not None:
+                bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+        twin.close()
+    return {"images": images, "ball": ball, "placed": placed, "joints": joints}
+
+
+def save_dataset(path: str | Path, data: dict[str, np.ndarray]) -> None:
+    """Write a dataset as a compressed ``.npz`` (no pickle), atomically."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.stem + ".tmp.npz")
+    np.savez_compressed(tmp, **data)
+    tmp.replace(path)

@@ -1,0 +1,200 @@
+"""One episode on a rig: rest pose, context, DMP at the control rate, back to rest, settle, outcome.
+
+The outcome is observed with the arm back at its rest pose (upright, over the arena's centre),
+so that the arm hides no part of the ring and the outcome image varies with the ball alone; the
+next episode's context is the same scene. The original implementation observed the outcome with
+the arm where its movement ended: there the arm's pose dominated the image, and a VAE trained on
+such images encoded the arm, not the ball (measured: docs/results.md, section 4).
+
+All positions in metres (arena frame: origin at the arm's base, z up), angles in radians,
+durations in seconds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from explore.learner.dmp import Dmp
+from explore.learner.experience import Observation
+from explore.rigs.rig import Rig
+from robot.spec import CONTROL_RATE_HZ
+from vision.observation import OBSERVATION_SIZE, square_observation
+
+
+@dataclass(frozen=True)
+class EpisodeConfig:
+    """Timing of an episode.
+
+    Attributes:
+        rate_hz: control rate (40 Hz: the DMP's 40 points last 1 s, as in the paper's rig).
+        reset_s: time to go back to the rest pose (1 s, original implementation).
+        settle_speed: the ball counts as still below this speed, m/s (guess: 1 cm/s).
+        arm_settle_speed: the arm counts as back at rest when no joint moves faster than this,
+            rad/s (guess, checked on the twin: it stops within 0.2-0.3 s). 0.05 rad/s over a
+            0.1 s check is 0.286 degrees, just under one XL-320 position unit (0.293 degrees,
+            datasheet), so a joint that moved by at most one unit of its reading
+            (``Arm.position_resolution``) also counts as still: a reading that flickers by one
+            unit at rest would otherwise hold every settle to ``settle_max_s``.
+        settle_max_s: longest wait for the ball and the arm to settle (the original waited 3 s).
+        settle_check_s: interval between two settle checks.
+        obs_size: side of the square observation the representation sees, pixels (64, paper).
+    """
+
+    rate_hz: float = CONTROL_RATE_HZ
+    reset_s: float = 1.0
+    settle_speed: float = 0.01
+    arm_settle_speed: float = 0.05
+    settle_max_s: float = 3.0
+    settle_check_s: float = 0.1
+    obs_size: int = OBSERVATION_SIZE
+
+
+@dataclass
+class EpisodeResult:
+    """Everything an episode produced.
+
+    Attributes:
+        targets: commands actually sent during the DMP, shape (T, 6), rad.
+        measured: joint positions read at each tick, shape (T, 6), rad.
+        end_effector: tool tip at each tick, shape (T, 3), m (NaN where unknown).
+        outcome: the observation after the ball settled.
+        settle_s: how long the ball took to settle (or the cap).
+        ball_moved: whether the ball moved by more than ``moved_threshold`` m.
+    """
+
+    targets: np.ndarray
+    measured: np.ndarray
+    end_effector: np.ndarray
+    outcome: Observation
+    settle_s: float
+    ball_moved: bool
+    extras: dict[str, float] = field(default_factory=dict)
+
+
+MOVED_THRESHOLD = 0.01  # m: a ball displacement under 1 cm is not "moved" (guess: tracker noise)
+
+
+class EpisodeRunner:
+    """Runs episodes on a rig with a DMP."""
+
+    def __init__(self, rig: Rig, dmp: Dmp | None = None, config: EpisodeConfig | None = None):
+        self.rig = rig
+        self.dmp = dmp or Dmp()
+        self.config = config or EpisodeConfig()
+        self.dt = 1.0 / self.config.rate_hz
+
+    # ---- phases --------------------------------------------------------------------------
+    def go_rest(self) -> None:
+        """Move to the rest pose by linear interpolation over ``reset_s`` at the control rate.
+
+        Nothing is sent when the last command already was the rest pose.
+        """
+        arm, clock = self.rig.arm, self.rig.clock
+        start = arm.last_sent
+        rest = arm.spec.rest
+        if start is not None and np.array_equal(start, rest):
+            return
+        if start is None:
+            start = arm.read().positions
+        n = max(1, round(self.config.reset_s / self.dt))
+        for i in range(1, n + 1):
+            arm.command(start + (rest - start) * (i / n))
+            clock.advance(self.dt)
+
+    def observe(self, render: bool = True) -> Observation:
+        """Locate the ball and optionally keep the frame.
+
+        With a ball locator (the tracker) a frame is always taken; without one (the twin),
+        the twin's ground truth is used and a frame is rendered only if ``render``.
+        """
+        rig = self.rig
+        if rig.ball_locator is None and not render:
+            return Observation(ball=self._true_ball())
+        frame = rig.camera.read().image
+        ball = self._true_ball() if rig.ball_locator is None else rig.ball_locator(frame)
+        if not render:
+            return Observation(ball=ball)
+        return Observation(
+            ball=ball, image=square_observation(frame, self.config.obs_size), frame=frame
+        )
+
+    def _true_ball(self) -> np.ndarray:
+        twin = self.rig.twin
+        return twin.ball_position()[:2] if twin is not None else np.full(2, np.nan)
+
+    def play(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Play the DMP of ``theta`` (48,) at the control rate.
+
+        Returns:
+            targets (T, 6) rad, measured (T, 6) rad, end-effector (T, 3) m.
+        """
+        traj = self.dmp.trajectory(theta)
+        arm, clock, twin = self.rig.arm, self.rig.clock, self.rig.twin
+        t = len(traj)
+        sent = np.empty((t, 6))
+        measured = np.empty((t, 6))
+        ee = np.full((t, 3), np.nan)
+        for i, q in enumerate(traj):
+            sent[i] = arm.command(q)
+            clock.advance(self.dt)
+            measured[i] = arm.read().positions
+            if twin is not None:
+                ee[i] = twin.end_effector_position()
+        return sent, measured, ee
+
+    def settle(self) -> float:
+        """Wait until the ball is still and the arm has stopped at rest; returns the time
+        waited, s (at least one ``settle_check_s``: the arm's speed takes two readings).
+
+        The arm lags its last rest command by 1-2 degrees per joint on the twin, which shifts
+        it by a few pixels in the 64x64 outcome image, more than a ball moved by a centimetre
+        does; it stops within 0.2-0.3 s (measured, docs/results.md). Ball, twin: its true speed.
+        Ball, real rigs: the tracked position between two frames ``settle_check_s`` apart (a
+        ball not seen in both counts as still moving, up to the ``settle_max_s`` cap, as the
+        original waited and re-observed).
+        """
+        cfg, clock, twin, arm = self.config, self.rig.clock, self.rig.twin, self.rig.arm
+        locator = self.rig.ball_locator if twin is None else None
+        previous = locator(self.rig.camera.read().image) if locator is not None else None
+        joints = arm.read().positions
+        # a joint is still when it moved less than arm_settle_speed allows, or by at most one
+        # unit of its reading (a real servo's reading can flicker by one unit at rest)
+        step_max = np.maximum(
+            cfg.arm_settle_speed * cfg.settle_check_s, arm.position_resolution * (1 + 1e-6)
+        )
+        waited = 0.0
+        while waited < cfg.settle_max_s:
+            clock.advance(cfg.settle_check_s)
+            waited += cfg.settle_check_s
+            now = arm.read().positions
+            arm_still = bool(np.all(np.abs(now - joints) <= step_max))
+            joints = now
+            if twin is not None:
+                ball_still = twin.ball_speed() < cfg.settle_speed
+            elif locator is not None:
+                here = locator(self.rig.camera.read().image)
+                step = float(np.linalg.norm(here - previous))  # NaN if either is unseen
+                ball_still = step / cfg.settle_check_s < cfg.settle_speed
+                previous = here
+            else:
+                ball_still = True
+            if ball_still and arm_still:
+                break
+        return waited
+
+    # ---- the whole episode -----------------------------------------------------------------
+    def run(self, theta: np.ndarray, context: Observation) -> EpisodeResult:
+        """Play ``theta`` from the rest pose (``context`` seen there), go back to rest, wait for the
+        ball to settle, then observe the outcome."""
+        targets, measured, ee = self.play(theta)
+        self.go_rest()
+        settle_s = self.settle()
+        outcome = self.observe(render=True)
+        moved = bool(
+            np.all(np.isfinite(context.ball))
+            and np.all(np.isfinite(outcome.ball))
+            and np.linalg.norm(outcome.ball - context.ball) > MOVED_THRESHOLD
+        )
+        return EpisodeResult(targets, measured, ee, outcome, settle_s, moved)

@@ -1,0 +1,189 @@
+"""The exploration loop: propose, play, observe, store, learn; resumable from the run folder."""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from explore.runs.episode import EpisodeConfig, EpisodeRunner
+from explore.runs.metrics import MetricsLog
+from explore.runs.record import EpisodeRecord
+from explore.rigs.rig import Rig
+from explore.runs.store import RunStore
+from explore.learner.strategies.base import Strategy
+from robot.safety import torque_off_on_signals
+
+log = logging.getLogger(__name__)
+
+FAULTS_FILE = "faults.json"  # the arm's fault and recovery counters, summed over sessions
+
+
+def add_fault_counts(run_path: Path, counts: dict[str, float]) -> dict[str, float]:
+    """Add one session's ``Arm.fault_counts()`` to ``RUN/faults.json`` (created if missing;
+    an unreadable file is kept aside as ``faults.json.bad``). Returns the totals."""
+    path = Path(run_path) / FAULTS_FILE
+    totals: dict[str, float] = {}
+    if path.exists():
+        try:
+            loaded = json.loads(path.read_text())
+            totals = {str(k): float(v) for k, v in loaded["totals"].items()}
+            sessions = int(loaded["sessions"])
+        except (ValueError, KeyError, TypeError, AttributeError):
+            path.replace(path.with_name(FAULTS_FILE + ".bad"))
+            totals, sessions = {}, 0
+    else:
+        sessions = 0
+    for k, v in counts.items():
+        totals[k] = round(totals.get(k, 0.0) + float(v), 3)
+    tmp = path.with_name(FAULTS_FILE + ".tmp")
+    tmp.write_text(json.dumps({"sessions": sessions + 1, "totals": totals}, indent=1))
+    tmp.replace(path)
+    return totals
+
+
+def episode_rng(seed: int, episode: int) -> np.random.Generator:
+    """The random stream of one episode: a function of (seed, episode) only, so a resumed run
+    draws exactly what the uninterrupted run would have."""
+    return np.random.default_rng([seed, episode])
+
+
+@dataclass
+class Progress:
+    """What a progress display shows after each episode."""
+
+    episode: int
+    total: int
+    ball_cells: int
+    ee_cells: int
+    phase: str
+    episodes_per_s: float
+
+
+class Explorer:
+    """Runs a strategy on a rig and records everything into a run store.
+
+    Args:
+        rig: a rig, not yet connected (``run`` connects it and turns torque off at the end).
+        strategy: the exploration strategy.
+        store: the run folder (new or reopened).
+        seed: the run's seed.
+        episode_config: episode timing.
+        on_episode: called with a ``Progress`` after every stored episode.
+        on_record: called with each new ``EpisodeRecord`` (recorders, viewers).
+    """
+
+    def __init__(
+        self,
+        rig: Rig,
+        strategy: Strategy,
+        store: RunStore,
+        seed: int,
+        episode_config: EpisodeConfig | None = None,
+        on_episode: Callable[[Progress], None] | None = None,
+        on_record: Callable[[EpisodeRecord], None] | None = None,
+    ) -> None:
+        self.rig = rig
+        self.strategy = strategy
+        self.store = store
+        self.seed = seed
+        self.runner = EpisodeRunner(rig, config=episode_config)
+        self.metrics = MetricsLog(store.path / "metrics.csv")
+        self.on_episode = on_episode
+        self.on_record = on_record
+
+    def _replay(self) -> None:
+        """Rebuild strategy and metrics from the stored history (after a resume)."""
+        for rec in self.store:
+            self.strategy.update(rec)
+            self.metrics.update(rec)
+        self.metrics.rewrite()
+
+    def run(self, n_episodes: int) -> None:
+        """Explore until the store holds ``n_episodes`` episodes."""
+        self._replay()
+        done = len(self.store)
+        if done >= n_episodes:
+            log.info("run already has %d episodes (asked for %d)", done, n_episodes)
+            return
+        try:
+            self._explore(done, n_episodes)
+        finally:
+            self._save_fault_counts()
+
+    def _save_fault_counts(self) -> None:
+        """``RUN/faults.json`` += this session's counters; never masks the run's own error."""
+        try:
+            add_fault_counts(self.store.path, self.rig.arm.fault_counts())
+        except Exception as exc:  # counters are a report: losing them must not hide a fault
+            log.warning("could not save the fault counters to %s: %s", self.store.path, exc)
+
+    def _explore(self, done: int, n_episodes: int) -> None:
+        with self.rig, torque_off_on_signals(self.rig.arm):
+            if done and self.rig.twin is not None:
+                state = self.store.records[-1].sim_state
+                self.rig.twin.set_state(state)
+                self.rig.arm.resync()
+            start = time.perf_counter()
+            for k in range(done, n_episodes):
+                row = self.step(k)
+                if self.on_episode is not None:
+                    rate = (k - done + 1) / max(time.perf_counter() - start, 1e-9)
+                    self.on_episode(
+                        Progress(
+                            k + 1,
+                            n_episodes,
+                            int(row["ball_cells"]),  # type: ignore[arg-type]
+                            int(row["ee_cells"]),
+                            self.strategy.phase(),
+                            rate,
+                        )  # type: ignore[arg-type]
+                    )
+            # leave the arm at rest before torque goes off
+            self.runner.go_rest()
+
+    def step(self, k: int) -> dict[str, object]:
+        """Run episode ``k`` (the rig connected), store it durably, then learn from it and
+        count it. Returns the episode's metrics row."""
+        rec = self.episode(k)
+        self.store.append(rec)
+        self.strategy.update(rec)
+        row = self.metrics.update(rec)
+        self.metrics.append_last()
+        if self.on_record is not None:
+            self.on_record(rec)
+        return row
+
+    def episode(self, k: int) -> EpisodeRecord:
+        """Run episode ``k``: rest pose, context, proposal, movement, outcome."""
+        t0 = time.perf_counter()
+        rng = episode_rng(self.seed, k)
+        self.runner.go_rest()
+        if self.rig.before_episode is not None:
+            self.rig.before_episode()
+        context = self.runner.observe(render=self.strategy.needs_context_image)
+        proposal = self.strategy.propose(context, rng)
+        result = self.runner.run(proposal.theta, context)
+        twin = self.rig.twin
+        return EpisodeRecord(
+            episode=k,
+            theta=np.asarray(proposal.theta, dtype=float),
+            goal=np.asarray(proposal.goal, dtype=float),
+            module=proposal.module,
+            kind=proposal.kind,
+            context_ball=context.ball,
+            ball=result.outcome.ball,
+            ball_moved=result.ball_moved,
+            targets=result.targets,
+            measured=result.measured,
+            end_effector=result.end_effector,
+            image=result.outcome.image,  # type: ignore[arg-type]
+            sim_state=twin.get_state() if twin is not None else np.zeros(0),
+            settle_s=result.settle_s,
+            duration_s=time.perf_counter() - t0,
+        )

@@ -1,0 +1,226 @@
+"""The run folder: where the truth of a run lives.
+
+Layout of ``RUN/``:
+- ``run.json``: format version, the run's config (rig, strategy, seed, episodes), creation
+  time. Written once, atomically (temporary file + rename).
+- ``history.bin``: append-only episode records. Each is framed as
+  ``b"EREC" | u32 length | u32 CRC-32 of the payload | payload`` (little endian), the payload
+  an ``EpisodeRecord`` as compressed npz. Each append is flushed and fsync'ed before the
+  episode counts as done, so a SIGKILL loses at most the episode in flight.
+- ``metrics.csv``: cells reached after every episode (derived; rebuilt from the history on
+  resume).
+- ``coverage.png`` and whatever later stages write (models, figures, recordings).
+
+On open, a torn last record (a crash mid-write) is cut off; a bad record followed by good ones
+is corruption and raises ``RunStoreError`` naming the offset, without touching the file.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import struct
+import time
+import zlib
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from explore.runs.record import EpisodeRecord, RecordError
+
+RUN_FORMAT = 1
+APP = "ergo-explore"
+MAGIC = b"EREC"
+HEADER = struct.Struct("<4sII")
+
+
+class RunStoreError(RuntimeError):
+    """A run folder is missing, foreign, from another version, or corrupt."""
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` via a temporary file and an atomic rename (fsync'ed)."""
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w") as f:
+        f.write(text)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def _scan(data: bytes) -> tuple[list[tuple[int, int]], int]:
+    """Find record payload spans in ``data``.
+
+    Returns:
+        spans: (start, end) of each valid payload, in order.
+        good_end: offset just after the last valid record (where a torn tail starts).
+    Raises RunStoreError when an invalid record is followed by more data that is not just a
+    torn tail, i.e. real corruption.
+    """
+    spans: list[tuple[int, int]] = []
+    pos = 0
+    n = len(data)
+    while pos < n:
+        if n - pos < HEADER.size:
+            break  # torn header
+        magic, length, crc = HEADER.unpack_from(data, pos)
+        start, end = pos + HEADER.size, pos + HEADER.size + length
+        if magic != MAGIC:
+            raise RunStoreError(f"history.bin is corrupt at byte {pos}: bad record marker")
+        if end > n:
+            break  # torn payload
+        if zlib.crc32(data[start:end]) != crc:
+            if end == n:
+                break  # last record incomplete on disk
+            raise RunStoreError(f"history.bin is corrupt at byte {pos}: checksum mismatch")
+        spans.append((start, end))
+        pos = end
+    return spans, pos
+
+
+class RunStore:
+    """A run folder opened for reading and appending. Use ``create`` or ``open``."""
+
+    def __init__(self, path: Path, meta: dict[str, Any]) -> None:
+        self.path = path
+        self.meta = meta
+        self.records: list[EpisodeRecord] = []
+        self._fh: Any = None
+        self.truncated_bytes = 0
+
+    # ---- construction ----------------------------------------------------------------------
+    @classmethod
+    def create(cls, path: str | Path, config: dict[str, Any]) -> RunStore:
+        """Make a new run folder; refuses a non-empty existing folder."""
+        path = Path(path)
+        stale = path / "run.json.tmp"
+        if path.is_dir() and [p.name for p in path.iterdir()] == [stale.name]:
+            stale.unlink()  # a kill during a previous create's atomic write: nothing was made
+        if path.exists() and any(path.iterdir()):
+            raise RunStoreError(
+                f"{path} exists and is not empty: use --resume {path} or a new --out"
+            )
+        path.mkdir(parents=True, exist_ok=True)
+        meta = {
+            "app": APP,
+            "format": RUN_FORMAT,
+            "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+            "config": config,
+        }
+        atomic_write_text(path / "run.json", json.dumps(meta, indent=2, sort_keys=True))
+        store = cls(path, meta)
+        store._open_for_append()
+        return store
+
+    @classmethod
+    def open(cls, path: str | Path) -> RunStore:
+        """Open an existing run, verifying its history and cutting a torn last record."""
+        path = Path(path)
+        meta = cls.read_meta(path)
+        store = cls(path, meta)
+        store._load()
+        store._open_for_append()
+        return store
+
+    @staticmethod
+    def is_run(path: str | Path) -> bool:
+        return (Path(path) / "run.json").is_file()
+
+    @staticmethod
+    def read_meta(path: Path) -> dict[str, Any]:
+        meta_path = path / "run.json"
+        if not path.is_dir():
+            raise RunStoreError(f"{path} is not a run folder (no such directory)")
+        if not meta_path.is_file():
+            raise RunStoreError(f"{path} is not a run folder (no run.json)")
+        try:
+            meta = json.loads(meta_path.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise RunStoreError(f"{meta_path} is not valid JSON: {exc}") from exc
+        if not isinstance(meta, dict) or meta.get("app") != APP:
+            raise RunStoreError(f"{meta_path} is not an {APP} run (field 'app')")
+        if meta.get("format") != RUN_FORMAT:
+            raise RunStoreError(
+                f"{meta_path} has format {meta.get('format')!r}; this version reads format "
+                f"{RUN_FORMAT} (field 'format')"
+            )
+        if not isinstance(meta.get("config"), dict):
+            raise RunStoreError(f"{meta_path} has no 'config' object")
+        return meta
+
+    # ---- history ---------------------------------------------------------------------------
+    @property
+    def history_path(self) -> Path:
+        return self.path / "history.bin"
+
+    @property
+    def config(self) -> dict[str, Any]:
+        return self.meta["config"]
+
+    def __len__(self) -> int:
+        return len(self.records)
+
+    def __iter__(self) -> Iterator[EpisodeRecord]:
+        return iter(self.records)
+
+    def _load(self) -> None:
+        if not self.history_path.exists():
+            return
+        data = self.history_path.read_bytes()
+        spans, good_end = _scan(data)
+        records = []
+        for i, (a, b) in enumerate(spans):
+            try:
+                rec = EpisodeRecord.from_bytes(data[a:b])
+            except RecordError as exc:
+                raise RunStoreError(f"history.bin record {i}: {exc}") from exc
+            if rec.episode != i:
+                raise RunStoreError(
+                    f"history.bin record {i} is episode {rec.episode}: missing or duplicated"
+                )
+            records.append(rec)
+        self.records = records
+        if good_end < len(data):
+            # a crash during the last append: drop the torn bytes (the episode in flight)
+            self.truncated_bytes = len(data) - good_end
+            with open(self.history_path, "r+b") as f:
+                f.truncate(good_end)
+                os.fsync(f.fileno())
+
+    def _open_for_append(self) -> None:
+        self._fh = open(self.history_path, "ab")  # noqa: SIM115 - held open for appends
+
+    def append(self, record: EpisodeRecord) -> None:
+        """Append one episode durably (flush + fsync) before returning."""
+        if record.episode != len(self.records):
+            raise RunStoreError(
+                f"episode {record.episode} appended after {len(self.records)} episodes"
+            )
+        payload = record.to_bytes()
+        self._fh.write(HEADER.pack(MAGIC, len(payload), zlib.crc32(payload)) + payload)
+        self._fh.flush()
+        os.fsync(self._fh.fileno())
+        self.records.append(record)
+
+    def close(self) -> None:
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+    def __enter__(self) -> RunStore:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def iter_history(run: Path) -> Iterator[EpisodeRecord]:
+    """Read a run's stored episodes without modifying the folder (no torn-tail repair, no
+    append handle): safe on a run that another process is still writing."""
+    path = Path(run) / "history.bin"
+    if not path.exists():
+        return
+    data = path.read_bytes()
+    spans, _ = _scan(data)
+    for a, b in spans:
+        yield EpisodeRecord.from_bytes(data[a:b])

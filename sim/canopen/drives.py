@@ -1,0 +1,595 @@
+"""Six emulated CiA 402 servo drives (CANopen nodes 1..6) backed by the twin's joints.
+
+Each drive is a ``canopen.LocalNode`` built from ``robot/canopen/ergo_drive.eds``: the
+library's SDO server answers configuration requests, its NMT slave produces the heartbeat and
+its EMCY producer reports faults. This module adds what a servo drive does:
+
+- the CiA 402 power state machine (``robot.canopen.cia402``), driven by the controlword
+  0x6040 (from an RPDO or an SDO write);
+- cyclic synchronous position (mode 8): synchronous RPDOs received between two SYNCs are
+  applied at the SYNC; the joint targets go to the twin; then every node transmits its
+  synchronous TPDOs (statusword 0x6041, position actual 0x6064 with the default mapping);
+- software position limits 0x607D, following error 0x60F4 against the window 0x6065;
+- faults: EMCY + FAULT state, cleared by a fault reset (rising edge of controlword bit 7).
+
+Physics: either a ``sim.realtime.RealtimeLoop`` steps the twin in wall time (the server), or
+``sync_step_s`` advances it by a fixed amount at every SYNC (tests: a fake clock that makes
+the loop deterministic and as fast as the CPU allows). In real-time mode a pump thread
+exchanges targets and positions with the twin (woken by each SYNC, and every 5 ms), so the
+SYNC handler never waits for the twin's lock, which a camera render may hold for tens of ms:
+the TPDOs then carry the pump's latest positions, as a drive reports its last sample.
+
+The twin has one torque switch for the whole arm: it is on only while all six drives are in
+OPERATION ENABLED (a drive out of it, e.g. in FAULT, leaves the whole arm limp). Joints whose
+drive is not enabled hold their current position as target.
+
+Fault injection (for tests and ``ergo twin serve``): a rate of lost PDO/SYNC frames (in both
+directions; heartbeats and SDOs are not dropped), a node that stops its heartbeat (and,
+muted, its TPDOs), a following-error fault (EMCY 0x8611) now or after some time in OPERATION
+ENABLED, any other EMCY fault (e.g. 0x2310 over-current, an overload), an extra delay before
+the TPDOs of every SYNC or of a fraction of them (late frames). Corrupted frames are not
+emulated: on CAN the controllers' CRC rejects them and the sender retransmits (ISO 11898-1),
+so a host only ever sees a frame late or, if the bus gives up, not at all (a drop).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import random
+import threading
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import canopen
+import numpy as np
+from canopen.sdo import SdoAbortedError
+
+from robot.canopen import cia402, emcy
+from robot.canopen.arm import EDS_PATH
+from robot.canopen.bus import open_bus
+from robot.canopen.cia402 import State
+from sim.twin import Twin
+
+log = logging.getLogger(__name__)
+
+NODE_IDS = (1, 2, 3, 4, 5, 6)
+CSP = 8  # modes of operation 0x6060: cyclic synchronous position (CiA 402-2)
+SYNC_COB_ID = 0x080
+# 0x6065 value meaning "following error monitoring off" (CiA 402-2).
+WINDOW_OFF = 0xFFFFFFFF
+# SDO abort codes (CiA 301 table "SDO abort codes").
+ABORT_VALUE_RANGE = 0x06090030
+ABORT_DEVICE_STATE = 0x08000022
+# Error register bits set while in fault (generic + device profile; see robot.canopen.emcy).
+FAULT_REGISTER = emcy.FOLLOWING_ERROR_REGISTER
+SUPPORTED_MODES = (CSP,)
+NMT_RESET_NODE, NMT_RESET_COMM = 0x81, 0x82
+NMT_PRE_OPERATIONAL = 0x80
+# Real-time mode: longest interval between two exchanges with the twin, s (guess: a fifth of
+# the 40 Hz control period, so positions are at most this old when the twin's lock is free).
+PUMP_PERIOD_S = 0.005
+
+
+def _is_pdo_or_sync(can_id: int) -> bool:
+    """SYNC and the four TPDO/RPDO pairs (0x180..0x57F), not SDO/EMCY/NMT/heartbeat."""
+    return can_id == SYNC_COB_ID or 0x180 <= can_id < 0x580
+
+
+class _FaultyNetwork(canopen.Network):
+    """A canopen network that loses a fraction of PDO/SYNC frames, both ways."""
+
+    # Longest blocking receive of the notifier thread, s (bounds the time ``stop`` takes).
+    NOTIFIER_CYCLE = 0.1
+
+    def __init__(self, bus: Any, drop_rate: float, seed: int) -> None:
+        super().__init__(bus)
+        self.drop_rate = drop_rate
+        self.dropped = 0
+        self._rng = random.Random(seed)
+        self._rng_lock = threading.Lock()
+
+    def _drop(self, can_id: int) -> bool:
+        if self.drop_rate <= 0 or not _is_pdo_or_sync(can_id):
+            return False
+        with self._rng_lock:
+            lost = self._rng.random() < self.drop_rate
+        if lost:
+            self.dropped += 1
+        return lost
+
+    def notify(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        if not self._drop(can_id):
+            super().notify(can_id, data, timestamp)
+
+    def send_message(self, can_id: int, data: bytes, remote: bool = False) -> None:
+        if not self._drop(can_id):
+            super().send_message(can_id, data, remote)
+
+
+class EmulatedDrive:
+    """One CiA 402 node: the object dictionary, the state machine and one twin joint.
+
+    Args:
+        node_id: CANopen node id (1..127).
+        joint: index of the twin joint it drives (0..5).
+        eds: the drive's EDS file.
+        direction: +1 or -1, how the drive is "mounted" (drive counts grow with the joint or
+            against it).
+        offset: joint angle at drive position 0, rad.
+    """
+
+    def __init__(
+        self, node_id: int, joint: int, eds: Path, direction: float = 1.0, offset: float = 0.0
+    ) -> None:
+        if not 1 <= node_id <= 127:
+            raise ValueError(f"CANopen node id must be 1..127, got {node_id}")
+        self.node_id = node_id
+        self.joint = joint
+        self.direction = float(direction)
+        self.offset = float(offset)
+        self.node = canopen.LocalNode(node_id, canopen.import_od(str(eds), node_id))
+        self.state = State.NOT_READY_TO_SWITCH_ON
+        self.controlword = 0
+        self.error_code = 0
+        self.demand = 0  # position demand, increments (the target the drive follows)
+        self.actual = 0  # position actual, increments
+        self.enabled_since: float | None = None
+        # wall time (time.monotonic, system-wide) the drive last left OPERATION ENABLED, for
+        # measuring how fast a host cuts torque
+        self.disabled_at: float | None = None
+        self.heartbeat_stopped = False
+        self.muted = False  # sends no TPDO (on top of a stopped heartbeat: a dead node)
+        self._rpdo_pending: list[Any] = []
+        self._cpr: float | None = None
+        self._mode: int | None = None
+        self._sync_count = 0
+        self.node.add_read_callback(self._on_read)
+        self.node.add_write_callback(self._on_write)
+        # Serial number: the node id, so that a scan tells the six drives apart.
+        self.node.data_store.setdefault(0x1018, {})[4] = node_id.to_bytes(4, "little")
+
+    # ---- object dictionary ---------------------------------------------------------------
+    def _od_int(self, index: int, subindex: int = 0) -> int:
+        obj = self.node.object_dictionary[index]
+        var = obj if isinstance(obj, canopen.objectdictionary.ODVariable) else obj[subindex]
+        return int(var.decode_raw(self.node.get_data(index, subindex)))
+
+    @property
+    def counts_per_rev(self) -> float:
+        """Increments per revolution from 0x608F (sub 1 / sub 2), cached."""
+        if self._cpr is None:
+            self._cpr = self._od_int(0x608F, 1) / max(1, self._od_int(0x608F, 2))
+        return self._cpr
+
+    @property
+    def mode(self) -> int:
+        """Modes of operation 0x6060, cached."""
+        if self._mode is None:
+            self._mode = self._od_int(0x6060)
+        return self._mode
+
+    def statusword(self) -> int:
+        extra = cia402.SW_REMOTE
+        if self.state is State.OPERATION_ENABLED and self.mode == CSP:
+            extra |= cia402.SW_CSP_FOLLOWING
+        return cia402.encode_statusword(self.state, extra)
+
+    def _on_read(self, index: int, subindex: int, od: Any) -> int | None:
+        """Live values of the dynamic objects (the rest comes from the data store/EDS)."""
+        if index == 0x6041:
+            return self.statusword()
+        if index == 0x6064:
+            return self.actual
+        if index == 0x6061:
+            return self.mode
+        if index == 0x60F4:
+            return self.actual - self.demand
+        if index == 0x603F:
+            return self.error_code
+        if index == 0x1001:
+            return FAULT_REGISTER if self.state is State.FAULT else 0
+        return None
+
+    def _on_write(self, index: int, subindex: int, od: Any, data: bytes) -> None:
+        if index == 0x608F and subindex in (1, 2):
+            value = int.from_bytes(data[:4], "little")
+            inc = value if subindex == 1 else self._od_int(0x608F, 1)
+            revs = value if subindex == 2 else self._od_int(0x608F, 2)
+            if inc <= 0 or revs <= 0:
+                raise SdoAbortedError(ABORT_VALUE_RANGE)
+            self._cpr = inc / revs
+        if index == 0x6060:
+            mode = int.from_bytes(data, "little", signed=True)
+            if mode not in SUPPORTED_MODES and mode != 0:
+                raise SdoAbortedError(ABORT_VALUE_RANGE)
+            if self.state is State.OPERATION_ENABLED:
+                raise SdoAbortedError(ABORT_DEVICE_STATE)
+            self._mode = mode
+        elif index == 0x6040:
+            self.apply_controlword(int.from_bytes(data[:2], "little"))
+        elif index == 0x607A:
+            self.demand = self._limit(int.from_bytes(data[:4], "little", signed=True))
+
+    def _limit(self, counts: int) -> int:
+        """Clamp a target to the software position limits 0x607D."""
+        lo, hi = self._od_int(0x607D, 1), self._od_int(0x607D, 2)
+        return min(max(counts, lo), hi) if lo < hi else counts
+
+    # ---- state machine ---------------------------------------------------------------------
+    def apply_controlword(self, cw: int) -> None:
+        """Run the CiA 402 state machine on a new controlword."""
+        before = self.state
+        self.state = cia402.next_state(self.state, cw, self.controlword)
+        self.controlword = cw
+        if before is State.FAULT and self.state is not State.FAULT:
+            self.error_code = 0
+            self.node.emcy.reset(0)  # EMCY 0x0000: error reset
+        if self.state is State.OPERATION_ENABLED and before is not State.OPERATION_ENABLED:
+            self.demand = self.actual  # CSP: take over where the joint is, no jump
+            self.enabled_since = time.monotonic()
+        elif self.state is not State.OPERATION_ENABLED:
+            self.enabled_since = None
+            if before is State.OPERATION_ENABLED:
+                self.disabled_at = time.monotonic()
+
+    def trip(self, code: int = emcy.FOLLOWING_ERROR, register: int = FAULT_REGISTER) -> None:
+        """Fault (transition 13 then 14): FAULT state, error code 0x603F and an EMCY frame."""
+        if self.state is State.FAULT:
+            return
+        self.state = cia402.next_state(cia402.fault(self.state), self.controlword)
+        self.error_code = code
+        self.enabled_since = None
+        log.warning("drive %d: %s", self.node_id, emcy.describe(code, register))
+        self.node.emcy.send(code, register)
+
+    # ---- cyclic data -----------------------------------------------------------------------
+    @property
+    def operational(self) -> bool:
+        return self.node.nmt.state == "OPERATIONAL"
+
+    def load_pdo_config(self) -> None:
+        """(Re)read the PDO communication and mapping objects from the local dictionary (the
+        master wrote them by SDO) and subscribe the RPDOs."""
+        self.node.rpdo.read(from_od=False)
+        self.node.tpdo.read(from_od=False)
+        for pdo in self.node.rpdo.map.values():
+            if self._on_rpdo not in pdo.callbacks:
+                pdo.add_callback(self._on_rpdo)
+
+    def _on_rpdo(self, pdo: Any) -> None:
+        if not self.operational:
+            return
+        if pdo.trans_type is not None and pdo.trans_type <= 240:
+            self._rpdo_pending.append(pdo)  # synchronous: applied at the next SYNC
+        else:
+            self._apply_rpdo(pdo)
+
+    def _apply_rpdo(self, pdo: Any) -> None:
+        data = bytes(pdo.data)
+        for var in pdo.map:
+            if var.length and var.offset is not None:
+                chunk = data[var.offset // 8 : (var.offset + var.length) // 8]
+                if len(chunk) * 8 == var.length:
+                    self.node.set_data(var.index, var.subindex, chunk)
+
+    def apply_pending(self) -> None:
+        """At SYNC: apply the synchronous RPDOs received since the previous SYNC."""
+        pending, self._rpdo_pending = self._rpdo_pending, []
+        for pdo in pending:
+            self._apply_rpdo(pdo)
+
+    def transmit_sync_tpdos(self) -> None:
+        """At SYNC: transmit the synchronous TPDOs whose period (transmission type) is due."""
+        self._sync_count += 1
+        if self.muted or not self.operational:
+            return
+        for pdo in self.node.tpdo.map.values():
+            tt = pdo.trans_type
+            if not pdo.enabled or tt is None or tt > 240:
+                continue
+            if tt > 1 and self._sync_count % tt:
+                continue
+            for var in pdo.map:
+                if var.length:
+                    var.set_data(self.node.get_data(var.index, var.subindex))
+            pdo.transmit()
+
+    def joint_target(self, counts_per_rev: float) -> float:
+        """The twin target for this joint, rad (the demand, in CSP while enabled)."""
+        return self.offset + self.direction * self.demand * math.tau / counts_per_rev
+
+    def to_counts(self, q: float, counts_per_rev: float) -> int:
+        return round(self.direction * (q - self.offset) * counts_per_rev / math.tau)
+
+
+class EmulatedDrives:
+    """The six drives on one CAN bus, backed by ``twin``.
+
+    Args:
+        twin: the twin whose joints the drives move.
+        bus: an open python-can bus, or an ``INTERFACE:CHANNEL`` spec (``virtual:NAME`` in
+            tests; the server bridges a virtual channel to its pty).
+        node_ids: CANopen ids of the drives of joints m1..m6.
+        directions, offsets: per joint, see ``EmulatedDrive``.
+        sync_step_s: advance the twin by this much at each SYNC (None: a RealtimeLoop does).
+        drop_rate: fraction of PDO/SYNC frames lost, each way.
+        tpdo_delay_s: extra delay before the TPDOs of a SYNC, s.
+        late_rate: fraction of SYNCs whose TPDOs get that delay (1: every SYNC).
+        seed: seed of the loss draws.
+        eds: the drives' EDS.
+    """
+
+    def __init__(
+        self,
+        twin: Twin,
+        bus: Any,
+        node_ids: Sequence[int] = NODE_IDS,
+        directions: Sequence[float] | None = None,
+        offsets: Sequence[float] | None = None,
+        sync_step_s: float | None = None,
+        drop_rate: float = 0.0,
+        tpdo_delay_s: float = 0.0,
+        late_rate: float = 1.0,
+        seed: int = 0,
+        eds: Path = EDS_PATH,
+    ) -> None:
+        if len(node_ids) != 6 or len(set(node_ids)) != 6:
+            raise ValueError(f"need six distinct node ids, got {list(node_ids)}")
+        if not 0.0 <= drop_rate < 1.0:
+            raise ValueError(f"drop rate must be in [0, 1), got {drop_rate}")
+        directions = [1.0] * 6 if directions is None else list(directions)
+        offsets = [0.0] * 6 if offsets is None else list(offsets)
+        self.twin = twin
+        if not 0.0 <= late_rate <= 1.0:
+            raise ValueError(f"late rate must be in [0, 1], got {late_rate}")
+        self.sync_step_s = sync_step_s
+        self.tpdo_delay_s = tpdo_delay_s
+        self.late_rate = late_rate
+        self.late_syncs = 0  # SYNCs whose TPDOs were delayed
+        self._late_rng = random.Random(seed + 1)
+        self.drives = [
+            EmulatedDrive(nid, j, eds, directions[j], offsets[j]) for j, nid in enumerate(node_ids)
+        ]
+        self._by_id = {d.node_id: d for d in self.drives}
+        self._owns_bus = isinstance(bus, str)
+        self._bus = open_bus(bus) if isinstance(bus, str) else bus
+        self.network = _FaultyNetwork(self._bus, drop_rate, seed)
+        self._lock = threading.RLock()
+        self._scheduled_faults: dict[int, float] = {}
+        self.syncs = 0
+        self._started = False
+        self._q = np.zeros(6)  # latest joint positions read from the twin, rad
+        self._pump_wake = threading.Event()
+        self._pump_stop = threading.Event()
+        self._pump_thread: threading.Thread | None = None
+
+    # ---- lifecycle -------------------------------------------------------------------------
+    def start(self) -> None:
+        """Connect, boot every node (boot-up message, PRE-OPERATIONAL, heartbeat on)."""
+        if self._started:
+            return
+        for d in self.drives:
+            self.network.add_node(d.node)
+        self.network.subscribe(SYNC_COB_ID, self._on_sync)
+        self.network.subscribe(0x000, self._on_nmt)
+        self.network.connect()
+        with self.twin.lock:
+            q = self.twin.joint_positions()
+        with self._lock:
+            self._set_actuals(q)
+            for d in self.drives:
+                d.demand = d.actual
+        for d in self.drives:
+            self._boot(d)
+        if not self.sync_step_s:
+            self._pump_stop.clear()
+            self._pump_thread = threading.Thread(target=self._pump, name="drives-pump", daemon=True)
+            self._pump_thread.start()
+        self._started = True
+
+    def stop(self) -> None:
+        """Stop heartbeats and the network; closes the bus if this object opened it."""
+        if not self._started:
+            return
+        self._started = False
+        self._pump_stop.set()
+        self._pump_wake.set()
+        if self._pump_thread is not None:
+            self._pump_thread.join(timeout=2.0)
+            self._pump_thread = None
+        for d in self.drives:
+            d.node.nmt.stop_heartbeat()
+        if self._owns_bus:
+            self.network.disconnect()
+        else:
+            if self.network.notifier is not None:
+                self.network.notifier.stop(self.network.NOTIFIER_SHUTDOWN_TIMEOUT)
+            self.network.bus = None
+
+    def __enter__(self) -> EmulatedDrives:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def _boot(self, d: EmulatedDrive) -> None:
+        d.state = State.NOT_READY_TO_SWITCH_ON
+        d.state = cia402.next_state(d.state, 0)  # self test done: switch on disabled
+        d.controlword = 0
+        d.node.nmt.send_command(NMT_RESET_NODE)  # state 0: sends the boot-up message
+        d.node.nmt.send_command(NMT_PRE_OPERATIONAL)  # starts the heartbeat (0x1017)
+        if d.heartbeat_stopped:
+            d.node.nmt.stop_heartbeat()
+
+    def _on_nmt(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        """After the library's NMT slave handled a command: reboot on reset, load the PDO
+        configuration when entering OPERATIONAL."""
+        if len(data) < 2:
+            return
+        cmd, target = data[0], data[1]
+        with self._lock:
+            for d in self.drives:
+                if target not in (0, d.node_id):
+                    continue
+                if cmd in (NMT_RESET_NODE, NMT_RESET_COMM):
+                    self._boot(d)
+                elif d.operational:
+                    d.load_pdo_config()
+                if d.heartbeat_stopped:
+                    d.node.nmt.stop_heartbeat()
+
+    # ---- the cycle -------------------------------------------------------------------------
+    def _plan(self) -> tuple[np.ndarray, np.ndarray]:
+        """Which joints are driven (OPERATION ENABLED in CSP) and their targets, shape (6,)
+        each (bool, rad). Call under ``self._lock``."""
+        enabled = np.zeros(6, dtype=bool)
+        targets = np.zeros(6)
+        for d in self.drives:
+            enabled[d.joint] = d.state is State.OPERATION_ENABLED and d.mode == CSP
+            targets[d.joint] = d.joint_target(d.counts_per_rev)
+        return enabled, targets
+
+    def _twin_io(self, plan: tuple[np.ndarray, np.ndarray], step_s: float | None) -> np.ndarray:
+        """Under the twin's lock: set the targets (joints not driven hold where they are) and
+        the torque, step if asked; returns the joint positions, shape (6,), rad."""
+        enabled, targets = plan
+        with self.twin.lock:
+            q = self.twin.joint_positions()
+            self.twin.set_targets(np.where(enabled, targets, q))
+            if self.twin.torque_enabled() != bool(enabled.all()):
+                self.twin.set_torque(bool(enabled.all()))
+            if step_s:
+                self.twin.step(step_s)
+                q = self.twin.joint_positions()
+        return q
+
+    def _set_actuals(self, q: np.ndarray) -> None:
+        """Position actual of every drive from joint positions (rad). Under ``self._lock``."""
+        self._q = q
+        for d in self.drives:
+            d.actual = d.to_counts(float(q[d.joint]), d.counts_per_rev)
+
+    def _pump(self) -> None:
+        """Real-time mode: exchange targets and positions with the twin, woken by each SYNC and
+        at least every ``PUMP_PERIOD_S``. It may wait for the twin's lock (a render holds it),
+        the SYNC handler never does."""
+        while not self._pump_stop.is_set():
+            self._pump_wake.wait(PUMP_PERIOD_S)
+            self._pump_wake.clear()
+            with self._lock:
+                plan = self._plan()
+            q = self._twin_io(plan, None)
+            with self._lock:
+                self._set_actuals(q)
+
+    def _on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        try:
+            self.cycle()
+        except Exception:  # never kill the notifier thread
+            log.exception("emulated drives: SYNC handling failed")
+
+    def cycle(self) -> None:
+        """One SYNC: apply the RPDOs, exchange with the twin (stepping it by ``sync_step_s``;
+        in real-time mode the pump thread does it and the positions are its latest), check
+        following errors, then send the TPDOs."""
+        with self._lock:
+            self.syncs += 1
+            for d in self.drives:
+                d.apply_pending()
+            if self.sync_step_s:
+                self._set_actuals(self._twin_io(self._plan(), self.sync_step_s))
+            else:
+                self._set_actuals(self._q)
+                self._pump_wake.set()
+            now = time.monotonic()
+            for d in self.drives:
+                self._check_faults(d, now)
+        if self.tpdo_delay_s > 0 and (
+            self.late_rate >= 1.0 or self._late_rng.random() < self.late_rate
+        ):
+            self.late_syncs += 1
+            time.sleep(self.tpdo_delay_s)
+        with self._lock:
+            for d in self.drives:
+                d.transmit_sync_tpdos()
+
+    def _check_faults(self, d: EmulatedDrive, now: float) -> None:
+        if d.state is not State.OPERATION_ENABLED:
+            return
+        after = self._scheduled_faults.get(d.node_id)
+        if after is not None and d.enabled_since is not None and now - d.enabled_since >= after:
+            del self._scheduled_faults[d.node_id]
+            d.trip()
+            return
+        window = d._od_int(0x6065)
+        if window != WINDOW_OFF and abs(d.actual - d.demand) > window:
+            d.trip()
+
+    # ---- queries and fault injection -------------------------------------------------------
+    def drive(self, node_id: int) -> EmulatedDrive:
+        if node_id not in self._by_id:
+            raise KeyError(f"no emulated drive with node id {node_id}")
+        return self._by_id[node_id]
+
+    def states(self) -> dict[int, State]:
+        """CiA 402 state of every drive by node id."""
+        return {d.node_id: d.state for d in self.drives}
+
+    @property
+    def drop_rate(self) -> float:
+        return self.network.drop_rate
+
+    @drop_rate.setter
+    def drop_rate(self, rate: float) -> None:
+        if not 0.0 <= rate < 1.0:
+            raise ValueError(f"drop rate must be in [0, 1), got {rate}")
+        self.network.drop_rate = rate
+
+    @property
+    def dropped(self) -> int:
+        """Frames lost so far by injection."""
+        return self.network.dropped
+
+    def stop_heartbeat(self, node_id: int, mute: bool = False) -> None:
+        """The node stops producing its heartbeat (and, with ``mute``, its TPDOs: dead)."""
+        d = self.drive(node_id)
+        d.heartbeat_stopped = True
+        d.muted = mute
+        d.node.nmt.stop_heartbeat()
+
+    def resume_heartbeat(self, node_id: int) -> None:
+        d = self.drive(node_id)
+        d.heartbeat_stopped = d.muted = False
+        d.node.nmt.start_heartbeat(d._od_int(0x1017))
+
+    def fault(self, node_id: int, code: int, register: int = FAULT_REGISTER) -> None:
+        """Trip any fault on the node now: FAULT state and an EMCY with ``code``, e.g.
+        0x2310 continuous over-current (an overload) or 0x4310 excess temperature of the
+        drive (CiA 301 / CiA 402 error codes, see ``robot.canopen.emcy``)."""
+        with self._lock:
+            self.drive(node_id).trip(code, register)
+
+    def following_error(self, node_id: int) -> None:
+        """Trip a following-error fault on the node now (EMCY 0x8611, FAULT)."""
+        with self._lock:
+            self.drive(node_id).trip(emcy.FOLLOWING_ERROR, FAULT_REGISTER)
+
+    def schedule_following_error(self, node_id: int, after_s: float) -> None:
+        """Trip a following-error fault once the node has been OPERATION ENABLED for
+        ``after_s`` seconds of wall time (checked at each SYNC)."""
+        self.drive(node_id)
+        self._scheduled_faults[node_id] = after_s
+
+
+def make_virtual_drives(twin: Twin, channel: str, **kw: Any) -> EmulatedDrives:
+    """Drives on python-can's in-process ``virtual`` bus ``channel`` (for tests)."""
+    return EmulatedDrives(twin, f"virtual:{channel}", **kw)
+
+
+def joint_positions_counts(drives: EmulatedDrives) -> np.ndarray:
+    """Position actual of every drive, shape (6,), increments."""
+    return np.array([d.actual for d in drives.drives])

@@ -1,0 +1,272 @@
+"""``ergo twin serve --bus canopen``: the twin as six CiA 402 drives on a CAN bus, reached
+through an SLCAN adapter emulated on a pseudo-terminal (and its camera as an MJPEG stream).
+
+    $ ergo twin serve --bus canopen
+    canopen bus (slcan) on /dev/pts/7
+    camera on http://127.0.0.1:41234/stream.mjpg
+
+The pty behaves like a CANable (SLCAN firmware) on /dev/ttyACM0: any python-can program opens
+it as ``slcan:/dev/pts/7``, e.g. ``ergo bus scan --can slcan:/dev/pts/7`` or a ``canopen`` rig
+with ``can: slcan:/dev/pts/7`` and ``camera: http://127.0.0.1:41234/stream.mjpg``.
+
+Inside, the SLCAN adapter (``sim.canopen.slcan``) is bridged to python-can's in-process
+``virtual`` bus on which the emulated drives (``sim.canopen.drives``) live; the twin runs in
+real time (``sim.realtime.RealtimeLoop``). Faults come from the flags of ``sim/cli.py``:
+``--drop-rate`` loses PDO/SYNC frames, ``--delay-ms`` delays the TPDOs, ``--overload-servo ID``
+makes that node fault with a following error (EMCY 0x8611) after some time enabled.
+``--corrupt-rate`` does not apply: on CAN a corrupted frame fails its CRC and is retransmitted
+by the controller (ISO 11898-1), so the host never sees it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+import os
+import select
+import sys
+import termios
+import threading
+import time
+from typing import Any
+
+from sim.canopen.slcan import CanFrame, LineSplitter, SlcanAdapter, SlcanError, encode_frame
+from sim.pty_port import OnPty, PtyPort
+
+log = logging.getLogger(__name__)
+
+# How often the threads wake up to check for stop, s (not a protocol figure).
+POLL_S = 0.05
+# Seconds a node stays in OPERATION ENABLED before ``--overload-servo`` trips it (guess: long
+# enough for a connect and a few moves).
+DEFAULT_OVERLOAD_AFTER_S = 2.0
+
+
+class SlcanPtyBridge(OnPty):
+    """An SLCAN adapter on a new pseudo-terminal (``sim.pty_port.PtyPort``), bridged to a
+    python-can bus.
+
+    The host writes SLCAN lines to ``path``; frames it transmits go onto ``bus``; frames on
+    ``bus`` are written back as SLCAN lines while the adapter is open. Clients may come and go;
+    frames left unread by a client that died with the channel open are flushed when the next one
+    sends ``C``. ``unplug()`` and ``replug()`` pull the adapter out and plug it back (a new
+    path; the adapter closed, as at power-on); with ``link``, ``slcan:LINK`` follows it.
+
+    Args:
+        bus: a python-can bus (the emulated drives' side).
+        link: path of a symbolic link to the current pty (None: no link).
+    """
+
+    def __init__(self, bus: Any, link: str | os.PathLike[str] | None = None) -> None:
+        self.bus = bus
+        self.adapter = SlcanAdapter()
+        self._splitter = LineSplitter()
+        self.pty = PtyPort(link, on_open=self._power_on)
+        self._write_lock = threading.Lock()
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self.frames_in = 0  # host -> bus
+        self.frames_out = 0  # bus -> host
+        self.frames_dropped = 0  # bus -> host, pty full or adapter closed
+
+    def _power_on(self) -> None:
+        self.adapter = SlcanAdapter()  # a freshly plugged adapter starts closed
+        self._splitter = LineSplitter()
+
+    # ---- lifecycle -------------------------------------------------------------------------
+    def start(self) -> None:
+        if self._threads:
+            return
+        self._stop.clear()
+        for target, name in ((self._host_to_bus, "slcan-rx"), (self._bus_to_host, "slcan-tx")):
+            t = threading.Thread(target=target, name=name, daemon=True)
+            t.start()
+            self._threads.append(t)
+
+    def stop(self) -> None:
+        self._stop.set()
+        for t in self._threads:
+            t.join(timeout=2.0)
+        self._threads.clear()
+
+    def close(self) -> None:
+        self.stop()
+        self.pty.close()
+
+    def __enter__(self) -> SlcanPtyBridge:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ---- threads ---------------------------------------------------------------------------
+    def _write(self, data: bytes, drop_if_full: bool) -> bool:
+        """Write whole lines to the host; with ``drop_if_full`` give up (whole) when the pty is
+        full, so a host that stopped reading never blocks the bus."""
+        with self._write_lock:
+            master = self.pty.master
+            if master is None:  # unplugged
+                return False
+            try:
+                if drop_if_full:
+                    _, writable, _ = select.select([], [master], [], 0)
+                    if not writable:
+                        return False
+                os.write(master, data)
+            except (OSError, ValueError):
+                return False
+        return True
+
+    def _host_to_bus(self) -> None:
+        import can
+
+        while not self._stop.is_set():
+            master, slave = self.pty.fds()
+            if master is None or slave is None:  # unplugged
+                time.sleep(POLL_S)
+                continue
+            try:
+                ready, _, _ = select.select([master], [], [], POLL_S)
+                if not ready:
+                    continue
+                chunk = os.read(master, 4096)
+            except (OSError, ValueError):  # EIO without a client; EBADF once unplugged
+                time.sleep(POLL_S)
+                continue
+            for line in self._splitter.feed(chunk):
+                was_open = self.adapter.is_open
+                reply, frame = self.adapter.handle(line)
+                if was_open and line is not None and line[:1] == b"C":
+                    # A client opening the port sends C first (python-can's slcanBus does, before
+                    # it reads anything): frames queued for a client that died with the channel
+                    # open are dropped here. Only then: flushing while a client is between its
+                    # select() and read() makes pyserial raise "device reports readiness to
+                    # read but returned no data" (seen when O also flushed).
+                    with contextlib.suppress(termios.error):
+                        termios.tcflush(slave, termios.TCIFLUSH)
+                if frame is not None:
+                    msg = can.Message(
+                        arbitration_id=frame.can_id,
+                        data=frame.data,
+                        is_extended_id=frame.extended,
+                        is_remote_frame=frame.remote,
+                        dlc=frame.dlc,
+                    )
+                    try:
+                        self.bus.send(msg)
+                        self.frames_in += 1
+                    except can.CanError as exc:
+                        log.warning("slcan bridge: frame not sent: %s", exc)
+                        reply = b"\a"
+                self._write(reply, drop_if_full=False)
+
+    def _bus_to_host(self) -> None:
+        while not self._stop.is_set():
+            msg = self.bus.recv(timeout=POLL_S)
+            if msg is None or msg.is_error_frame:
+                continue
+            if not self.adapter.is_open:
+                self.frames_dropped += 1
+                continue
+            try:
+                frame = CanFrame(
+                    msg.arbitration_id,
+                    b"" if msg.is_remote_frame else bytes(msg.data),
+                    msg.is_extended_id,
+                    msg.is_remote_frame,
+                    msg.dlc,
+                )
+            except SlcanError as exc:
+                log.warning("slcan bridge: frame not representable: %s", exc)
+                continue
+            if self._write(encode_frame(frame), drop_if_full=True):
+                self.frames_out += 1
+            else:
+                self.frames_dropped += 1
+
+
+def serve(args: argparse.Namespace) -> int:
+    """Serve until interrupted (SIGINT/SIGTERM); returns the exit code. Prints the pty path and
+    the camera URL, one line each, flushed, so that a parent process can read them."""
+    import signal
+
+    import can
+
+    from sim.canopen.drives import EmulatedDrives
+    from sim.realtime import RealtimeLoop
+    from sim.twin import Twin
+
+    drop_rate = float(getattr(args, "drop_rate", 0.0) or 0.0)
+    delay_ms = float(getattr(args, "delay_ms", 0.0) or 0.0)
+    overload = getattr(args, "overload_servo", None)
+    if not 0.0 <= drop_rate < 1.0:
+        print(f"ergo: error: --drop-rate {drop_rate} is not in [0, 1)", file=sys.stderr)
+        return 2
+    if delay_ms < 0:
+        print(f"ergo: error: --delay-ms {delay_ms} is negative", file=sys.stderr)
+        return 2
+    if overload is not None and not 1 <= overload <= 6:
+        print(f"ergo: error: --overload-servo {overload} is not a node id in 1..6", file=sys.stderr)
+        return 2
+    if float(getattr(args, "corrupt_rate", 0.0) or 0.0) > 0:
+        print(
+            "ergo: warning: --corrupt-rate ignored on CAN (the CRC rejects a corrupted frame and "
+            "the controller retransmits it)",
+            file=sys.stderr,
+        )
+
+    def _terminate(signum: int, _frame: object) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, _terminate)
+    channel = f"ergo-canopen-{os.getpid()}"
+    twin = Twin()
+    drives = EmulatedDrives(
+        twin,
+        f"virtual:{channel}",
+        drop_rate=drop_rate,
+        tpdo_delay_s=delay_ms / 1000.0,
+        seed=int(getattr(args, "seed", 0) or 0),
+    )
+    if overload is not None:
+        after = float(getattr(args, "overload_after_s", DEFAULT_OVERLOAD_AFTER_S))
+        drives.schedule_following_error(int(overload), after)
+    bridge_bus = can.Bus(interface="virtual", channel=channel)
+    try:
+        with (
+            RealtimeLoop(twin, speed=float(getattr(args, "speed", 1.0) or 1.0)),
+            drives,
+            SlcanPtyBridge(bridge_bus, link=getattr(args, "link", None)) as bridge,
+        ):
+            from sim.mjpeg_server import serve_until_interrupted
+
+            announce = [f"canopen bus (slcan) on {bridge.path}"]
+            if bridge.link:
+                announce.append(f"canopen bus link {bridge.link}")
+            return serve_until_interrupted(twin, args, announce)
+    finally:
+        bridge_bus.shutdown()
+        signal.signal(signal.SIGTERM, previous)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m sim.canopen.server [--speed S] [--drop-rate P] ...`` without the ``ergo``
+    command (tests and benchmarks start it like this)."""
+    p = argparse.ArgumentParser(prog="python -m sim.canopen.server")
+    p.add_argument("--speed", type=float, default=1.0)
+    p.add_argument("--drop-rate", type=float, default=0.0)
+    p.add_argument("--delay-ms", type=float, default=0.0)
+    p.add_argument("--overload-servo", type=int, default=None)
+    p.add_argument("--overload-after-s", type=float, default=DEFAULT_OVERLOAD_AFTER_S)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--link", default=None, help="keep a symbolic link to the pty at this path")
+    p.add_argument("--camera-port", type=int, default=0)
+    p.add_argument("--no-camera", action="store_true")
+    return serve(p.parse_args(argv))
+
+
+if __name__ == "__main__":
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    sys.exit(main())

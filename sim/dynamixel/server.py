@@ -1,0 +1,149 @@
+"""``ergo twin serve --bus dynamixel``: the twin behind a real serial port (a pseudo-terminal)
+speaking Dynamixel Protocol 2.0 as six XL-320, and its overhead camera as an MJPEG stream.
+
+    $ ergo twin serve --bus dynamixel
+    dynamixel bus on /dev/pts/7
+    camera on http://127.0.0.1:41234/stream.mjpg
+
+Any program that drives a real Ergo Jr through a serial port then drives the twin, e.g.
+``ergo bus scan --port /dev/pts/7`` or a ``dynamixel`` rig with ``port: /dev/pts/7`` and
+``camera: http://127.0.0.1:41234/stream.mjpg``. The twin runs in real time
+(``sim.realtime.RealtimeLoop``); faults are injected from the flags (see ``sim/cli.py``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import select
+import sys
+import threading
+import time
+
+from sim.dynamixel.emulator import DEFAULT_OVERLOAD_AFTER_S, DynamixelEmulator, FaultConfig
+from sim.pty_port import OnPty, PtyPort
+
+log = logging.getLogger(__name__)
+
+# How often the serving loop wakes up to check for stop, s (not a protocol figure).
+POLL_S = 0.05
+
+
+class PtyBusServer(OnPty):
+    """Serves a ``DynamixelEmulator`` on a new pseudo-terminal (``sim.pty_port.PtyPort``).
+
+    ``path`` is the slave side to open with pyserial (e.g. ``/dev/pts/7``); ``port`` the link
+    when there is one. ``unplug()`` and ``replug()`` pull the adapter out and plug it back.
+
+    Args:
+        emulator: who answers.
+        link: path of a symbolic link to the current pty (None: no link).
+    """
+
+    def __init__(self, emulator: DynamixelEmulator, link: str | os.PathLike[str] | None = None):
+        self.emulator = emulator
+        self.pty = PtyPort(link)
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.bytes_in = 0
+        self.bytes_out = 0
+
+    def serve_forever(self) -> None:
+        """Answer packets until ``stop()`` (call from any thread) or KeyboardInterrupt."""
+        while not self._stop.is_set():
+            master = self.pty.master
+            if master is None:  # unplugged
+                time.sleep(POLL_S)
+                continue
+            try:
+                ready, _, _ = select.select([master], [], [], POLL_S)
+                if not ready:
+                    continue
+                data = os.read(master, 4096)
+            except (OSError, ValueError):  # EIO without a slave open; EBADF once unplugged
+                time.sleep(POLL_S)
+                continue
+            if not data:
+                continue
+            t0 = time.monotonic()
+            self.bytes_in += len(data)
+            for delay, wire in self.emulator.handle_bytes(data):
+                wait = t0 + delay - time.monotonic()
+                if wait > 0:
+                    time.sleep(wait)
+                try:
+                    os.write(master, wire)
+                except OSError:  # unplugged meanwhile
+                    break
+                self.bytes_out += len(wire)
+
+    def start(self) -> None:
+        """Serve in a daemon thread."""
+        if self._thread is None:
+            self._stop.clear()
+            self._thread = threading.Thread(
+                target=self.serve_forever, name="dynamixel-pty", daemon=True
+            )
+            self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+
+    def close(self) -> None:
+        self.stop()
+        self.pty.close()
+
+    def __enter__(self) -> PtyBusServer:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def faults_from_args(args: argparse.Namespace) -> FaultConfig:
+    """The ``--drop-rate --corrupt-rate --delay-ms --overload-servo --seed`` flags (and
+    ``--late-rate`` where the command line has it)."""
+    return FaultConfig(
+        drop_rate=float(getattr(args, "drop_rate", 0.0) or 0.0),
+        corrupt_rate=float(getattr(args, "corrupt_rate", 0.0) or 0.0),
+        extra_delay_s=float(getattr(args, "delay_ms", 0.0) or 0.0) / 1000.0,
+        late_rate=float(getattr(args, "late_rate", 0.0) or 0.0),
+        overload_servo=getattr(args, "overload_servo", None),
+        overload_after_s=float(getattr(args, "overload_after_s", DEFAULT_OVERLOAD_AFTER_S)),
+        seed=int(getattr(args, "seed", 0) or 0),
+    )
+
+
+def serve(args: argparse.Namespace) -> int:
+    """Serve until interrupted; returns the exit code. Prints the pty path and the camera URL
+    (one line each, flushed) so that a parent process can read them."""
+    from sim.realtime import RealtimeLoop
+    from sim.twin import Twin
+
+    try:
+        faults = faults_from_args(args)
+    except ValueError as exc:
+        print(f"ergo: error: {exc}", file=sys.stderr)
+        return 2
+    if faults.overload_servo is not None and not 1 <= faults.overload_servo <= 6:
+        print(
+            f"ergo: error: --overload-servo {faults.overload_servo} is not in 1..6", file=sys.stderr
+        )
+        return 2
+    twin = Twin()
+    emulator = DynamixelEmulator(twin, faults=faults)
+    with (
+        RealtimeLoop(twin, speed=float(getattr(args, "speed", 1.0))),
+        PtyBusServer(emulator, link=getattr(args, "link", None)) as server,
+    ):
+        from sim.mjpeg_server import serve_until_interrupted
+
+        announce = [f"dynamixel bus on {server.path}"]
+        if server.link:
+            announce.append(f"dynamixel bus link {server.link}")
+        return serve_until_interrupted(twin, args, announce)
