@@ -14,11 +14,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 
 from explore.dmp import Dmp
 from explore.rig import Rig
+from vision.observation import square_observation
 
 
 @dataclass(frozen=True)
@@ -89,15 +89,6 @@ class EpisodeResult:
 MOVED_THRESHOLD = 0.01  # m: a ball displacement under 1 cm is not "moved" (guess: tracker noise)
 
 
-def square_observation(frame: np.ndarray, size: int) -> np.ndarray:
-    """Centre square crop of a frame resized to (size, size, 3) with area averaging."""
-    h, w = frame.shape[:2]
-    s = min(h, w)
-    y0, x0 = (h - s) // 2, (w - s) // 2
-    crop = frame[y0 : y0 + s, x0 : x0 + s]
-    return cv2.resize(crop, (size, size), interpolation=cv2.INTER_AREA)
-
-
 class EpisodeRunner:
     """Runs episodes on a rig with a DMP."""
 
@@ -129,11 +120,16 @@ class EpisodeRunner:
         """Locate the ball and optionally keep the frame.
 
         With a ball locator (the tracker) a frame is always taken; without one (the twin),
-        the twin's ground truth is used and a frame is rendered only if ``render``.
+        the twin's ground truth is used and, if ``render``, the observation is rendered (at its
+        own size when the rig has a ``square_view``; then ``frame`` is None).
         """
         rig = self.rig
         if rig.ball_locator is None and not render:
             return Observation(ball=self._true_ball())
+        if rig.ball_locator is None and rig.square_view is not None:
+            # only the observation is used: rendered at its own size, no full frame
+            image = rig.square_view(self.config.obs_size)
+            return Observation(ball=self._true_ball(), image=image)
         frame = rig.camera.read().image
         ball = self._true_ball() if rig.ball_locator is None else rig.ball_locator(frame)
         if not render:
