@@ -30,7 +30,7 @@ import numpy as np
 
 from sim.armballs.config import ArmBallsConfig
 from sim.armballs.kinematics import hand_position
-from sim.armballs.primitives import RbfPrimitive
+from sim.armballs.primitives import PrimitiveParameterError, RbfPrimitive
 from sim.armballs.render import render_scene
 
 NOT_CAUGHT = -1  # catch_step of an episode in which the ball was never caught
@@ -236,7 +236,11 @@ class ArmBallsEnv:
             rng: draws the distractor's walk (unused without a distractor).
             render: whether to draw the final scene.
         """
-        commands = self.primitive.commands(np.asarray(params, dtype=float).reshape(-1))
+        if np.ndim(params) != 1:
+            raise PrimitiveParameterError(
+                f"one episode takes parameters of shape ({self.n_params},), got {np.shape(params)}"
+            )
+        commands = self.primitive.commands(params)
         paths = play_commands(commands[None], self._noise(rng, 1), self.config)
         ball = paths.ball[0, -1].copy()
         distractor = None if paths.distractor is None else paths.distractor[0, -1].copy()
@@ -261,7 +265,9 @@ class ArmBallsEnv:
         Returns:
             the N episodes' paths; the outcomes are their last steps (``[:, -1]``).
         """
-        commands = self.primitive.commands(
-            np.asarray(params, dtype=float).reshape(-1, self.n_params)
-        )
+        if np.ndim(params) != 2:
+            raise PrimitiveParameterError(
+                f"a batch takes parameters of shape (N, {self.n_params}), got {np.shape(params)}"
+            )
+        commands = self.primitive.commands(params)
         return play_commands(commands, self._noise(rng, len(commands)), self.config)

@@ -315,6 +315,14 @@ def test_bad_parameters_are_refused_with_a_clear_error(params: np.ndarray, messa
         ArmBallsEnv().play(params, np.random.default_rng(0))
 
 
+def test_single_and_batch_episodes_refuse_the_other_shape():
+    env = ArmBallsEnv()
+    with pytest.raises(PrimitiveParameterError, match="one episode"):
+        env.play(np.zeros((1, 49)), np.random.default_rng(0))
+    with pytest.raises(PrimitiveParameterError, match="a batch"):
+        env.play_batch(np.zeros(98), np.random.default_rng(0))
+
+
 def test_bad_settings_are_refused():
     with pytest.raises(ValueError, match="sum to 1"):
         ArmBallsConfig(link_lengths=(0.5, 0.4))
