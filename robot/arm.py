@@ -59,13 +59,13 @@ class JointState:
     ) -> JointState:
         """A state with only positions known (others zero or NaN unless given)."""
         n = len(positions)
-        nan = np.full(n, np.nan)
+        # defaults made only for what is missing (an arm reads this every control tick)
         return cls(
             positions=np.asarray(positions, dtype=float),
-            velocities=kw.get("velocities", np.zeros(n)),
-            loads=kw.get("loads", nan.copy()),
-            temperatures=kw.get("temperatures", nan.copy()),
-            errors=kw.get("errors", np.zeros(n, dtype=int)),
+            velocities=kw["velocities"] if "velocities" in kw else np.zeros(n),
+            loads=kw["loads"] if "loads" in kw else np.full(n, np.nan),
+            temperatures=kw["temperatures"] if "temperatures" in kw else np.full(n, np.nan),
+            errors=kw["errors"] if "errors" in kw else np.zeros(n, dtype=int),
             timestamp=timestamp,
         )
 

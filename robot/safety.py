@@ -56,22 +56,19 @@ class Watchdog:
         if self._last is not None and state.timestamp - self._last > self.max_gap_s:
             self._since.clear()
         self._last = state.timestamp
-        checks = {
-            "temperature": (
-                np.nan_to_num(state.temperatures, nan=-np.inf),
-                self.max_temperature_c,
-                "C",
-            ),
-            "load": (np.abs(np.nan_to_num(state.loads, nan=0.0)), self.max_load, "of max torque"),
-        }
-        for kind, (values, limit, unit) in checks.items():
-            over = np.flatnonzero(values > limit)
-            if over.size == 0:
+        # NaN (unknown) compares False with any limit, so it never trips
+        checks = (
+            ("temperature", np.asarray(state.temperatures), self.max_temperature_c, "C"),
+            ("load", np.abs(state.loads), self.max_load, "of max torque"),
+        )
+        for kind, values, limit, unit in checks:
+            over = values > limit
+            if not over.any():
                 self._since.pop(kind, None)
                 continue
             start = self._since.setdefault(kind, state.timestamp)
             if state.timestamp - start >= self.hold_s:
-                j = int(over[0])
+                j = int(over.argmax())  # the first joint over its limit
                 return (
                     f"safety stop: joint {j + 1} {kind} {values[j]:.2f} {unit} over the limit "
                     f"{limit} for {state.timestamp - start:.1f} s; torque off"

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -55,20 +56,22 @@ class ArmSpec:
     def ids(self) -> list[int]:
         return [j.servo_id for j in self.joints]
 
-    @property
+    # The arrays below are computed once (the spec is frozen) and read-only: ``clamp`` runs on
+    # every command, 80 times an episode, and building them each time was a third of its cost.
+    @cached_property
     def lower(self) -> np.ndarray:
-        """Lower limits, shape (n,), rad."""
-        return np.array([j.lower for j in self.joints])
+        """Lower limits, shape (n,), rad (read-only)."""
+        return _read_only([j.lower for j in self.joints])
 
-    @property
+    @cached_property
     def upper(self) -> np.ndarray:
-        """Upper limits, shape (n,), rad."""
-        return np.array([j.upper for j in self.joints])
+        """Upper limits, shape (n,), rad (read-only)."""
+        return _read_only([j.upper for j in self.joints])
 
-    @property
+    @cached_property
     def rest(self) -> np.ndarray:
-        """Rest pose, shape (n,), rad."""
-        return np.array([j.rest for j in self.joints])
+        """Rest pose, shape (n,), rad (read-only)."""
+        return _read_only([j.rest for j in self.joints])
 
     @property
     def n(self) -> int:
@@ -104,22 +107,41 @@ class ArmSpec:
         target = np.asarray(target, dtype=float).reshape(-1)
         if target.shape != (self.n,):
             raise ValueError(f"command has shape {target.shape}, expected ({self.n},)")
-        if not np.all(np.isfinite(target)):
+        # Plain floats: for six joints a Python loop costs half of the numpy expression
+        # (7 against 13 us a command, 80 commands an episode) and gives the same bits
+        # (min/max, then prev +- max_step, as np.clip / np.where / np.sign did).
+        wanted = target.tolist()
+        if not all(map(math.isfinite, wanted)):
             raise ValueError(f"command has non-finite values: {target}")
-        inside = np.clip(target, self.lower, self.upper)
+        inside = [min(max(x, lo), hi) for x, lo, hi in zip(wanted, *self._limit_lists, strict=True)]
         if previous is None:
-            return inside
+            return np.array(inside)
         prev = np.asarray(previous, dtype=float).reshape(self.n)
-        if not np.all(np.isfinite(prev)):
+        before = prev.tolist()
+        if not all(map(math.isfinite, before)):
             raise ValueError(f"previous command has non-finite values: {prev}")
         # Towards the target brought inside the limits, at most max_step: from inside the
         # limits this stays inside; from outside (an arm moved by hand past narrowed limits)
-        # it walks back in at max_step per tick instead of jumping to the limit.
-        delta = inside - prev
-        # the target itself when within reach (exactly: no rounding outside the limits)
-        return np.where(
-            np.abs(delta) <= self.max_step, inside, prev + np.sign(delta) * self.max_step
+        # it walks back in at max_step per tick instead of jumping to the limit. The target
+        # itself when within reach (exactly: no rounding outside the limits).
+        step = self.max_step
+        return np.array(
+            [
+                x if abs(x - p) <= step else (p + step if x > p else p - step)
+                for x, p in zip(inside, before, strict=True)
+            ]
         )
+
+    @cached_property
+    def _limit_lists(self) -> tuple[list[float], list[float]]:
+        """(lower, upper) limits as lists of floats, rad (for ``clamp``)."""
+        return [j.lower for j in self.joints], [j.upper for j in self.joints]
+
+
+def _read_only(values: list[float]) -> np.ndarray:
+    a = np.array(values, dtype=float)
+    a.flags.writeable = False
+    return a
 
 
 def _deg(lo: float, hi: float) -> tuple[float, float]:

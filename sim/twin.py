@@ -14,6 +14,7 @@ import threading
 from pathlib import Path
 
 from robot.spec import ERGO_JR_JOINTS
+from sim import RENDER_QUALITIES
 from sim.headless import ensure_headless_gl
 
 ensure_headless_gl()
@@ -24,6 +25,11 @@ import numpy as np  # noqa: E402
 MODELS = Path(__file__).parent / "models"
 SCENE = MODELS / "scene.xml"
 JOINTS = ERGO_JR_JOINTS  # the MJCF's joint and actuator names (sim/models/ergo_jr.xml)
+# MuJoCo's default visual quality (MJCF reference, <visual><quality>): what the scene rendered
+# with before it set its own (sim/models/make_scene.py).
+LEGACY_SHADOW_SIZE = 4096  # px
+LEGACY_OFFSAMPLES = 4
+LEGACY_FLOOR_GRID = 0.01  # m, the floor's render grid before 2026-12-01 (shadows show it)
 
 
 class TwinError(RuntimeError):
@@ -36,16 +42,36 @@ class Twin:
     Args:
         scene: MJCF file to load (default: ``sim/models/scene.xml``).
         render_size: (height, width) of overhead renders, pixels.
+        render_quality: ``"chosen"`` (the scene's own render settings: no shadow map, no
+            multisampling; docs/twin.md) or ``"legacy"`` (MuJoCo's defaults, which the twin
+            used before 2026-12-01: a 4096 x 4096 shadow map, 4x multisampling, the top light
+            casting shadows, the floor drawn on a 1 cm grid; about 15x slower a frame on a
+            software renderer, for reproducing figures measured on those images: the same
+            pixels). Physics is the same with either.
     """
 
     def __init__(
-        self, scene: str | Path = SCENE, render_size: tuple[int, int] = (240, 240)
+        self,
+        scene: str | Path = SCENE,
+        render_size: tuple[int, int] = (240, 240),
+        render_quality: str = "chosen",
     ) -> None:
+        if render_quality not in RENDER_QUALITIES:
+            raise TwinError(
+                f"render quality {render_quality!r}: expected one of {', '.join(RENDER_QUALITIES)}"
+            )
         try:
             self.model = mujoco.MjModel.from_xml_path(str(scene))
         except (ValueError, FileNotFoundError) as exc:
             raise TwinError(f"cannot load twin scene {scene}: {exc}") from exc
+        self.render_quality = render_quality
+        if render_quality == "legacy":
+            quality = self.model.vis.quality
+            quality.shadowsize, quality.offsamples = LEGACY_SHADOW_SIZE, LEGACY_OFFSAMPLES
+            self.model.light_castshadow[:] = 1
+            self.model.geom_size[self.model.geom("floor").id, 2] = LEGACY_FLOOR_GRID
         self.data = mujoco.MjData(self.model)
+        self._timestep = float(self.model.opt.timestep)
         self.lock = threading.RLock()
         m = self.model
         self._qpos_idx = np.array([m.joint(j).qposadr[0] for j in JOINTS])
@@ -65,8 +91,9 @@ class Twin:
     # ---- state -----------------------------------------------------------------------------
     @property
     def timestep(self) -> float:
-        """Physics step, s."""
-        return float(self.model.opt.timestep)
+        """Physics step, s (the model's, read once: ``model.opt`` builds a new view per access,
+        and ``step`` needs it every control tick)."""
+        return self._timestep
 
     @property
     def time(self) -> float:
@@ -137,7 +164,7 @@ class Twin:
 
     def targets(self) -> np.ndarray:
         """Current position targets, shape (6,), rad."""
-        return self.data.ctrl[self._act_idx].copy()
+        return self.data.ctrl[self._act_idx]
 
     def step(self, seconds: float | None = None) -> None:
         """Advance physics by ``seconds`` (rounded to whole steps; one step if None)."""
@@ -145,22 +172,22 @@ class Twin:
         with self.lock:
             mujoco.mj_step(self.model, self.data, nstep=n)
 
-    # ---- queries ---------------------------------------------------------------------------
+    # ---- queries (index arrays: every one returns a new array) ------------------------------
     def joint_positions(self) -> np.ndarray:
         """Shape (6,), rad."""
-        return self.data.qpos[self._qpos_idx].copy()
+        return self.data.qpos[self._qpos_idx]
 
     def joint_velocities(self) -> np.ndarray:
         """Shape (6,), rad/s."""
-        return self.data.qvel[self._qvel_idx].copy()
+        return self.data.qvel[self._qvel_idx]
 
     def joint_torques(self) -> np.ndarray:
         """Actuator torques, shape (6,), N.m."""
-        return self.data.actuator_force[self._act_idx].copy()
+        return self.data.actuator_force[self._act_idx]
 
     def max_torques(self) -> np.ndarray:
         """Actuator force limits, shape (6,), N.m."""
-        return self.model.actuator_forcerange[self._act_idx, 1].copy()
+        return self.model.actuator_forcerange[self._act_idx, 1]
 
     def ball_position(self) -> np.ndarray:
         """Ball centre, shape (3,), m (world frame, z up, origin at the arm's base)."""

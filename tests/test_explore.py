@@ -106,7 +106,6 @@ def test_the_outcome_is_observed_with_the_arm_back_at_rest():
     image (more than a ball moved by a centimetre): the outcome waits until it has stopped."""
     from explore.rigs.rig import RigConfig, make_rig
     from explore.runs.episode import EpisodeRunner
-    from vision.observation import square_observation
 
     with make_rig(RigConfig()) as rig:
         runner = EpisodeRunner(rig)
@@ -120,7 +119,7 @@ def test_the_outcome_is_observed_with_the_arm_back_at_rest():
             assert np.abs(rig.twin.joint_positions() - rest).max() < np.radians(0.3)
             assert not np.allclose(result.targets[-1], rest, atol=0.05)  # it did move
             rig.clock.advance(1.0)  # a second later the scene is the same
-            later = square_observation(rig.camera.read().image, runner.config.obs_size)
+            later = runner.observe(render=True).image
             change = np.abs(later.astype(int) - result.outcome.image.astype(int)).mean()
             assert change < 0.1, f"episode {seed}: the outcome image changed by {change:.2f}"
             context = result.outcome
@@ -249,3 +248,25 @@ def test_fault_counters_are_summed_per_session_and_never_mask_the_runs_error(tmp
         Explorer(rig, strategy, store, seed=0).run(3)
     store.close()
     assert not (tmp_path / "run" / "faults.json").exists()
+
+
+def test_the_twin_s_physics_does_not_depend_on_its_render_quality(tmp_path):
+    """The same seed with the chosen render settings and with MuJoCo's defaults: every field
+    of every record the same but the outcome image (the ball's dynamics never see a render)."""
+    from explore.learner.strategies import make_strategy
+    from explore.rigs.rig import RigConfig, make_rig
+    from explore.runs.explorer import Explorer
+    from explore.runs.store import RunStore
+
+    runs = {}
+    for quality in ("chosen", "legacy"):
+        rig = make_rig(RigConfig(options={"render_quality": quality}))
+        store = RunStore.create(tmp_path / quality, {"test": True})
+        Explorer(rig, make_strategy("rge-efr", bootstrap=6), store, seed=6).run(12)
+        runs[quality] = store.records
+        store.close()
+    chosen, legacy = runs["chosen"], runs["legacy"]
+    assert sum(r.ball_moved for r in chosen) >= 1  # the ball's dynamics were exercised
+    for a, b in zip(chosen, legacy, strict=True):
+        assert a.equals(b, ignore=("duration_s", "image"))
+        assert not np.array_equal(a.image, b.image)

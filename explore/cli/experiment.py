@@ -19,6 +19,7 @@ from explore.campaigns.backends import BACKENDS, DEFAULT_RETRIES
 from explore.campaigns.trial import CampaignError
 from explore.cli import CliError
 from explore.cli.explore import add_rig_arguments, parse_key_values, rig_options
+from sim import RENDER_QUALITIES
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -82,6 +83,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     o.add_argument(
         "--arm", choices=("rest", "random"), default="rest",
         help="arm at rest (default: as in an episode's outcome image) or in random poses",
+    )  # fmt: skip
+    o.add_argument(
+        "--render-quality", choices=RENDER_QUALITIES, default="chosen",
+        help="the twin's render settings (default chosen; legacy: the images before 2026-12-01)",
     )  # fmt: skip
     o.add_argument("--no-progress", action="store_true", help="no progress bar")
     o.set_defaults(func=run_dataset_outcomes)
@@ -167,7 +172,10 @@ def run_dataset_outcomes(args: argparse.Namespace) -> int:
         raise CliError(f"--n must be at least 1, got {args.n}")
     if args.out.suffix != ".npz":
         raise CliError(f"--out {args.out}: expected a .npz file name")
-    data = make_outcome_dataset(args.n, seed=args.seed, progress=not args.no_progress, arm=args.arm)
+    data = make_outcome_dataset(
+        args.n, seed=args.seed, progress=not args.no_progress, arm=args.arm,
+        render_quality=args.render_quality,
+    )  # fmt: skip
     save_dataset(args.out, data)
     print(f"{args.out}: {args.n} images {data['images'].shape[1:]} with ball positions")
     return 0

@@ -60,6 +60,9 @@ class Rig:
     ball_locator: Callable[[np.ndarray], np.ndarray] | None = None
     #: called with the arm at rest before each episode's context is observed (twin: ball reset)
     before_episode: Callable[[], None] | None = None
+    #: side (pixels) -> the square observation (side, side, 3) BGR uint8, rendered directly
+    #: at that size; set where nothing needs the full frame (the twin with its ground truth)
+    square_view: Callable[[int], np.ndarray] | None = None
 
     def connect(self) -> None:
         self.camera.connect()

@@ -4,9 +4,9 @@ Each scene: the ball placed uniformly over its ring (uniform in area between rad
 m, where the ball's centre can lie; uniform angle), the arm at its rest pose (``arm="rest"``,
 the default: an episode's outcome is observed there, explore/runs/episode.py) or driven towards
 random joint targets inside its limits (``arm="random"``, the paper's database, in which the
-arm's pose varies), ``settle_s`` seconds of physics, then an overhead render reduced to 64x64
-exactly as an episode's outcome (``vision.observation.square_observation``). The ball's position
-is read after the arm moved (the arm may have pushed it).
+arm's pose varies), ``settle_s`` seconds of physics, then the overhead view rendered at 64x64
+exactly as an episode's outcome on the twin (``sim.camera.SimCamera.read_square``). The ball's
+position is read after the arm moved (the arm may have pushed it).
 
 The paper pre-trained its VAEs on such a database of the environment's possible outcomes.
 """
@@ -23,7 +23,6 @@ from robot.spec import ergo_jr_spec
 from vision.observation import OBSERVATION_SIZE, square_observation
 
 SETTLE_S = 0.3  # s of physics towards the random pose: a 30-degree step takes ~0.2 s (docs/twin)
-RENDER_SIZE = (240, 240)  # the sim rig's default overhead frame (explore/rigs/sim.py)
 ARM_POSES = ("rest", "random")  # arm at its rest pose (as in an episode's outcome) or random
 
 
@@ -37,23 +36,28 @@ def ring_positions(n: int, rng: np.random.Generator) -> np.ndarray:
 def make_outcome_dataset(
     n: int,
     seed: int = 0,
-    render_size: tuple[int, int] = RENDER_SIZE,
     settle_s: float = SETTLE_S,
     progress: bool = True,
     arm: str = "rest",
+    render_quality: str = "chosen",
 ) -> dict[str, np.ndarray]:
-    """Render ``n`` scenes with the arm at rest (``arm="rest"``) or in random poses (``"random"``).
+    """Render ``n`` scenes with the arm at rest (``arm="rest"``) or in random poses (``"random"``),
+    with the twin's ``render_quality`` (``sim.twin.Twin``; "legacy" reduces full frames, as the
+    sim rig does with it).
 
     Returns:
         images: (n, 64, 64, 3) BGR uint8; ball: (n, 2) m after the arm moved; placed: (n, 2) m
         where the ball was put; joints: (n, 6) rad, the arm's pose at the render.
     """
+    from sim.camera import SimCamera
     from sim.twin import JOINTS, Twin
 
     if arm not in ARM_POSES:
         raise ValueError(f"arm={arm!r}: expected one of {', '.join(ARM_POSES)}")
     rng = np.random.default_rng(seed)
-    twin = Twin(render_size=render_size)
+    twin = Twin(render_quality=render_quality)
+    camera = SimCamera(twin)
+    camera.connect()
     lo = np.array([twin.model.joint(j).range[0] for j in JOINTS])
     hi = np.array([twin.model.joint(j).range[1] for j in JOINTS])
     size = OBSERVATION_SIZE
@@ -74,7 +78,10 @@ def make_outcome_dataset(
             twin.reset(tuple(placed[i]))
             twin.set_targets(targets[i])
             twin.step(settle_s)
-            images[i] = square_observation(twin.render(), size)
+            if render_quality == "legacy":
+                images[i] = square_observation(camera.read().image, size)
+            else:
+                images[i] = camera.read_square(size).image
             ball[i] = twin.ball_position()[:2]
             joints[i] = twin.joint_positions()
             if bar is not None:

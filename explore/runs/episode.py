@@ -107,11 +107,16 @@ class EpisodeRunner:
         """Locate the ball and optionally keep the frame.
 
         With a ball locator (the tracker) a frame is always taken; without one (the twin),
-        the twin's ground truth is used and a frame is rendered only if ``render``.
+        the twin's ground truth is used and, if ``render``, the observation is rendered (at its
+        own size when the rig has a ``square_view``; then ``frame`` is None).
         """
         rig = self.rig
         if rig.ball_locator is None and not render:
             return Observation(ball=self._true_ball())
+        if rig.ball_locator is None and rig.square_view is not None:
+            # only the observation is used: rendered at its own size, no full frame
+            image = rig.square_view(self.config.obs_size)
+            return Observation(ball=self._true_ball(), image=image)
         frame = rig.camera.read().image
         ball = self._true_ball() if rig.ball_locator is None else rig.ball_locator(frame)
         if not render:

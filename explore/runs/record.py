@@ -9,6 +9,7 @@ episode (empty on hardware); settle_s, duration_s seconds.
 from __future__ import annotations
 
 import io
+import zipfile
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -21,6 +22,11 @@ _SCALAR_FIELDS = {
     "episode": int, "module": int, "kind": str, "ball_moved": bool, "settle_s": float,
     "duration_s": float,
 }  # fmt: skip
+
+
+# zlib level of a stored record: level 1 encodes one in half the time of numpy's default (6)
+# for a 5% larger record (9.8 against 9.3 kB; measured 2026-12-01 on 100 twin episodes).
+NPZ_LEVEL = 1
 
 
 class RecordError(ValueError):
@@ -51,11 +57,13 @@ class EpisodeRecord:
         return self.end_effector[-1]
 
     def to_bytes(self) -> bytes:
-        """Serialise as a compressed ``.npz`` (no pickle)."""
+        """Serialise as a compressed ``.npz`` (no pickle), as ``np.savez_compressed`` writes
+        it but at zlib level 1 (``NPZ_LEVEL``): any ``np.load`` reads it."""
         buf = io.BytesIO()
-        arrays = {name: np.asarray(getattr(self, name)) for name in _ARRAY_FIELDS}
-        scalars = {name: np.asarray(getattr(self, name)) for name in _SCALAR_FIELDS}
-        np.savez_compressed(buf, **arrays, **scalars)
+        with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED, compresslevel=NPZ_LEVEL) as zf:
+            for name in (*_ARRAY_FIELDS, *_SCALAR_FIELDS):
+                with zf.open(name + ".npy", "w") as f:
+                    np.lib.format.write_array(f, np.asarray(getattr(self, name)))
         return buf.getvalue()
 
     @classmethod

@@ -36,6 +36,20 @@ BALL_START = (0.15, 0.0)  # m, initial ball position on the ring
 ARENA_RADIUS = OUTER_RADIUS  # the metric's bounding square is [-R, R]^2
 CAMERA_HEIGHT = 0.55  # m above the floor
 CAMERA_FOVY = 45.0  # degrees: the arena's square fits the frame with a margin
+# Render settings, chosen (docs/twin.md, "Render settings"): the light is straight above, so
+# the ball's shadow lies under the ball, hidden from the overhead camera, and the arm at rest
+# shades only itself; a real rig under ceiling lights sees soft shadows or none. MuJoCo's
+# defaults (a 4096 x 4096 shadow map, 4x multisampling) cost 43.5 ms a frame on Mesa's software
+# renderer at 64 x 64, against about 1-3.5 ms with no shadow-casting light and no
+# multisampling (measured 2026-12-01; ``sim.twin.Twin(render_quality="legacy")`` brings them
+# back). The outcome
+# image is rendered at its own 64 x 64 (explore/rigs/sim.py): without multisampling the ball's
+# centroid in it is 0.07 px (median) from that of an 8x-multisampled 480 x 480 render reduced
+# to 64 x 64 (measured 2026-12-01 over 40 ring positions), 0.5 mm in the arena.
+SHADOW_SIZE = 0  # px: no shadow map (no light casts shadows)
+OFFSCREEN_SAMPLES = 0  # no multisample anti-aliasing
+LIGHT_CASTS_SHADOW = False
+FLOOR_GRID = 0.5  # m, spacing of the floor's render grid (rendering only; see the scene)
 
 
 def wall_boxes() -> str:
@@ -71,6 +85,8 @@ def scene_xml() -> str:
   <visual>
     <headlight diffuse="0.6 0.6 0.6" ambient="0.35 0.35 0.35" specular="0 0 0"/>
     <global offwidth="640" offheight="640"/>
+    <!-- chosen in make_scene.py (SHADOW_SIZE, OFFSCREEN_SAMPLES): see docs/twin.md -->
+    <quality shadowsize="{SHADOW_SIZE}" offsamples="{OFFSCREEN_SAMPLES}"/>
   </visual>
 
   <default>
@@ -89,9 +105,12 @@ def scene_xml() -> str:
   </asset>
 
   <worldbody>
-    <light name="top" pos="0 0 1.2" dir="0 0 -1" diffuse="0.5 0.5 0.5" directional="true"/>
-    <!-- blue arena floor (HSV hue about 115 in OpenCV units) -->
-    <geom name="floor" type="plane" size="0.5 0.5 0.01" material="floor_mat" contype="0" conaffinity="1"
+    <light name="top" pos="0 0 1.2" dir="0 0 -1" diffuse="0.5 0.5 0.5" directional="true"
+           castshadow="{str(LIGHT_CASTS_SHADOW).lower()}"/>
+    <!-- blue arena floor (HSV hue about 115 in OpenCV units); the third size is the spacing of
+         the grid it is drawn with (rendering only): 0.5 m, 2 x 2 quads, draws the same pixels as
+         the 100 x 100 of 0.01 m in half the time of a 64 x 64 frame (measured 2026-12-01) -->
+    <geom name="floor" type="plane" size="0.5 0.5 {FLOOR_GRID}" material="floor_mat" contype="0" conaffinity="1"
           friction="0.8 0.005 0.0001"/>
     <!-- kerb around the base: keeps the ball on its ring, collides with the ball only -->
     <geom name="kerb" type="cylinder" size="{INNER_RADIUS} {KERB_HEIGHT / 2}" pos="0 0 {KERB_HEIGHT / 2}"
