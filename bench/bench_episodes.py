@@ -27,10 +27,9 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from explore.learner.strategies import make_strategy
 from explore.rigs.rig import RigConfig, make_rig
-from explore.runs.explorer import Explorer
-from explore.runs.store import RunStore
+from explore.runs.config import RunConfig, StrategyConfig
+from explore.runs.open_run import open_run
 from sim.camera import SimCamera
 from sim.twin import Twin
 from vision.observation import square_observation
@@ -96,15 +95,20 @@ def measure(
     (same actuator targets, same steps: the same contacts and solver work), with MuJoCo called
     directly, plus one outcome image."""
     options = {"vae": str(vae)} if strategy == "rge-vae" else {}
-    rig = make_rig(RigConfig(options={"render_quality": quality}))
+    config = RunConfig(
+        rig=RigConfig(options={"render_quality": quality}),
+        strategy=StrategyConfig(strategy, options),
+        episodes=episodes,
+    )
+    rig = make_rig(config.rig)
     twin = rig.twin
     bound_twin = Twin(render_size=twin.render_size, render_quality=quality)
     bound_camera = SimCamera(bound_twin)
     run_s = bound_s = run_cpu = bound_cpu = 0.0
     steps_total = 0
     with tempfile.TemporaryDirectory() as tmp, rig, bound_camera:
-        store = RunStore.create(Path(tmp) / "run", {"bench": True})
-        explorer = Explorer(rig, make_strategy(strategy, **options), store, seed=0)
+        run = open_run(Path(tmp) / "run", config, mode="new", rig=rig)
+        explorer = run.explorer()
         obs = explorer.runner.config.obs_size
         explorer.runner.observe(render=True)  # warm both renderers up outside the timings
         bound_frame(bound_twin, bound_camera, quality, obs)
@@ -129,7 +133,7 @@ def measure(
                 bound_frame(bound_twin, bound_camera, quality, obs)
                 bound_s += time.perf_counter() - t0
                 bound_cpu += time.process_time() - c0
-        store.close()
+        run.close()
     bound_twin.close()
     n = episodes
     return n / run_s, n / bound_s, n / run_cpu, n / bound_cpu, steps_total / n

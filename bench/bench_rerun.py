@@ -23,11 +23,9 @@ if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY"):
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from explore.learner.strategies import make_strategy
 from explore.report.recorder import Recorder
-from explore.rigs.rig import RigConfig, make_rig
-from explore.runs.explorer import Explorer
-from explore.runs.store import RunStore
+from explore.runs.config import RunConfig
+from explore.runs.open_run import open_run
 
 
 def run_once(out: Path, episodes: int, record: bool, stride: int) -> tuple[float, float]:
@@ -38,24 +36,15 @@ def run_once(out: Path, episodes: int, record: bool, stride: int) -> tuple[float
         recorder's background encoder and writer count); the loop only, rig start-up
         excluded, the recorder's flush on close included.
     """
-    config = {
-        "rig": {"name": "sim", "rig_id": "twin", "options": {}},
-        "strategy": {"name": "rpe", "options": {}},
-        "seed": 0,
-        "episodes": episodes,
-    }
-    store = RunStore.create(out, config)
+    run = open_run(out, RunConfig(seed=0, episodes=episodes), mode="new")
     recorder = Recorder("save", path=out / "recording.rrd", stride=stride) if record else None
-    explorer = Explorer(
-        make_rig(RigConfig(**config["rig"])), make_strategy("rpe"), store, seed=0,
-        on_record=recorder.on_record if recorder else None,
-    )  # fmt: skip
+    explorer = run.explorer(on_record=recorder.on_record if recorder else None)
     t0, c0 = time.perf_counter(), time.process_time()
     explorer.run(episodes)
     if recorder:
         recorder.close()
     elapsed, cpu = time.perf_counter() - t0, time.process_time() - c0
-    store.close()
+    run.close()
     return episodes / elapsed, episodes / cpu
 
 

@@ -16,10 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from explore.learner.strategies import make_strategy
-from explore.rigs.rig import RigConfig, make_rig
-from explore.runs.explorer import Explorer
-from explore.runs.store import RunStore
+from explore.runs.config import RunConfig
+from explore.runs.open_run import open_run
 
 
 def main() -> None:
@@ -30,12 +28,11 @@ def main() -> None:
     fractions, cells = [], []
     for seed in args.seeds:
         with tempfile.TemporaryDirectory() as tmp:
-            store = RunStore.create(Path(tmp) / "run", {"bench": True})
-            ex = Explorer(make_rig(RigConfig()), make_strategy("rpe"), store, seed=seed)
-            ex.run(args.episodes)
-            moved = np.mean([r.ball_moved for r in store])
+            config = RunConfig(seed=seed, episodes=args.episodes)
+            with open_run(Path(tmp) / "run", config, mode="new") as run:
+                ex = run.explore()
+                moved = np.mean([r.ball_moved for r in run.store])
             n_cells = ex.metrics.rows[-1]["ball_cells"]
-            store.close()
         fractions.append(moved)
         cells.append(n_cells)
         print(

@@ -9,13 +9,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from robot.bus_flags import add_bus_arguments, bus_from_args, make_arm
 from sim.models.make_scene import BALL_RADIUS
 
-# --port / --can -> "module:Class" of the arm backend used by ``calibrate joints``.
-ARM_BACKENDS: dict[str, str] = {
-    "port": "robot.dynamixel.arm:DynamixelArm",
-    "can": "robot.canopen.arm:CanArm",
-}
 DEFAULT_VIEWS = 15  # views to collect from a live camera (OpenCV's tutorial: 10-15, docs/facts.md)
 MIN_VIEW_SHIFT_PX = 25.0  # a live view is kept only if the corners moved this much (guess)
 
@@ -98,10 +94,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     joints = cal.add_parser("joints", help="joint offsets, directions and ranges, by hand")
     common(joints)
-    bus = joints.add_mutually_exclusive_group(required=True)
-    bus.add_argument("--port", help="Dynamixel serial port, e.g. /dev/ttyUSB0")
-    bus.add_argument("--can", help="python-can bus, e.g. socketcan:can0")
-    joints.add_argument("--baud", type=int, default=1_000_000, help="serial baud rate")
+    add_bus_arguments(joints, required=True)
     joints.add_argument("--model", default="XL-320", help="Dynamixel model")
     joints.add_argument("--joints", nargs="*", default=None, help="joint names (default all)")
     joints.set_defaults(func=_joints)
@@ -187,14 +180,13 @@ def _live_views(args: argparse.Namespace, spec) -> tuple[list, tuple[int, int]]:
     import numpy as np
 
     from calibration import charuco
-    from vision.camera import CameraError
-    from vision.cli import open_source
+    from vision.camera import CameraError, make_camera
 
     views: list = []
     size = (0, 0)
     last = None
     print(f"show the board at {args.views} places and tilts; Ctrl-C to stop early")
-    with open_source(args.camera) as cam:
+    with make_camera(args.camera) as cam:
         for n in range(args.max_frames):
             if len(views) >= args.views:
                 break
@@ -232,9 +224,9 @@ def _read_frame(args: argparse.Namespace):
         if image is None:
             raise CalibrationError(f"cannot read image {args.image}")
         return image
-    from vision.cli import open_source
+    from vision.camera import make_camera
 
-    with open_source(args.camera) as cam:
+    with make_camera(args.camera) as cam:
         for _ in range(5):  # let auto-exposure settle on a live camera (guess: 5 frames)
             image = cam.read().image
     return image
@@ -331,15 +323,11 @@ def _joints(args: argparse.Namespace) -> int:
 
 
 def _make_arm(args: argparse.Namespace):
-    import importlib
-
-    key = "port" if args.port else "can"
-    module_name, cls_name = ARM_BACKENDS[key].split(":")
-    cls = getattr(importlib.import_module(module_name), cls_name)
-    if key == "port":
-        # Raw servo angles: directions +1 and offsets 0, so that the result applies directly.
-        return cls(args.port, baud=args.baud, model=args.model)
-    return cls(args.can)
+    """The arm the bus flags name, with raw servo angles (directions +1 and offsets 0, the
+    backends' defaults), so that the result applies directly."""
+    bus = bus_from_args(args)
+    assert bus is not None  # argparse requires --port or --can
+    return make_arm(bus, model=args.model) if bus.kind == "dynamixel" else make_arm(bus)
 
 
 def _joints_impl(args: argparse.Namespace) -> int:

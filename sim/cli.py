@@ -4,14 +4,14 @@ real bus protocol, in real time, for hardware-in-the-loop tests)."""
 from __future__ import annotations
 
 import argparse
-import importlib
 from pathlib import Path
 
+from robot.registry import LazyTable
+
 # --bus NAME -> "module:function(args) -> int" that serves until interrupted.
-BUS_SERVERS: dict[str, str] = {
-    "dynamixel": "sim.dynamixel.server:serve",
-    "canopen": "sim.canopen.server:serve",
-}
+BUS_SERVERS = LazyTable(
+    "bus server", {"dynamixel": "sim.dynamixel.server:serve", "canopen": "sim.canopen.server:serve"}
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -76,6 +76,4 @@ def _view(args: argparse.Namespace) -> int:
 
 
 def _serve(args: argparse.Namespace) -> int:
-    module_name, func_name = BUS_SERVERS[args.bus].split(":")
-    module = importlib.import_module(module_name)
-    return int(getattr(module, func_name)(args) or 0)
+    return int(BUS_SERVERS.load(args.bus)(args) or 0)

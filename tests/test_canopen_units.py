@@ -123,7 +123,7 @@ def test_emcy_descriptions() -> None:
         ({}, "needs option can"),
         ({"can": "nope"}, "expected INTERFACE:CHANNEL"),
         ({"can": "virtual:x", "node_ids": [1, 2]}, "needs 6 values"),
-        ({"can": "virtual:x", "port": "/dev/ttyUSB0"}, "unknown option"),
+        ({"can": "virtual:x", "port": "/dev/ttyUSB0"}, "option port is unknown; known: "),
         ({"can": "virtual:x", "camera": 1.5}, "camera must be"),
         ({"can": "virtual:x", "eds": "/nonexistent/drive.eds"}, "EDS file not found"),
     ],

@@ -1,18 +1,14 @@
-"""bench/diagnose_inverse_model.py re-finds the neighbour the meta-policy really used."""
+"""The inverse-model diagnosis (explore/report/inverse_model.py, bench/diagnose_inverse_model.py)
+re-finds the neighbour the meta-policy really used."""
 
 from __future__ import annotations
-
-import sys
-from pathlib import Path
 
 import pytest
 import torch
 
 from explore.campaigns.trial import run_one
+from explore.report.inverse_model import PAIRS, DiagnosisError, diagnose, figure
 from vision.vae import Vae, VaeConfig
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from diagnose_inverse_model import PAIRS, diagnose, figure
 
 torch.set_num_threads(1)
 
@@ -45,5 +41,5 @@ def test_the_neighbour_found_again_is_the_one_whose_parameters_were_played(
 
 def test_a_run_without_an_inverse_model_is_a_one_line_error(tmp_path):
     run_one(str(tmp_path / "rpe"), "rpe", {}, 0, 3, False)
-    with pytest.raises(SystemExit, match="'rpe' has no inverse model"):
+    with pytest.raises(DiagnosisError, match="'rpe' has no inverse model"):
         diagnose(tmp_path / "rpe")

@@ -18,8 +18,7 @@ import pytest
 import serial
 
 from explore.rigs.clock import RealClock
-from explore.rigs.dynamixel import make_dynamixel_rig
-from explore.rigs.rig import RigConfig, RigError
+from explore.rigs.rig import RigConfig, RigError, make_rig
 from robot.dynamixel import protocol as proto
 from robot.dynamixel.arm import DynamixelArm
 from robot.dynamixel.bus import DynamixelBus, HardwareAlertError, ServoError
@@ -248,12 +247,12 @@ def test_mjpeg_stream_opens_in_opencv() -> None:
 
 def test_rig_needs_a_port() -> None:
     with pytest.raises(RigError, match=r"options\.port"):
-        make_dynamixel_rig(RigConfig(name="dynamixel", options={}))
+        make_rig(RigConfig(name="dynamixel", options={}))
 
 
 def test_rig_runs_against_the_emulated_arm_and_camera() -> None:
     with hil() as (twin, emulator, port), MjpegServer(TwinFrames(twin), fps=20) as camera:
-        rig = make_dynamixel_rig(
+        rig = make_rig(
             RigConfig(name="dynamixel", rig_id="hil", options={"port": port, "camera": camera.url})
         )
         assert rig.twin is None and isinstance(rig.arm, DynamixelArm)

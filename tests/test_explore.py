@@ -167,7 +167,8 @@ def test_ball_reset_start_puts_the_ball_back_before_every_episode(tmp_path, caps
     assert any(r.ball_moved for r in recs)  # while the arm did push it away in some
     bad = ["explore", "--episodes", "1", "--out", str(tmp_path / "b"), "--rig-option"]
     assert ergo(*bad, "ball_reset=sometimes") == 2
-    assert "ball_reset='sometimes'" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "options.ball_reset' must be one of 'none', 'start', got 'sometimes'" in err
 
 
 def test_cell_counter_on_hand_made_points():
@@ -222,7 +223,9 @@ def test_fault_counters_are_summed_per_session_and_never_mask_the_runs_error(tmp
 
     from explore.learner.strategies import make_strategy
     from explore.rigs.rig import RigConfig, make_rig
-    from explore.runs.explorer import Explorer, add_fault_counts
+    from explore.runs.config import RunConfig
+    from explore.runs.explorer import add_fault_counts
+    from explore.runs.open_run import open_run
 
     assert add_fault_counts(tmp_path, {"bus_retries": 2, "recovery_s": 0.5})["bus_retries"] == 2
     totals = add_fault_counts(tmp_path, {"bus_retries": 3, "links_lost": 1})
@@ -243,28 +246,30 @@ def test_fault_counters_are_summed_per_session_and_never_mask_the_runs_error(tmp
 
     rig.arm.fault_counts = broken_counts  # type: ignore[method-assign]
     strategy.propose = failing_propose  # type: ignore[method-assign]
-    store = RunStore.create(tmp_path / "run", {"test": "faults"})
-    with pytest.raises(ValueError, match="the strategy failed"):
-        Explorer(rig, strategy, store, seed=0).run(3)
-    store.close()
+    with (
+        open_run(tmp_path / "run", RunConfig(episodes=3), rig=rig, strategy=strategy) as run,
+        pytest.raises(ValueError, match="the strategy failed"),
+    ):
+        run.explore()
     assert not (tmp_path / "run" / "faults.json").exists()
 
 
 def test_the_twin_s_physics_does_not_depend_on_its_render_quality(tmp_path):
     """The same seed with the chosen render settings and with MuJoCo's defaults: every field
     of every record the same but the outcome image (the ball's dynamics never see a render)."""
-    from explore.learner.strategies import make_strategy
-    from explore.rigs.rig import RigConfig, make_rig
-    from explore.runs.explorer import Explorer
-    from explore.runs.store import RunStore
+    from explore.rigs.rig import RigConfig
+    from explore.runs.config import RunConfig, StrategyConfig
+    from explore.runs.open_run import open_run
 
     runs = {}
     for quality in ("chosen", "legacy"):
-        rig = make_rig(RigConfig(options={"render_quality": quality}))
-        store = RunStore.create(tmp_path / quality, {"test": True})
-        Explorer(rig, make_strategy("rge-efr", bootstrap=6), store, seed=6).run(12)
-        runs[quality] = store.records
-        store.close()
+        config = RunConfig(
+            rig=RigConfig(options={"render_quality": quality}),
+            strategy=StrategyConfig("rge-efr", {"bootstrap": 6}), seed=6, episodes=12,
+        )  # fmt: skip
+        with open_run(tmp_path / quality, config) as run:
+            run.explore()
+            runs[quality] = run.store.records
     chosen, legacy = runs["chosen"], runs["legacy"]
     assert sum(r.ball_moved for r in chosen) >= 1  # the ball's dynamics were exercised
     for a, b in zip(chosen, legacy, strict=True):

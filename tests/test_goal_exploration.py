@@ -69,9 +69,17 @@ def test_strategy_state_is_rebuilt_by_update(reference):
 
 
 def test_bad_options_are_one_line_errors():
-    with pytest.raises(StrategyError, match="unknown option"):
+    with pytest.raises(StrategyError, match="option bootstap is unknown; known: bootstrap, "):
         make_strategy("rge-efr", bootstap=3)
-    with pytest.raises(StrategyError, match="goals must be"):
+    with pytest.raises(StrategyError, match="option goals must be one of 'uniform', 'normal'"):
         make_strategy("rge-efr", goals="gaussian")
+    with pytest.raises(StrategyError, match="option sigma must be >= 0"):
+        make_strategy("rge-efr", sigma=-0.1)
+    with pytest.raises(StrategyError, match="option exploit must be a probability"):
+        make_strategy("mge-efr", exploit=2)
+    with pytest.raises(StrategyError, match="option bootstrap must be an integer"):
+        make_strategy("rge-efr", bootstrap="many")
+    with pytest.raises(StrategyError, match="strategy 'rpe': option sigma is unknown"):
+        make_strategy("rpe", sigma=0.1)  # rpe has no options: none is stored silently
     with pytest.raises(StrategyError, match="needs option vae"):
         make_strategy("rge-vae")

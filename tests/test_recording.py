@@ -15,7 +15,6 @@ import rerun.chunk as rrc
 from explore.cli import CliError, main
 from explore.cli.rerun_flags import add_rerun_arguments, make_recorder
 from explore.learner.goal_outcomes import goal_outcome_of, strategy_outcome_of
-from explore.learner.strategies import make_strategy
 from explore.report.recorder import (
     EPISODE_ENTITIES,
     GOAL_ENTITIES,
@@ -27,9 +26,9 @@ from explore.report.recorder import (
     recording_paths,
     run_recording_id,
 )
-from explore.rigs.rig import RigConfig, make_rig
-from explore.runs.explorer import Explorer
-from explore.runs.store import RunStore, iter_history
+from explore.runs.config import RunConfig, StrategyConfig
+from explore.runs.open_run import open_run
+from explore.runs.store import iter_history
 
 N = 8
 # one line of ChunkStore.summary(): "{entity}  rows={n}  static={bool}  timelines=[...]  cols=[...]"
@@ -65,34 +64,20 @@ def explore_with_recorder(
 ) -> Path:
     """Explore the twin with a recorder saving ``recorder_path``; ``live_outcomes``: the
     recorder reads the running strategy's goal space (else none, or the config's)."""
-    config = {
-        "rig": {"name": "sim", "rig_id": "twin", "options": {}},
-        "strategy": strategy or {"name": "rpe", "options": {}},
-        "seed": 1,
-        "episodes": episodes,
-    }
-    store = RunStore.create(out, config)
-    strat = make_strategy(config["strategy"]["name"], **config["strategy"]["options"])
-    recorder = Recorder(
-        "save",
-        path=recorder_path,
-        stride=STRIDE,
-        recording_id=run_recording_id(out),
-        outcome_of=strategy_outcome_of(strat) if live_outcomes else None,
-    )
-    explorer = Explorer(
-        make_rig(RigConfig(**config["rig"])),
-        strat,
-        store,
-        seed=1,
-        on_record=recorder.on_record,
-        on_episode=recorder.on_progress,
-    )
-    try:
-        explorer.run(episodes)
-    finally:
-        recorder.close()
-        store.close()
+    strategy = strategy or {"name": "rpe", "options": {}}
+    config = RunConfig(strategy=StrategyConfig(**strategy), seed=1, episodes=episodes)
+    with open_run(out, config, mode="new") as run:
+        recorder = Recorder(
+            "save",
+            path=recorder_path,
+            stride=STRIDE,
+            recording_id=run_recording_id(out),
+            outcome_of=strategy_outcome_of(run.strategy) if live_outcomes else None,
+        )
+        try:
+            run.explore(on_record=recorder.on_record, on_episode=recorder.on_progress)
+        finally:
+            recorder.close()
     return out
 
 

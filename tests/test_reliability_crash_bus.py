@@ -19,7 +19,6 @@ Figures are printed for docs/reliability.md.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import os
 import random
 import signal
@@ -31,7 +30,9 @@ from pathlib import Path
 
 import pytest
 
-from explore.runs.episode import EpisodeConfig
+from explore.rigs.rig import RigConfig
+from explore.runs.config import EpisodeConfig, RunConfig
+from explore.runs.open_run import open_run
 from explore.runs.record import EpisodeRecord
 from explore.runs.store import RunStore, _scan
 
@@ -67,23 +68,21 @@ def _served(tmp: Path) -> Iterator[tuple[str, str, object]]:
 
 
 def _create_run(out: Path, port: str, camera: str) -> None:
-    config = {
-        "rig": {"name": "dynamixel", "rig_id": "crash-bus-test",
-                # 100 ms of slack and 5 retries per bus call: the emulator thread shares two
-                # busy cores with real-time physics and the camera; at the defaults (20 ms,
-                # 2) and at 50 ms and 4, a call failed after its retries at load 13-15
-                "options": {"port": port, "camera": camera, "latency_s": 0.1, "retries": 5}},
-        "strategy": {"name": "rpe", "options": {}},
-        "seed": 5,
-        "episodes": EPISODES,
+    config = RunConfig(
+        rig=RigConfig("dynamixel", "crash-bus-test",
+                      # 100 ms of slack and 5 retries per bus call: the emulator thread shares
+                      # two busy cores with real-time physics and the camera; at the defaults
+                      # (20 ms, 2) and at 50 ms and 4, a call failed after its retries at load
+                      # 13-15
+                      {"port": port, "camera": camera, "latency_s": 0.1, "retries": 5}),
+        seed=5,
+        episodes=EPISODES,
         # Twice the control rate, for speed. The return to rest takes 0.5 s, not 0.25: with
         # 0.25 s the loads stay at the servos' limit from one episode into the next (the
         # settle reads the arm), and the load watchdog rightly stops the arm after 2 s.
-        "episode": dataclasses.asdict(
-            EpisodeConfig(rate_hz=80.0, reset_s=0.5, settle_max_s=0.2, settle_check_s=0.1)
-        ),
-    }  # fmt: skip
-    RunStore.create(out, config).close()
+        episode=EpisodeConfig(rate_hz=80.0, reset_s=0.5, settle_max_s=0.2, settle_check_s=0.1),
+    )  # fmt: skip
+    open_run(out, config, mode="new").close()  # the rig is built, not connected
 
 
 def _on_disk(out: Path) -> int:

@@ -5,9 +5,6 @@ each failure and loses no completed episode."""
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -15,8 +12,6 @@ from robot.dynamixel.arm import DynamixelArm
 from robot.dynamixel.bus import NoStatusError
 from robot.errors import RobotError, SafetyStop
 from sim.dynamixel.emulator import DynamixelEmulator, EmulatedSerial, FaultConfig
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 
 LATENCY_S = 0.002
 
@@ -71,18 +66,18 @@ def test_an_overload_alert_stops_the_arm_with_torque_off():
 
 @pytest.mark.slow
 def test_a_short_soak_over_the_serial_bus_loses_no_episode(tmp_path):
-    import soak
+    from explore.runs.soak import soak
 
-    result = soak.soak(episodes=25, rate=0.05, bus="serial", seed=1, out=tmp_path / "run")
+    result = soak(episodes=25, rate=0.05, bus="serial", seed=1, out=tmp_path / "run")
     print("\n", result)
     assert result["lost_episodes"] == 0 and result["history_ok"]
     assert result["counters"]["bus_retries"] > 0
 
 
 def test_a_short_soak_with_arm_level_faults_loses_no_episode(tmp_path):
-    import soak
+    from explore.runs.soak import soak
 
-    result = soak.soak(episodes=15, rate=0.01, bus="arm", seed=2, out=tmp_path / "run")
+    result = soak(episodes=15, rate=0.01, bus="arm", seed=2, out=tmp_path / "run")
     print("\n", result)
     assert result["lost_episodes"] == 0 and result["history_ok"]
     assert result["failed_attempts"] >= 1  # 1% of ~2000 arm calls: some episodes failed

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from explore.cli import main
-from explore.runs.config_check import RunConfigError, validate_run_config
+from explore.runs.config import RunConfig, RunConfigError
 
 RIG_OPTION = "render_size=[64,64]"
 
@@ -41,7 +41,7 @@ def good_config(good_run) -> dict:
     return json.loads((good_run / "run.json").read_text())["config"]
 
 
-# ---- validate_run_config -----------------------------------------------------------------
+# ---- RunConfig.from_dict -------------------------------------------------------------------
 def _set(cfg: dict, path: str, value) -> dict:
     cfg = copy.deepcopy(cfg)
     keys = path.split(".")
@@ -72,11 +72,12 @@ BAD_FIELDS = [
     ("rig.options", [], "config.rig.options", "object"),
     ("rig.options.render_size", 240, "config.rig.options.render_size", "[height, width]"),
     ("rig.options.render_size", [0, 64], "config.rig.options.render_size", "[height, width]"),
-    ("rig.options.baud", "fast", "config.rig.options.baud", "positive integer"),
-    ("rig.options.port", 3, "config.rig.options.port", "string"),
-    ("rig.options.camera", -1, "config.rig.options.camera", "device index"),
+    ("rig.options.render_sise", [64, 64], "config.rig.options.render_sise", "unknown; known"),
+    ("rig.options.baud", 1000000, "config.rig.options.baud", "unknown; known"),  # on the twin
     ("strategy.name", "curiosity", "config.strategy.name", "one of"),
     ("strategy.options", None, "config.strategy.options", "object"),
+    ("strategy.options.bootstrap", 5, "config.strategy.options.bootstrap", "unknown; known"),
+    ("bogus", 1, "config.bogus", "unknown; known"),
     ("episode.rate_hz", "40", "config.episode.rate_hz", "number"),
     ("episode.rate_hz", float("nan"), "config.episode.rate_hz", "number"),
     ("episode.reset_s", -1.0, "config.episode.reset_s", "number in"),
@@ -85,25 +86,47 @@ BAD_FIELDS = [
 ]
 
 
-@pytest.mark.parametrize("path, value, field, expected", BAD_FIELDS)
-def test_validate_run_config_names_the_field_in_one_line(good_config, path, value, field, expected):
-    bad = _set(good_config, path, value)
+# A Dynamixel rig's options, checked against that rig's own Options.
+BAD_DYNAMIXEL_OPTIONS = [
+    ("baud", "fast", "positive integer"),
+    ("baud", 0, "positive integer"),
+    ("port", 3, "string"),
+    ("camera", -1, "device index"),
+    ("camera", 1.5, "device index"),
+    ("directions", "up", "list"),
+]
+
+
+def _check(config: dict, path: str, value, field: str, expected: str) -> None:
+    bad = _set(config, path, value)
     with pytest.raises(RunConfigError) as exc:
-        validate_run_config(bad, where="runs/x/run.json")
+        RunConfig.from_dict(bad, where="runs/x/run.json")
     msg = str(exc.value)
     assert msg.startswith("runs/x/run.json: field '" + field + "'"), msg
     assert expected in msg and "\n" not in msg, msg
 
 
-def test_validate_run_config_accepts_what_ergo_explore_writes(good_config):
-    validate_run_config(good_config)
+@pytest.mark.parametrize("path, value, field, expected", BAD_FIELDS)
+def test_a_bad_run_config_names_the_field_in_one_line(good_config, path, value, field, expected):
+    _check(good_config, path, value, field, expected)
+
+
+@pytest.mark.parametrize("key, value, expected", BAD_DYNAMIXEL_OPTIONS)
+def test_a_rigs_options_are_checked_against_that_rig(good_config, key, value, expected):
+    config = _set(good_config, "rig", {"name": "dynamixel", "options": {"port": "/dev/pts/3"}})
+    _check(config, f"rig.options.{key}", value, f"config.rig.options.{key}", expected)
+
+
+def test_the_run_config_accepts_what_ergo_explore_writes_and_gives_it_back(good_config):
+    assert RunConfig.from_dict(good_config).to_dict() == good_config
     opts = {"port": "/dev/pts/3", "baud": 1000000, "camera": "http://127.0.0.1:1/s"}
-    validate_run_config(_set(good_config, "rig.options", opts))
+    hardware = _set(good_config, "rig", {"name": "dynamixel", "rig_id": "x", "options": opts})
+    assert RunConfig.from_dict(hardware).rig.options == opts  # stored as given
 
 
-def test_validate_run_config_refuses_a_non_object():
+def test_a_run_config_that_is_not_an_object_is_refused():
     with pytest.raises(RunConfigError, match="field 'config' must be an object"):
-        validate_run_config([1, 2])
+        RunConfig.from_dict([1, 2])
 
 
 # ---- edited run folders through the CLI ----------------------------------------------------
@@ -141,7 +164,7 @@ def test_a_broken_run_json_gets_one_line_and_nothing_is_written(
     assert _bytes_of(run) == before
 
 
-# Wrong types that got a traceback before ``run_explore`` called ``validate_run_config``.
+# Wrong types that got a traceback before ``ergo explore`` checked the run's config.
 UNHANDLED = [
     ("seed not a number", lambda m: m["config"].update(seed="abc"), "config.seed"),
     ("episodes a string", lambda m: m["config"].update(episodes="ten"), "config.episodes"),
@@ -195,6 +218,9 @@ def test_bad_flags_get_one_line(tmp_path, capsys, monkeypatch, args, message):
     [
         (["--seed", "-1"], "config.seed"),
         (["--rig-option", "render_size=5"], "config.rig.options.render_size"),
+        (["--rig-option", "render_sise=[64,64]"], "config.rig.options.render_sise"),
+        (["--strategy", "rge-efr", "--strategy-option", "sigma=lots"], "options.sigma"),
+        (["--strategy", "rpe", "--strategy-option", "bootstrap=5"], "options.bootstrap"),
     ],
 )
 def test_bad_values_of_a_new_run_get_one_line_and_no_folder(

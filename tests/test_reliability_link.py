@@ -26,10 +26,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from explore.learner.strategies import make_strategy
 from explore.rigs.clock import TwinClock
 from explore.rigs.rig import Rig, RigConfig
-from explore.runs.explorer import Explorer
+from explore.runs.config import RunConfig
+from explore.runs.open_run import open_run
 from explore.runs.store import RunStore
 from robot.arm import RecoveryPolicy
 from robot.dynamixel.arm import DynamixelArm
@@ -73,7 +73,7 @@ def _history(path: Path) -> list[int]:
 def test_an_unplugged_adapter_is_reopened_by_name_and_the_run_goes_on(tmp_path):
     with served(tmp_path) as (twin, emulator, server):
         rig = _rig(twin, server.port)
-        store = RunStore.create(tmp_path / "run", {"test": "link"})
+        run = open_run(tmp_path / "run", RunConfig(seed=SEED, episodes=4), rig=rig)
         replugged = threading.Event()
         torque_after: list[bool] = []
 
@@ -84,9 +84,8 @@ def test_an_unplugged_adapter_is_reopened_by_name_and_the_run_goes_on(tmp_path):
             if p.episode == 3:  # after the recovery: torque back on at every servo
                 torque_after.append(all(emulator.torque_states().values()))
 
-        explorer = Explorer(rig, make_strategy("rpe"), store, seed=SEED, on_episode=on_episode)
-        explorer.run(4)
-        store.close()
+        with run:
+            run.explore(on_episode=on_episode)
         counts = rig.arm.fault_counts()
         assert replugged.is_set() and server.unplugs == 1 and torque_after == [True]
         assert counts["links_lost"] == 1 and counts["reconnects"] == 1, counts
@@ -98,27 +97,26 @@ def test_an_unplugged_adapter_is_reopened_by_name_and_the_run_goes_on(tmp_path):
 def test_an_adapter_that_stays_unplugged_stops_the_run_which_resumes_once_it_is_back(tmp_path):
     fast = RecoveryPolicy(attempts=3, first_delay_s=0.05, max_delay_s=0.1)
     with served(tmp_path) as (twin, emulator, server):
-        store = RunStore.create(tmp_path / "run", {"test": "link"})
 
         def on_episode(p) -> None:
             if p.episode == 2:
                 server.unplug()  # and it stays out
 
         rig = _rig(twin, server.port, fast)
-        explorer = Explorer(rig, make_strategy("rpe"), store, seed=SEED, on_episode=on_episode)
-        with pytest.raises(SafetyStop) as info:
-            explorer.run(5)
+        run = open_run(tmp_path / "run", RunConfig(seed=SEED, episodes=5), rig=rig)
+        with run, pytest.raises(SafetyStop) as info:
+            run.explore(on_episode=on_episode)
         message = str(info.value)
         assert "\n" not in message and "link lost" in message and "not back after 3" in message
         assert "can be resumed" in message
         assert rig.arm.fault_counts()["stops_after_link_loss"] == 1
         assert not rig.arm.is_connected
-        assert [r.episode for r in store] == [0, 1]  # completed episodes kept, none torn
+        assert [r.episode for r in run.store] == [0, 1]  # completed episodes kept, none torn
 
         server.replug()  # the adapter is back: resume the run from its folder
         rig = _rig(twin, server.port, fast)
-        Explorer(rig, make_strategy("rpe"), store, seed=SEED).run(5)
-        store.close()
+        with open_run(tmp_path / "run", mode="resume", rig=rig) as run:
+            run.explore()
         assert _history(tmp_path / "run") == [0, 1, 2, 3, 4]
         assert not any(emulator.torque_states().values())
         faults = json.loads((tmp_path / "run" / "faults.json").read_text())  # both sessions

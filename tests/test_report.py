@@ -108,26 +108,13 @@ def test_goal_panels_follow_the_modules(runs):
 @pytest.fixture(scope="module")
 def goal_run(tmp_path_factory) -> Path:
     """A goal-exploration run on the twin: 3 random episodes, then 4 with goals."""
-    from explore.learner.strategies import make_strategy
-    from explore.rigs.rig import RigConfig, make_rig
-    from explore.runs.explorer import Explorer
-    from explore.runs.store import RunStore
+    from explore.runs.config import RunConfig, StrategyConfig
+    from explore.runs.open_run import open_run
 
     out = tmp_path_factory.mktemp("goal") / "rge-efr-s1"
-    config = {
-        "rig": {"name": "sim", "rig_id": "twin", "options": {}},
-        "strategy": {"name": "rge-efr", "options": {"bootstrap": 3, "random_episodes": 0}},
-        "seed": 1,
-        "episodes": 7,
-    }
-    store = RunStore.create(out, config)
-    rig = make_rig(RigConfig(**config["rig"]))
-    try:
-        Explorer(rig, make_strategy("rge-efr", bootstrap=3, random_episodes=0), store, seed=1).run(
-            7
-        )
-    finally:
-        store.close()
+    strategy = StrategyConfig("rge-efr", {"bootstrap": 3, "random_episodes": 0})
+    with open_run(out, RunConfig(strategy=strategy, seed=1, episodes=7), mode="new") as run:
+        run.explore()
     return out
 
 

@@ -5,17 +5,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from explore.learner.strategies import make_strategy
 from explore.rigs.rig import RigConfig, RigError, make_rig
-from explore.runs.explorer import Explorer
-from explore.runs.store import RunStore
+from explore.runs.config import RunConfig
+from explore.runs.open_run import open_run
 from sim.twin import Twin
 
 
 def test_tracked_ball_positions_match_the_twin_or_are_reported_unseen(tmp_path):
-    rig = make_rig(RigConfig(options={"ball": "tracker"}))
-    store = RunStore.create(tmp_path / "run", {})
-    Explorer(rig, make_strategy("rpe"), store, seed=5).run(25)
+    config = RunConfig(rig=RigConfig(options={"ball": "tracker"}), seed=5, episodes=25)
+    with open_run(tmp_path / "run", config) as run:
+        run.explore()
+        store = run.store
     twin = Twin()
     seen = 0
     for rec in store:
@@ -29,5 +29,5 @@ def test_tracked_ball_positions_match_the_twin_or_are_reported_unseen(tmp_path):
 
 
 def test_an_unknown_ball_source_is_refused():
-    with pytest.raises(RigError, match="ball='gps'"):
+    with pytest.raises(RigError, match="option ball must be one of 'truth', 'tracker', got 'gps'"):
         make_rig(RigConfig(options={"ball": "gps"}))

@@ -79,23 +79,6 @@ def _error(message: str) -> int:
     return 2
 
 
-def open_source(
-    source: str,
-    width: int | None = None,
-    height: int | None = None,
-    fps: float | None = None,
-    fourcc: str | None = None,
-):
-    """A camera for a source string: a folder or a video file replays every frame
-    (``FileCamera``); a device index or a URL is a live ``OpenCVCamera``."""
-    from vision.file_camera import FileCamera
-    from vision.opencv_camera import OpenCVCamera
-
-    if not source.isdigit() and "://" not in source:
-        return FileCamera(source, fps=fps)
-    return OpenCVCamera(source, width=width, height=height, fps=fps, fourcc=fourcc)
-
-
 def parse_hsv(text: str):
     """``"27,45,70:38,255,255"`` -> ``HSVRange``."""
     from vision.tracker import HSVRange
@@ -155,7 +138,7 @@ def _find_cameras(args: argparse.Namespace) -> int:
 def _track(args: argparse.Namespace) -> int:
     import dataclasses
 
-    from vision.camera import CameraError
+    from vision.camera import CameraError, make_camera
     from vision.tracker import BallTracker, TrackerConfig
 
     arena, ranges, ball_radius = None, None, None
@@ -172,7 +155,10 @@ def _track(args: argparse.Namespace) -> int:
     if ball_radius:
         config = dataclasses.replace(config, ball_radius_m=float(ball_radius))
     tracker = BallTracker(config, arena)
-    camera = open_source(args.camera, args.width, args.height, args.fps, args.fourcc)
+    try:
+        camera = make_camera(args.camera, args.width, args.height, args.fps, args.fourcc)
+    except CameraError as exc:
+        return _error(str(exc))
     n = 0
     try:
         with camera:

@@ -3,7 +3,7 @@ to ``OBSERVATION_SIZE`` pixels a side.
 
 64 x 64 x 3 is the paper's VAE input (Laversanne-Finot et al. 2018; docs/facts.md): the VAE's
 architecture is built for it and episodes observe it by default; the size is a run setting
-(``explore.runs.episode.EpisodeConfig.obs_size``).
+(``explore.runs.config.EpisodeConfig.obs_size``).
 """
 
 from __future__ import annotations

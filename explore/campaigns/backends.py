@@ -5,18 +5,22 @@ and ``ray`` (Ray tasks on a cluster, explore/campaigns/ray_backend.py); and what
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
 
 from explore.campaigns.trial import CampaignError, Trial, TrialResult
+from robot.registry import LazyTable
 
 # backend name -> "module:function(trials, settings) -> list[TrialResult]", imported lazily so
 # that the local backend never imports Ray
-BACKENDS: dict[str, str] = {
-    "local": "explore.campaigns.local_backend:run_local",
-    "ray": "explore.campaigns.ray_backend:run_ray",
-}
+BACKENDS = LazyTable(
+    "campaign backend",
+    {
+        "local": "explore.campaigns.local_backend:run_local",
+        "ray": "explore.campaigns.ray_backend:run_ray",
+    },
+    error=CampaignError,
+)
 
 
 # Restarts of a trial whose worker or node died (a guess: enough for a node lost once or a
@@ -46,11 +50,8 @@ class BackendSettings:
 
 
 def load_backend(name: str) -> Callable[[list[Trial], BackendSettings], list[TrialResult]]:
-    target = BACKENDS.get(name)
-    if target is None:
-        raise CampaignError(f"unknown backend {name!r}; choose one of {', '.join(BACKENDS)}")
-    module_name, func_name = target.split(":")
-    return getattr(importlib.import_module(module_name), func_name)
+    """The backend's ``run(trials, settings)`` (``CampaignError`` for an unknown one)."""
+    return BACKENDS.load(name)
 
 
 def report_line(r: TrialResult) -> str:

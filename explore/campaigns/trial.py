@@ -23,7 +23,7 @@ import socket
 import sys
 import time
 from collections.abc import Iterator
-from contextlib import ExitStack, contextmanager
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,7 +32,7 @@ CAMPAIGN_FILE = "campaign.json"
 TRIAL_FILE = "trial.json"
 LOCK_FILE = "trial.lock"
 
-# rigs with nothing physical attached: any host can run them (explore/rigs/rig.py RIG_FACTORIES)
+# rigs with nothing physical attached: any host can run them (explore/rigs/rig.py RIGS)
 VIRTUAL_RIGS = frozenset({"sim"})
 RIG_RESOURCE_PREFIX = "rig:"  # Ray custom resource of a physical rig: "rig:<rig_id>"
 TWIN_RIG: dict[str, Any] = {"name": "sim", "rig_id": "twin", "options": {}}
@@ -186,72 +186,52 @@ def read_json(path: Path) -> dict[str, Any]:
     return data if isinstance(data, dict) else {}
 
 
-def _new_config(trial: Trial) -> dict[str, Any]:
-    from explore.runs.episode import EpisodeConfig
+def trial_config(trial: Trial) -> Any:
+    """The ``RunConfig`` of a trial's run when it is new (a resumed run keeps its own)."""
+    from explore.rigs.rig import RigConfig
+    from explore.runs.config import RunConfig, StrategyConfig
 
-    return {
-        "rig": {"name": trial.rig["name"], "rig_id": trial.rig["rig_id"],
-                "options": dict(trial.rig.get("options", {}))},
-        "strategy": {"name": trial.strategy, "options": trial.options},
-        "seed": trial.seed,
-        "episodes": trial.episodes,
-        "episode": dataclasses.asdict(EpisodeConfig()),
-    }  # fmt: skip
+    rig = RigConfig(trial.rig["name"], trial.rig["rig_id"], dict(trial.rig.get("options", {})))
+    return RunConfig(
+        rig=rig, strategy=StrategyConfig(trial.strategy, dict(trial.options)), seed=trial.seed,
+        episodes=trial.episodes,
+    )  # fmt: skip
 
 
 def run_trial(trial: Trial, progress: bool = False) -> TrialResult:
     """Run (or resume) one trial until ``trial.episodes``; runs in the worker (a local process
-    or a Ray task). Raises ``CampaignError`` (or the run store's, the rig's and the strategy's
-    errors) with a one-line message."""
-    from explore.learner.strategies import make_strategy
-    from explore.rigs.rig import RigConfig, make_rig
-    from explore.runs.episode import EpisodeConfig
-    from explore.runs.explorer import Explorer
-    from explore.runs.store import RunStore, RunStoreError, atomic_write_text
+    or a Ray task). Raises ``CampaignError`` (or the rig's and the strategy's errors) with a
+    one-line message."""
+    from explore.runs.open_run import open_run
+    from explore.runs.store import RunStoreError, atomic_write_text
 
     _check_campaign(trial)
     check_rig_calibration(trial.rig)
     path = Path(trial.run_dir)
     started = time.time()
     host, pid = socket.gethostname(), os.getpid()
-    with ExitStack() as held:  # unwinds in reverse: the store closes before the lock goes
-        store = None
-        if RunStore.is_run(path):
-            held.enter_context(_trial_lock(path))
-            store = RunStore.open(path)
-            held.callback(store.close)
-            config = store.config
-            config["episodes"] = trial.episodes
-            config["rig"]["options"].update(trial.rig.get("options", {}))  # ports change
-        else:
-            config = _new_config(trial)
-        # strategy and rig before a new run folder exists: a bad name leaves nothing
-        strat = make_strategy(config["strategy"]["name"], **config["strategy"]["options"])
-        rig = make_rig(RigConfig(**config["rig"]))
-        if store is None:
-            try:
-                store = RunStore.create(path, config)
-            except RunStoreError as exc:
-                raise CampaignError(str(exc)) from exc
-            held.enter_context(_trial_lock(path))
-            held.callback(store.close)
-        resumed_from = len(store)
-        info = {"host": host, "pid": pid, "started": started, "resumed_from": resumed_from}
-        atomic_write_text(path / TRIAL_FILE, json.dumps(info))
-        bar = _Bar(trial, resumed_from) if progress else None
-        if bar:
-            held.callback(bar.close)
-        explorer = Explorer(
-            rig, strat, store, seed=int(config["seed"]),
-            episode_config=EpisodeConfig(**config.get("episode", {})),
-            on_episode=bar.update if bar else None,
+    try:
+        run = open_run(
+            path, trial_config(trial), mode="auto", episodes=trial.episodes,
+            rig_options=trial.rig.get("options", {}),  # ports change between sessions
+            hold=_trial_lock,
         )  # fmt: skip
-        explorer.run(trial.episodes)
+    except RunStoreError as exc:
+        raise CampaignError(str(exc)) from exc
+    with run:  # the history closes before the lock goes
+        info = {"host": host, "pid": pid, "started": started, "resumed_from": run.resumed_from}
+        atomic_write_text(path / TRIAL_FILE, json.dumps(info))
+        bar = _Bar(trial, run.resumed_from) if progress else None
+        try:
+            explorer = run.explore(on_episode=bar.update if bar else None)
+        finally:
+            if bar:
+                bar.close()
         rows = explorer.metrics.rows
         cells = int(rows[-1]["ball_cells"]) if rows else 0  # type: ignore[arg-type]
         result = TrialResult(
-            trial.strategy, trial.seed, len(store), cells, resumed_from, host, pid, started,
-            time.time(),
+            trial.strategy, trial.seed, len(run.store), cells, run.resumed_from, host, pid,
+            started, time.time(),
         )  # fmt: skip
         atomic_write_text(path / TRIAL_FILE, json.dumps(dataclasses.asdict(result)))
         return result

@@ -4,20 +4,24 @@ function in its own ``cli`` module (listed below); this root only assembles them
 from __future__ import annotations
 
 import argparse
-import importlib
 import logging
 import sys
 
-# Modules with ``register(subparsers) -> None``. Each must import quickly (no torch or MuJoCo at
-# module level) so that ``ergo --help`` stays fast.
-COMMAND_MODULES = (
-    "explore.cli.explore",
-    "sim.cli",
-    "robot.cli",
-    "vision.cli",
-    "calibration.cli",
-    "explore.cli.experiment",
-    "explore.cli.report",
+from robot.registry import LazyTable, RegistryError
+
+# Each package's ``register(subparsers) -> None``, in the order of ``ergo --help``. Each module
+# must import quickly (no torch or MuJoCo at module level) so that ``ergo --help`` stays fast.
+COMMAND_MODULES = LazyTable(
+    "command module",
+    {
+        "explore": "explore.cli.explore:register",
+        "sim": "sim.cli:register",
+        "robot": "robot.cli:register",
+        "vision": "vision.cli:register",
+        "calibration": "calibration.cli:register",
+        "experiment": "explore.cli.experiment:register",
+        "report": "explore.cli.report:register",
+    },
 )
 
 
@@ -37,7 +41,7 @@ def _user_errors() -> tuple[type[BaseException], ...]:
     from robot.errors import RobotError
     from vision.camera import CameraError
 
-    return (CliError, RobotError, CameraError, FileNotFoundError, PermissionError)
+    return (CliError, RegistryError, RobotError, CameraError, FileNotFoundError, PermissionError)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -49,13 +53,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in COMMAND_MODULES:
-        try:
-            module = importlib.import_module(name)
-        except ModuleNotFoundError as exc:
-            if exc.name == name:
-                continue  # that package has no commands yet
-            raise
-        module.register(sub)
+        register = COMMAND_MODULES.load(name, missing_ok=True)
+        if register is not None:  # else that package has no commands in this version
+            register(sub)
     return parser
 
 

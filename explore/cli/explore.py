@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import sys
 import time
@@ -12,17 +11,17 @@ from typing import Any
 
 from explore.cli import CliError
 from explore.cli.rerun_flags import add_rerun_arguments
-from explore.rigs.rig import RIG_FACTORIES
+from explore.rigs.rig import RIGS
+from robot.bus_flags import add_bus_arguments, bus_flags
+
+DEFAULT_RIG, DEFAULT_RIG_ID = "sim", "twin"
 
 
 def add_rig_arguments(p: argparse.ArgumentParser) -> None:
     """Flags that choose and configure a rig (shared by the commands that drive one)."""
-    p.add_argument("--rig", choices=sorted(RIG_FACTORIES), default=None, help="rig (default sim)")
+    p.add_argument("--rig", choices=sorted(RIGS), default=None, help="rig (default sim)")
     p.add_argument("--rig-id", default=None, help="physical rig id (finds its calibration)")
-    p.add_argument("--port", help="dynamixel: serial port, e.g. /dev/ttyUSB0 or /dev/pts/N")
-    p.add_argument("--baud", type=int, help="dynamixel: baud rate (default 1000000)")
-    p.add_argument("--can", help="canopen: python-can bus, e.g. socketcan:can0, slcan:/dev/pts/N")
-    p.add_argument("--bitrate", type=int, help="canopen: CAN bitrate (default 1000000)")
+    add_bus_arguments(p, exclusive=False)
     p.add_argument("--camera", help="hardware rigs: camera index, path or URL")
     p.add_argument(
         "--rig-option", action="append", default=[], metavar="KEY=JSON",
@@ -31,13 +30,19 @@ def add_rig_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def rig_options(args: argparse.Namespace) -> dict[str, Any]:
-    opts: dict[str, Any] = {}
-    for key in ("port", "baud", "can", "bitrate", "camera"):
-        value = getattr(args, key, None)
-        if value is not None:
-            opts[key] = value
+    """The rig options the flags give (bus flags, ``--camera``, ``--rig-option``)."""
+    opts = bus_flags(args)
+    if getattr(args, "camera", None) is not None:
+        opts["camera"] = args.camera
     opts.update(parse_key_values(args.rig_option, "--rig-option"))
     return opts
+
+
+def rig_of(args: argparse.Namespace) -> Any:
+    """The ``RigConfig`` the rig flags describe (``--rig``, ``--rig-id``, options)."""
+    from explore.rigs.rig import RigConfig
+
+    return RigConfig(args.rig or DEFAULT_RIG, args.rig_id or DEFAULT_RIG_ID, rig_options(args))
 
 
 def parse_key_values(items: list[str], flag: str) -> dict[str, Any]:
@@ -79,45 +84,49 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run_explore)
 
 
-def _new_config(args: argparse.Namespace) -> dict[str, Any]:
-    from explore.runs.episode import EpisodeConfig
+def _new_config(args: argparse.Namespace) -> Any:
+    """A new run's ``RunConfig`` from the flags (defaults where none is given)."""
+    from explore.runs.config import DEFAULT_EPISODES, DEFAULT_SEED, RunConfig, StrategyConfig
 
-    return {
-        "rig": {"name": args.rig or "sim", "rig_id": args.rig_id or "twin",
-                "options": rig_options(args)},
-        "strategy": {
-            "name": args.strategy or "rpe",
-            "options": parse_key_values(args.strategy_option, "--strategy-option"),
-        },
-        "seed": 0 if args.seed is None else args.seed,
-        "episodes": 300 if args.episodes is None else args.episodes,
-        "episode": dataclasses.asdict(EpisodeConfig()),
-    }  # fmt: skip
+    return RunConfig(
+        rig=rig_of(args),
+        strategy=StrategyConfig(
+            args.strategy or StrategyConfig.name,
+            parse_key_values(args.strategy_option, "--strategy-option"),
+        ),
+        seed=DEFAULT_SEED if args.seed is None else args.seed,
+        episodes=DEFAULT_EPISODES if args.episodes is None else args.episodes,
+    )
 
 
-def _check_resume_flags(args: argparse.Namespace, config: dict[str, Any]) -> None:
-    """On resume, the run's own config wins; flags that would change it are refused."""
-    for flag, value, key in (
-        ("--strategy", args.strategy, config["strategy"]["name"]),
-        ("--seed", args.seed, config["seed"]),
-        ("--rig", args.rig, config["rig"]["name"]),
-    ):
-        if value is not None and value != key:
-            raise CliError(f"{flag} {value} differs from the run's {key!r}: a run keeps its config")
-    given = parse_key_values(args.strategy_option, "--strategy-option")
-    if given and given != config["strategy"].get("options", {}):
-        raise CliError(
-            f"--strategy-option {given} differs from the run's {config['strategy']['options']}: "
-            "a run keeps the strategy options it started with"
-        )
+def _refuse_changes(args: argparse.Namespace) -> Any:
+    """On resume, the run's own config wins: a check that refuses flags that would change it."""
+
+    def check(config: Any) -> None:
+        for flag, value, held in (
+            ("--strategy", args.strategy, config.strategy.name),
+            ("--seed", args.seed, config.seed),
+            ("--rig", args.rig, config.rig.name),
+        ):
+            if value is not None and value != held:
+                raise CliError(
+                    f"{flag} {value} differs from the run's {held!r}: a run keeps its config"
+                )
+        given = parse_key_values(args.strategy_option, "--strategy-option")
+        if given and given != config.strategy.options:
+            raise CliError(
+                f"--strategy-option {given} differs from the run's {config.strategy.options}: "
+                "a run keeps the strategy options it started with"
+            )
+
+    return check
 
 
 def run_explore(args: argparse.Namespace) -> int:
-    from explore.learner.strategies import StrategyError, make_strategy
+    from explore.learner.strategies import StrategyError
     from explore.report.figures import coverage_curve
-    from explore.rigs.rig import RigConfig, RigError, make_rig
-    from explore.runs.config_check import validate_run_config
-    from explore.runs.explorer import Explorer
+    from explore.rigs.rig import RigError
+    from explore.runs.open_run import open_run
     from explore.runs.store import RunStore, RunStoreError
     from robot.errors import RobotError
 
@@ -132,40 +141,31 @@ def run_explore(args: argparse.Namespace) -> int:
         resume_path = args.out
     try:
         if resume_path is not None:
-            store = RunStore.open(resume_path)
-            config = store.config
-            validate_run_config(config, where=resume_path / "run.json")
-            _check_resume_flags(args, config)
-            if args.episodes is not None:
-                config["episodes"] = args.episodes
-            config["rig"]["options"].update(rig_options(args))  # ports change between sessions
-            if store.truncated_bytes:
+            run = open_run(
+                resume_path, mode="resume", episodes=args.episodes,
+                rig_options=rig_options(args),  # ports change between sessions
+                check_resumed=_refuse_changes(args),
+            )  # fmt: skip
+            if run.store.truncated_bytes:
                 print(
-                    f"dropped a torn last record ({store.truncated_bytes} bytes)", file=sys.stderr
+                    f"dropped a torn last record ({run.store.truncated_bytes} bytes)",
+                    file=sys.stderr,
                 )
         else:
-            config = _new_config(args)
-            store = None
-        if resume_path is None:
-            validate_run_config(config, where="command line")
-        # build strategy and rig before a new run folder exists: a bad name leaves nothing
-        strategy = make_strategy(config["strategy"]["name"], **config["strategy"]["options"])
-        rig = make_rig(RigConfig(**config["rig"]))
-        if store is None:
+            config = _new_config(args)  # checked by open_run before anything is made
             out = args.out or Path("runs") / (
-                f"{config['strategy']['name']}-s{config['seed']}-{time.strftime('%Y%m%d-%H%M%S')}"
+                f"{config.strategy.name}-s{config.seed}-{time.strftime('%Y%m%d-%H%M%S')}"
             )
-            store = RunStore.create(out, config)
+            run = open_run(out, config, mode="new")
     except (RunStoreError, RigError, StrategyError) as exc:
         raise CliError(str(exc)) from exc
 
     from explore.cli.rerun_flags import make_recorder
-    from explore.runs.episode import EpisodeConfig
 
-    total = int(config["episodes"])
-    bar = _progress_bar(total, len(store), disabled=args.no_progress)
+    store = run.store
+    bar = _progress_bar(run.config.episodes, len(store), disabled=args.no_progress)
     recorder = make_recorder(
-        args, store.path, records=store.records, config=config, strategy=strategy
+        args, store.path, records=store.records, config=run.config, strategy=run.strategy
     )
 
     def on_episode(p: Any) -> None:
@@ -174,14 +174,9 @@ def run_explore(args: argparse.Namespace) -> int:
         if recorder:
             recorder.on_progress(p)
 
-    explorer = Explorer(
-        rig, strategy, store, seed=int(config["seed"]),
-        episode_config=EpisodeConfig(**config.get("episode", {})),
-        on_episode=on_episode,
-        on_record=recorder.on_record if recorder else None,
-    )  # fmt: skip
+    explorer = run.explorer(on_episode, recorder.on_record if recorder else None)
     try:
-        explorer.run(total)
+        explorer.run(run.config.episodes)
     except RobotError as exc:
         raise CliError(
             f"{exc}; run paused after {len(store)} episodes: resume with "
@@ -190,7 +185,7 @@ def run_explore(args: argparse.Namespace) -> int:
     finally:
         if recorder:
             recorder.close()
-        store.close()
+        run.close()
         if bar:
             bar.close()
         if (store.path / "metrics.csv").exists() and len(store):

@@ -42,7 +42,7 @@ def make_recorder(
     args: argparse.Namespace,
     run_path: Path,
     records: Iterable[Any] | None = None,
-    config: dict[str, Any] | None = None,
+    config: Any = None,
     strategy: Any = None,
     load_models: bool = False,
 ) -> Any:

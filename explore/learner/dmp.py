@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
@@ -72,6 +73,17 @@ class DmpConfig:
         return self.n_points / self.rate_hz
 
 
+class MotorPrimitive(Protocol):
+    """What turns motor parameters into a joint trajectory; a rig owns one (``Rig.motor``) and
+    strategies propose ``n_params`` numbers in [-1, 1] for it."""
+
+    n_params: int
+
+    def trajectory(self, theta: np.ndarray) -> np.ndarray:
+        """Motor parameters (n_params,) in [-1, 1] -> joint targets (T, n_joints), rad."""
+        ...
+
+
 class ParameterError(ValueError):
     """Motor parameters of the wrong shape, not finite, or outside [-1, 1]."""
 
@@ -92,7 +104,9 @@ def check_parameters(theta: np.ndarray) -> np.ndarray:
 
 
 class Dmp:
-    """Six DMPs in parallel."""
+    """Six DMPs in parallel: the Ergo Jr's ``MotorPrimitive``."""
+
+    n_params = N_PARAMS
 
     def __init__(self, config: DmpConfig | None = None) -> None:
         self.config = config or DmpConfig()

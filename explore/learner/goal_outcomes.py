@@ -79,13 +79,10 @@ def goal_outcome_of(strategy_config: dict[str, Any], load_models: bool = False) 
 
 
 def _strategy_class(name: str) -> type | None:
-    """The class registered for a strategy name, without building it."""
-    import importlib
+    """The class registered for a strategy name, without building it (None if unknown)."""
+    from explore.learner.strategies import STRATEGIES, StrategyError
 
-    from explore.learner.strategies import STRATEGIES
-
-    target = STRATEGIES.get(name)
-    if target is None:
+    try:
+        return STRATEGIES.load(name)
+    except StrategyError:
         return None
-    module_name, cls_name = target.split(":")
-    return getattr(importlib.import_module(module_name), cls_name, None)

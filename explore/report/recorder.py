@@ -51,8 +51,9 @@ import numpy as np
 
 from explore.learner.goal_outcomes import goal_outcome_of, strategy_outcome_of
 from explore.report.blueprint import default_blueprint
+from explore.runs.config import EpisodeConfig, RunConfig
 from explore.runs.metrics import ARENA_HALF_WIDTH, REACH_HALF_WIDTH, CellCounter
-from robot.spec import CONTROL_RATE_HZ, ERGO_JR_JOINTS
+from robot.spec import ERGO_JR_JOINTS
 
 if TYPE_CHECKING:
     from explore.runs.record import EpisodeRecord
@@ -64,10 +65,6 @@ RECORDING_NAME = "recording"  # RUN/recording.rrd, then RUN/recording-2.rrd, ...
 JOINT_NAMES = ERGO_JR_JOINTS
 BATCH_FLUSH_S = 1.0  # latency of a live viewer, s
 JPEG_QUALITY = 80  # 64x64 frames: about 2 kB each
-# Defaults of explore.runs.episode.EpisodeConfig (kept here so that this module imports
-# nothing heavy).
-DEFAULT_RATE_HZ = CONTROL_RATE_HZ
-DEFAULT_RESET_S = 1.0
 
 # Entity paths every recording has (the documented layout; docs/viewing.md).
 STATIC_ENTITIES = ("arena/bounds", "arm/bounds")
@@ -176,8 +173,8 @@ class Recorder:
         path: Path | None = None,
         url: str | None = None,
         stride: int = 1,
-        rate_hz: float = DEFAULT_RATE_HZ,
-        reset_s: float = DEFAULT_RESET_S,
+        rate_hz: float = EpisodeConfig.rate_hz,
+        reset_s: float = EpisodeConfig.reset_s,
         recording_id: str | None = None,
         outcome_of: Callable[[EpisodeRecord], np.ndarray | None] | None = None,
         blueprint: bool = True,
@@ -397,7 +394,7 @@ def open_recorder(
     url: str | None = None,
     stride: int = 1,
     records: Iterable[EpisodeRecord] | None = None,
-    config: dict[str, Any] | None = None,
+    config: RunConfig | None = None,
     strategy: Any = None,
     load_models: bool = False,
 ) -> Recorder | None:
@@ -409,10 +406,10 @@ def open_recorder(
         stride: log images and trajectories every ``stride`` episodes (>= 1).
         records: episodes already in the run (a resume), to continue the cell counts and the
             clock; read from ``run_path`` when None.
-        config: the run's config (``run.json``'s ``config``); read from ``run_path`` when None.
+        config: the run's config; read from ``run_path`` (its ``run.json``) when None.
         strategy: the running strategy: its goal space gives ``goal/reached`` for every
             strategy with one (learned spaces included). Without it, only the spaces that
-            ``goal_outcome_of(config["strategy"], load_models)`` can build.
+            ``goal_outcome_of(config.strategy, load_models)`` can build.
         load_models: without ``strategy``, also load a learned goal space's model.
     """
     if mode == "off" and url is None:
@@ -421,17 +418,16 @@ def open_recorder(
     if config is None:
         from explore.runs.store import RunStore
 
-        config = RunStore.read_meta(run_path)["config"]
-    episode = config.get("episode", {})
+        config = RunConfig.from_dict(RunStore.read_meta(run_path)["config"], run_path / "run.json")
     kw: dict[str, Any] = {
         "stride": stride,
-        "rate_hz": float(episode.get("rate_hz", DEFAULT_RATE_HZ)),
-        "reset_s": float(episode.get("reset_s", DEFAULT_RESET_S)),
+        "rate_hz": float(config.episode.rate_hz),
+        "reset_s": float(config.episode.reset_s),
         "recording_id": run_recording_id(run_path),
         "outcome_of": (
             strategy_outcome_of(strategy)
             if strategy is not None
-            else goal_outcome_of(config.get("strategy", {}), load_models=load_models)
+            else goal_outcome_of(config.strategy.to_dict(), load_models=load_models)
         ),
     }
     if url is not None:

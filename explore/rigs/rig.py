@@ -1,55 +1,70 @@
-"""A ``Rig`` is an Arm + a Camera + a Clock (+ the twin, when there is one, for ground truth).
+"""A ``Rig`` is an Arm + a Camera + a Clock + a motor primitive (+ the twin, when there is one,
+for ground truth).
 
-Rigs are built by name from a table of name -> "module:factory", imported lazily, so a user
-without a CAN adapter library never imports it. A factory takes a ``RigConfig`` and returns
-an unconnected ``Rig``.
+Rigs are built by name from ``RIGS``, a table of name -> module imported lazily
+(``robot.registry.LazyTable``), so a user without a CAN adapter library never imports it. Each
+rig module defines its typed ``Options`` (a dataclass: unknown keys and wrong types are refused
+by ``explore.options.parse_options``) and ``make_rig(config, options) -> Rig``, which returns
+an unconnected rig.
 """
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from explore.learner.dmp import Dmp, MotorPrimitive
+from explore.options import OptionsError, parse_options
 from explore.rigs.clock import Clock
 from robot.arm import Arm
+from robot.registry import LazyTable
 from vision.camera import Camera
-
-# name -> "module:function(config) -> Rig"
-RIG_FACTORIES: dict[str, str] = {
-    "sim": "explore.rigs.sim:make_sim_rig",
-    "dynamixel": "explore.rigs.dynamixel:make_dynamixel_rig",
-    "canopen": "explore.rigs.canopen:make_canopen_rig",
-}
 
 
 class RigError(RuntimeError):
     """A rig could not be built or connected."""
 
 
-@dataclass
+# name -> the module with its ``Options`` and ``make_rig``
+RIGS = LazyTable(
+    "rig",
+    {
+        "sim": "explore.rigs.sim",
+        "dynamixel": "explore.rigs.dynamixel",
+        "canopen": "explore.rigs.canopen",
+    },
+    error=RigError,
+)
+
+
+@dataclass(frozen=True)
 class RigConfig:
-    """How to build a rig. ``options`` holds backend settings (port, can channel, camera URL).
+    """How to build a rig.
 
     Attributes:
-        name: a key of ``RIG_FACTORIES``.
+        name: a key of ``RIGS``.
         rig_id: identifies a physical rig (its calibration files are found by this id).
-        options: backend-specific settings, JSON-serialisable.
+        options: the rig's options as given (JSON-like, as ``run.json`` stores them); the rig's
+            ``Options`` dataclass checks them and supplies the defaults (``rig_options``).
     """
 
     name: str = "sim"
     rig_id: str = "twin"
     options: dict[str, Any] = field(default_factory=dict)
 
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "rig_id": self.rig_id, "options": dict(self.options)}
+
 
 @dataclass
 class Rig:
     """Everything an episode needs. ``twin`` is the MuJoCo twin for simulated rigs, else None.
     ``ball_locator`` finds the ball in camera frames (the tracker); a rig needs one unless it
-    is the twin, whose ground truth is used then."""
+    is the twin, whose ground truth is used then. ``motor`` turns motor parameters into joint
+    trajectories (the Ergo Jr's DMPs unless the rig has its own)."""
 
     arm: Arm
     camera: Camera
@@ -63,6 +78,8 @@ class Rig:
     #: side (pixels) -> the square observation (side, side, 3) BGR uint8, rendered directly
     #: at that size; set where nothing needs the full frame (the twin with its ground truth)
     square_view: Callable[[int], np.ndarray] | None = None
+    #: motor parameters (n_params,) -> joint trajectory (T, n_joints) rad
+    motor: MotorPrimitive = field(default_factory=Dmp)
 
     def connect(self) -> None:
         self.camera.connect()
@@ -84,17 +101,16 @@ class Rig:
         self.disconnect()
 
 
+def rig_options(config: RigConfig) -> Any:
+    """The typed ``Options`` of the rig ``config`` names, from ``config.options``; a
+    ``RigError`` (one line, the known options listed) for an unknown rig, option or value."""
+    module = RIGS.load(config.name)
+    try:
+        return parse_options(module.Options, config.options, f"rig {config.name!r}")
+    except OptionsError as exc:
+        raise RigError(str(exc)) from None
+
+
 def make_rig(config: RigConfig) -> Rig:
     """Build (not connect) the rig named in ``config``."""
-    target = RIG_FACTORIES.get(config.name)
-    if target is None:
-        raise RigError(f"unknown rig {config.name!r}; choose one of {', '.join(RIG_FACTORIES)}")
-    module_name, func_name = target.split(":")
-    try:
-        module = importlib.import_module(module_name)
-    except ImportError as exc:
-        raise RigError(f"rig {config.name!r} needs a module that failed to import: {exc}") from exc
-    factory = getattr(module, func_name, None)
-    if factory is None:
-        raise RigError(f"rig {config.name!r} is not available in this version ({target} missing)")
-    return factory(config)
+    return RIGS.load(config.name).make_rig(config, rig_options(config))

@@ -16,39 +16,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from explore.learner.dmp import Dmp
+from explore.learner.dmp import MotorPrimitive
 from explore.learner.experience import Observation
 from explore.rigs.rig import Rig
-from robot.spec import CONTROL_RATE_HZ
-from vision.observation import OBSERVATION_SIZE, square_observation
-
-
-@dataclass(frozen=True)
-class EpisodeConfig:
-    """Timing of an episode.
-
-    Attributes:
-        rate_hz: control rate (40 Hz: the DMP's 40 points last 1 s, as in the paper's rig).
-        reset_s: time to go back to the rest pose (1 s, original implementation).
-        settle_speed: the ball counts as still below this speed, m/s (guess: 1 cm/s).
-        arm_settle_speed: the arm counts as back at rest when no joint moves faster than this,
-            rad/s (guess, checked on the twin: it stops within 0.2-0.3 s). 0.05 rad/s over a
-            0.1 s check is 0.286 degrees, just under one XL-320 position unit (0.293 degrees,
-            datasheet), so a joint that moved by at most one unit of its reading
-            (``Arm.position_resolution``) also counts as still: a reading that flickers by one
-            unit at rest would otherwise hold every settle to ``settle_max_s``.
-        settle_max_s: longest wait for the ball and the arm to settle (the original waited 3 s).
-        settle_check_s: interval between two settle checks.
-        obs_size: side of the square observation the representation sees, pixels (64, paper).
-    """
-
-    rate_hz: float = CONTROL_RATE_HZ
-    reset_s: float = 1.0
-    settle_speed: float = 0.01
-    arm_settle_speed: float = 0.05
-    settle_max_s: float = 3.0
-    settle_check_s: float = 0.1
-    obs_size: int = OBSERVATION_SIZE
+from explore.runs.config import EpisodeConfig
+from vision.observation import square_observation
 
 
 @dataclass
@@ -56,8 +28,8 @@ class EpisodeResult:
     """Everything an episode produced.
 
     Attributes:
-        targets: commands actually sent during the DMP, shape (T, 6), rad.
-        measured: joint positions read at each tick, shape (T, 6), rad.
+        targets: commands actually sent during the movement, shape (T, n_joints), rad.
+        measured: joint positions read at each tick, shape (T, n_joints), rad.
         end_effector: tool tip at each tick, shape (T, 3), m (NaN where unknown).
         outcome: the observation after the ball settled.
         settle_s: how long the ball took to settle (or the cap).
@@ -77,11 +49,13 @@ MOVED_THRESHOLD = 0.01  # m: a ball displacement under 1 cm is not "moved" (gues
 
 
 class EpisodeRunner:
-    """Runs episodes on a rig with a DMP."""
+    """Runs episodes on a rig with its motor primitive (``rig.motor``, or ``motor``)."""
 
-    def __init__(self, rig: Rig, dmp: Dmp | None = None, config: EpisodeConfig | None = None):
+    def __init__(
+        self, rig: Rig, motor: MotorPrimitive | None = None, config: EpisodeConfig | None = None
+    ) -> None:
         self.rig = rig
-        self.dmp = dmp or Dmp()
+        self.motor = motor if motor is not None else rig.motor
         self.config = config or EpisodeConfig()
         self.dt = 1.0 / self.config.rate_hz
 
@@ -130,16 +104,17 @@ class EpisodeRunner:
         return twin.ball_position()[:2] if twin is not None else np.full(2, np.nan)
 
     def play(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Play the DMP of ``theta`` (48,) at the control rate.
+        """Play the motor primitive of ``theta`` (n_params,) at the control rate.
 
         Returns:
-            targets (T, 6) rad, measured (T, 6) rad, end-effector (T, 3) m.
+            targets (T, n_joints) rad, measured (T, n_joints) rad, end-effector (T, 3) m.
         """
-        traj = self.dmp.trajectory(theta)
+        traj = self.motor.trajectory(theta)
         arm, clock, twin = self.rig.arm, self.rig.clock, self.rig.twin
         t = len(traj)
-        sent = np.empty((t, 6))
-        measured = np.empty((t, 6))
+        n = arm.spec.n
+        sent = np.empty((t, n))
+        measured = np.empty((t, n))
         ee = np.full((t, 3), np.nan)
         for i, q in enumerate(traj):
             sent[i] = arm.command(q)

@@ -11,7 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from explore.runs.episode import EpisodeConfig, EpisodeRunner
+from explore.runs.config import EpisodeConfig
+from explore.runs.episode import EpisodeRunner
 from explore.runs.metrics import MetricsLog
 from explore.runs.record import EpisodeRecord
 from explore.rigs.rig import Rig

@@ -140,7 +140,7 @@ def scan_cli(args: argparse.Namespace) -> int:
     try:
         infos = scan(
             args.can,
-            getattr(args, "bitrate", DEFAULT_BITRATE),
+            getattr(args, "bitrate", None) or DEFAULT_BITRATE,
             ids,
             float(getattr(args, "listen_s", LISTEN_S)),
         )

@@ -32,6 +32,7 @@ import numpy as np
 
 from robot.arm import Arm, JointState, RecoveryPolicy
 from robot.dynamixel.bus import (
+    DEFAULT_BAUD,
     DEFAULT_LATENCY_S,
     DEFAULT_RETRIES,
     DynamixelBus,
@@ -77,7 +78,7 @@ class DynamixelArm(Arm):
     def __init__(
         self,
         port: str,
-        baud: int = 1_000_000,
+        baud: int = DEFAULT_BAUD,
         spec: ArmSpec | None = None,
         model: str | int = "XL-320",
         directions: Sequence[float] | None = None,

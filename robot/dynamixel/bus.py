@@ -40,6 +40,8 @@ except ImportError:  # pragma: no cover - not a POSIX system
 
 log = logging.getLogger(__name__)
 
+# The Ergo Jr's XL-320 run at 1 Mbps (ROBOTIS e-manual, Poppy Ergo Jr configuration).
+DEFAULT_BAUD = 1_000_000
 # Serial frame: 1 start + 8 data + 1 stop bits, no parity (e-manual, "Communication": 8N1).
 BITS_PER_BYTE = 10
 # Factory return delay time: 250 x 2 us = 500 us (e-manual, "Return Delay Time"); the arm sets
@@ -227,7 +229,7 @@ class DynamixelBus:
     def __init__(
         self,
         port: str,
-        baud: int = 1_000_000,
+        baud: int = DEFAULT_BAUD,
         *,
         retries: int = DEFAULT_RETRIES,
         latency_s: float = DEFAULT_LATENCY_S,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from robot.dynamixel.bus import DynamixelBus, DynamixelError, NoStatusError, PingReply
+from robot.dynamixel.bus import DEFAULT_BAUD, DynamixelBus, DynamixelError, NoStatusError, PingReply
 from robot.dynamixel.control_table import MODELS
 from robot.dynamixel.protocol import MAX_SERVO_ID
 from robot.errors import BusError
@@ -39,7 +39,7 @@ def scan_cli(args: argparse.Namespace) -> int:
     if bad:
         print(f"ergo: error: ids must be in 0..{MAX_SERVO_ID}, got {bad[0]}", file=sys.stderr)
         return 2
-    baud = int(getattr(args, "baud", 1_000_000))
+    baud = int(getattr(args, "baud", None) or DEFAULT_BAUD)
     try:
         with DynamixelBus(args.port, baud, retries=0, latency_s=SCAN_LATENCY_S) as bus:
             found = scan(bus, ids)

@@ -4,18 +4,25 @@ A strategy proposes motor parameters for the next episode from the context obser
 rest pose, then learns from the stored record of that episode. Its state must be a
 deterministic function of the records it was updated with, so that a resumed run rebuilds it
 by replaying the history.
+
+Strategies are built by name from ``STRATEGIES`` (imported lazily). Each declares its options
+as a dataclass ``Options`` (``explore.options``): unknown keys and wrong types are refused in
+one line with the known options listed. It proposes ``n_params`` motor parameters, the count of
+the rig's motor primitive (48 for the Ergo Jr's DMPs).
 """
 
 from __future__ import annotations
 
-import importlib
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from explore.learner.dmp import N_PARAMS
 from explore.learner.experience import Experience, Observation
+from explore.options import OptionsError, parse_options
+from robot.registry import LazyTable
 
 
 @dataclass
@@ -23,7 +30,7 @@ class Proposal:
     """What to play next.
 
     Attributes:
-        theta: motor parameters, shape (48,), in [-1, 1].
+        theta: motor parameters, shape (n_params,), in [-1, 1].
         goal: the goal aimed at in the strategy's goal space, shape (g,) (empty for RPE).
         module: goal-space module index (-1 when none).
         kind: "random" (motor babbling), "explore" (goal + noise) or "exploit" (goal, no noise).
@@ -35,15 +42,36 @@ class Proposal:
     kind: str = "random"
 
 
+class StrategyError(ValueError):
+    """Unknown strategy or bad strategy options."""
+
+
+@dataclass(frozen=True)
+class NoOptions:
+    """A strategy without options."""
+
+
 class Strategy(ABC):
-    """Base class of exploration strategies."""
+    """Base class of exploration strategies.
+
+    Args:
+        n_params: motor parameters to propose (the rig's ``motor.n_params``).
+        **options: the strategy's options as given (``self.options``), read into its ``Options``
+            dataclass (``self.settings``).
+    """
 
     name: str = "strategy"
+    Options: type = NoOptions
     #: whether ``propose`` needs ``context.image`` (a render/frame at the rest pose)
     needs_context_image: bool = False
 
-    def __init__(self, **options: Any) -> None:
-        self.options = options
+    def __init__(self, n_params: int = N_PARAMS, **options: Any) -> None:
+        self.options = dict(options)
+        try:
+            self.settings = parse_options(self.Options, options, f"strategy {self.name!r}")
+        except OptionsError as exc:
+            raise StrategyError(str(exc)) from None
+        self.n_params = int(n_params)
 
     @abstractmethod
     def propose(self, context: Observation, rng: np.random.Generator) -> Proposal:
@@ -57,7 +85,6 @@ class Strategy(ABC):
         return self.name
 
 
-# name -> "module:Class"
 # How to make the model a latent strategy needs (option ``vae``; the campaign's ``--vae`` or
 # ``--betavae``). "vae" is the recipe of docs/results.md: a plain VAE (beta 1) collapses at
 # CPU-sized schedules.
@@ -69,26 +96,25 @@ MAKE_VAE = {
     "ergo vae train --data data/outcomes.npz --out models/betavae --beta 4 --capacity 10",
 }
 
-STRATEGIES: dict[str, str] = {
-    "rpe": "explore.learner.strategies.rpe:RandomParameterExploration",
-    "rge-efr": "explore.learner.strategies.goal_exploration:EngineeredGoalExploration",
-    "mge-efr": "explore.learner.strategies.goal_exploration:ModularEngineeredGoalExploration",
-    "rge-vae": "explore.learner.strategies.goal_exploration:LatentGoalExploration",
-    "rge-betavae": "explore.learner.strategies.goal_exploration:BetaLatentGoalExploration",
-    "mge-vae": "explore.learner.strategies.goal_exploration:ModularLatentGoalExploration",
-    "mge-betavae": "explore.learner.strategies.goal_exploration:ModularBetaLatentGoalExploration",
-    "rge-online": "explore.learner.strategies.online:OnlineLatentGoalExploration",
-}
+# name -> "module:Class"
+STRATEGIES = LazyTable(
+    "strategy",
+    {
+        "rpe": "explore.learner.strategies.rpe:RandomParameterExploration",
+        "rge-efr": "explore.learner.strategies.goal_exploration:EngineeredGoalExploration",
+        "mge-efr": "explore.learner.strategies.goal_exploration:ModularEngineeredGoalExploration",
+        "rge-vae": "explore.learner.strategies.goal_exploration:LatentGoalExploration",
+        "rge-betavae": "explore.learner.strategies.goal_exploration:BetaLatentGoalExploration",
+        "mge-vae": "explore.learner.strategies.goal_exploration:ModularLatentGoalExploration",
+        "mge-betavae": (
+            "explore.learner.strategies.goal_exploration:ModularBetaLatentGoalExploration"
+        ),
+        "rge-online": "explore.learner.strategies.online:OnlineLatentGoalExploration",
+    },
+    error=StrategyError,
+)
 
 
-class StrategyError(ValueError):
-    """Unknown strategy or bad strategy options."""
-
-
-def make_strategy(name: str, **options: Any) -> Strategy:
-    target = STRATEGIES.get(name)
-    if target is None:
-        raise StrategyError(f"unknown strategy {name!r}; choose one of {', '.join(STRATEGIES)}")
-    module_name, cls_name = target.split(":")
-    cls = getattr(importlib.import_module(module_name), cls_name)
-    return cls(**options)
+def make_strategy(name: str, n_params: int = N_PARAMS, **options: Any) -> Strategy:
+    """The strategy ``name`` with ``options``, proposing ``n_params`` parameters."""
+    return STRATEGIES.load(name)(n_params=n_params, **options)

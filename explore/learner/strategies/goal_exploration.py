@@ -14,7 +14,8 @@ function of the records given to ``update`` (a resumed run replays them).
 
 from __future__ import annotations
 
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, Literal
 
 import numpy as np
 
@@ -24,11 +25,12 @@ from explore.learner.goal_spaces import EngineeredGoalSpace, GoalSpace, LatentGo
 from explore.learner.interest import RANDOM_CHOICE, WINDOW, ModuleInterest
 from explore.learner.meta_policy import MetaPolicy
 from explore.learner.strategies.base import MAKE_VAE, Proposal, Strategy, StrategyError
+from explore.options import BadOption
 
 BOOTSTRAP = 100  # paper: 100-400 random episodes in the simulations
 EXPLOIT_MGE = 0.2  # paper: about 1 episode in 5 is a noise-free exploit episode (MGE)
 NORMAL_CLIP = 2.5  # paper: latent goals N(0, 1) clipped at +-2.5
-GOAL_SAMPLINGS = ("uniform", "normal")
+LATENT_FORMS = ("raw", "zscore")
 # The original rig's settings (the original implementation, docs/facts.md), the defaults here
 # because the ball is not reset between episodes, on the rig as on the twin. With the paper's
 # simulation settings (sigma 0.05, no random episodes), rge-efr replayed bootstrap motions that
@@ -38,10 +40,11 @@ SIGMA_RIG = 0.2  # exploration noise in the [-1, 1] parameter space, original ri
 RANDOM_EPISODES_RIG = 0.1  # share of random motor babbling episodes after the bootstrap, rig
 
 
-class GoalExploration(Strategy):
-    """Goal exploration in a goal space built by ``make_space``.
+@dataclass(frozen=True)
+class GoalExplorationOptions:
+    """Options of every goal-exploration strategy.
 
-    Options:
+    Attributes:
         bootstrap: random episodes before goal exploration (default 100).
         sigma: exploration noise in the [-1, 1] parameter space (default 0.2, the original
             rig; the paper's simulations used 0.05).
@@ -49,43 +52,68 @@ class GoalExploration(Strategy):
         random_episodes: probability of a random-parameter episode after the bootstrap
             (default 0.1, the original rig; 0 in the paper's simulations).
         goals: "uniform" in the outcome bounds seen so far, or "normal" (latent spaces).
-        modular: choose modules by interest (MGE) instead of the whole space (RGE).
+        modular: choose modules by interest (MGE) instead of the whole space (RGE); default:
+            the strategy's.
         window, random_choice: interest window (exploit episodes) and random module share.
     """
 
+    bootstrap: int = BOOTSTRAP
+    sigma: float = SIGMA_RIG
+    exploit: float | None = None
+    random_episodes: float = RANDOM_EPISODES_RIG
+    goals: Literal["uniform", "normal"] = "uniform"
+    modular: bool | None = None
+    window: int = WINDOW
+    random_choice: float = RANDOM_CHOICE
+
+    def __post_init__(self) -> None:
+        for key in ("bootstrap", "sigma"):
+            if getattr(self, key) < 0:
+                raise BadOption(key, f"must be >= 0, got {getattr(self, key)}")
+        for key in ("exploit", "random_episodes", "random_choice"):
+            p = getattr(self, key)
+            if p is not None and not 0.0 <= p <= 1.0:
+                raise BadOption(key, f"must be a probability, got {p}")
+
+
+@dataclass(frozen=True)
+class EngineeredOptions(GoalExplorationOptions):
+    """Goal-exploration options, and: ``form`` ("wrap-safe" (default) or "polar") and
+    ``hand_module`` (the tool tip as a second module; default True when modular)."""
+
+    form: Literal["wrap-safe", "polar"] = "wrap-safe"
+    hand_module: bool | None = None
+
+
+@dataclass(frozen=True)
+class LatentOptions(GoalExplorationOptions):
+    """Goal-exploration options, and: ``vae`` (the model folder or its ``.pt`` file, from
+    ``ergo vae train``; required) and ``latents`` ("raw" latent means, the paper's and the
+    default, or "zscore": z-scored with the means' statistics over the VAE's training data)."""
+
+    vae: str | None = None
+    latents: Literal["raw", "zscore"] = "raw"
+
+
+class GoalExploration(Strategy):
+    """Goal exploration in a goal space built by ``make_space`` (options:
+    ``GoalExplorationOptions``)."""
+
     name = "goal-exploration"
+    Options: type = GoalExplorationOptions
     modular_default = False
 
-    def __init__(self, **options: Any) -> None:
-        super().__init__(**options)
-        known = {
-            "bootstrap", "sigma", "exploit", "random_episodes", "goals", "modular", "window",
-            "random_choice", *self.extra_options(),
-        }  # fmt: skip
-        unknown = set(options) - known
-        if unknown:
-            raise StrategyError(
-                f"{self.name}: unknown option(s) {', '.join(sorted(unknown))}; "
-                f"known: {', '.join(sorted(known))}"
-            )
-        self.bootstrap = int(options.get("bootstrap", BOOTSTRAP))
-        self.sigma = float(options.get("sigma", SIGMA_RIG))
-        self.modular = bool(options.get("modular", self.modular_default))
-        self.exploit = float(options.get("exploit", EXPLOIT_MGE if self.modular else 0.0))
-        self.random_episodes = float(options.get("random_episodes", RANDOM_EPISODES_RIG))
-        self.goal_sampling = str(options.get("goals", "uniform"))
-        if self.goal_sampling not in GOAL_SAMPLINGS:
-            raise StrategyError(
-                f"{self.name}: goals must be one of {', '.join(GOAL_SAMPLINGS)}, "
-                f"got {self.goal_sampling!r}"
-            )
-        if self.bootstrap < 0 or self.sigma < 0:
-            raise StrategyError(f"{self.name}: bootstrap and sigma must be >= 0")
-        for key, p in (("exploit", self.exploit), ("random_episodes", self.random_episodes)):
-            if not 0.0 <= p <= 1.0:
-                raise StrategyError(f"{self.name}: {key} must be a probability, got {p}")
-        self.window = int(options.get("window", WINDOW))
-        self.random_choice = float(options.get("random_choice", RANDOM_CHOICE))
+    def __init__(self, n_params: int = N_PARAMS, **options: Any) -> None:
+        super().__init__(n_params, **options)
+        s = self.settings
+        self.bootstrap = s.bootstrap
+        self.sigma = s.sigma
+        self.modular = self.modular_default if s.modular is None else s.modular
+        self.exploit = (EXPLOIT_MGE if self.modular else 0.0) if s.exploit is None else s.exploit
+        self.random_episodes = s.random_episodes
+        self.goal_sampling = s.goals
+        self.window = s.window
+        self.random_choice = s.random_choice
         self.n_seen = 0
         self.space: GoalSpace | None = None
         self._last_latent: np.ndarray | None = None  # latent spaces: context of the next move
@@ -93,9 +121,6 @@ class GoalExploration(Strategy):
         self._init_space(self.make_space())
 
     # ---- hooks for subclasses ----------------------------------------------------------------
-    def extra_options(self) -> tuple[str, ...]:
-        return ()
-
     def make_space(self) -> GoalSpace | None:
         """The goal space, or None while it does not exist yet (online representations)."""
         raise NotImplementedError
@@ -106,7 +131,7 @@ class GoalExploration(Strategy):
         if space is None:
             return
         dims = [len(m) for m in space.modules]
-        self.policy = MetaPolicy(space.context_dim, dims, N_PARAMS)
+        self.policy = MetaPolicy(space.context_dim, dims, self.n_params)
         self.low = [np.full(d, np.inf) for d in dims]
         self.high = [np.full(d, -np.inf) for d in dims]
         self.interest = ModuleInterest(dims, self.window, self.random_choice)
@@ -166,7 +191,7 @@ class GoalExploration(Strategy):
 
     # ---- proposals ---------------------------------------------------------------------------
     def _random(self, rng: np.random.Generator) -> Proposal:
-        return Proposal(theta=rng.uniform(-1.0, 1.0, N_PARAMS), kind="random")
+        return Proposal(theta=rng.uniform(-1.0, 1.0, self.n_params), kind="random")
 
     def sample_goal(self, module: int, rng: np.random.Generator) -> np.ndarray:
         """A goal in ``module``: uniform in the bounds seen so far, or clipped N(0, 1)."""
@@ -199,23 +224,16 @@ class GoalExploration(Strategy):
 
 
 class EngineeredGoalExploration(GoalExploration):
-    """Goal exploration on the ball's engineered polar features (EFR).
-
-    Extra options: ``form`` ("wrap-safe" (default) or "polar"); ``hand_module`` (MGE: the
-    tool tip as a second module; default True when modular).
-    """
+    """Goal exploration on the ball's engineered polar features (EFR; options:
+    ``EngineeredOptions``)."""
 
     name = "rge-efr"
-
-    def extra_options(self) -> tuple[str, ...]:
-        return ("form", "hand_module")
+    Options = EngineeredOptions
 
     def make_space(self) -> GoalSpace:
-        form = self.options.get("form", "wrap-safe")
-        try:
-            return EngineeredGoalSpace(form, bool(self.options.get("hand_module", self.modular)))
-        except ValueError as exc:
-            raise StrategyError(f"{self.name}: {exc}") from exc
+        s = self.settings
+        hand = self.modular if s.hand_module is None else s.hand_module
+        return EngineeredGoalSpace(s.form, hand)
 
 
 class ModularEngineeredGoalExploration(EngineeredGoalExploration):
@@ -224,18 +242,14 @@ class ModularEngineeredGoalExploration(EngineeredGoalExploration):
 
 
 class LatentGoalExploration(GoalExploration):
-    """Goal exploration in the latent space of a VAE trained beforehand (option ``vae``: the
-    model folder or its ``.pt`` file, from ``ergo vae train``; option ``latents``: "raw" latent
-    means, the paper's and the default, or "zscore": z-scored with the means' statistics over
-    the VAE's training data, the outcome database)."""
+    """Goal exploration in the latent space of a VAE trained beforehand (options:
+    ``LatentOptions``)."""
 
     name = "rge-vae"
-
-    def extra_options(self) -> tuple[str, ...]:
-        return ("vae", "latents")
+    Options = LatentOptions
 
     def make_space(self) -> GoalSpace | None:
-        path = self.options.get("vae")
+        path = self.settings.vae
         if not path:
             raise StrategyError(
                 f"{self.name} needs option vae=PATH (make one with: {MAKE_VAE['vae']})"
@@ -246,10 +260,7 @@ class LatentGoalExploration(GoalExploration):
             vae = load_vae(path)
         except (VaeError, FileNotFoundError) as exc:
             raise StrategyError(f"{self.name}: {exc}") from exc
-        return latent_space(vae, self.modular, self.options.get("latents", "raw"), path)
-
-
-LATENT_FORMS = ("raw", "zscore")
+        return latent_space(vae, self.modular, self.settings.latents, path)
 
 
 def check_latents(latents: str, where: str) -> str:

@@ -10,12 +10,18 @@ initial weights; ``vision/vae_train.py``), so a resumed run that replays its his
 from __future__ import annotations
 
 import tempfile
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, Literal
 
 import numpy as np
 
+from explore.learner.dmp import N_PARAMS
 from explore.learner.strategies.base import StrategyError
-from explore.learner.strategies.goal_exploration import GoalExploration, check_latents, latent_space
+from explore.learner.strategies.goal_exploration import (
+    GoalExploration,
+    GoalExplorationOptions,
+    latent_space,
+)
 
 ONLINE_BOOTSTRAP = 2000  # paper: 2000 random episodes before the online VAE (rig)
 # CPU schedule, the one of the pre-trained VAE in docs/results.md (section 4): Adam lr 1e-3,
@@ -30,28 +36,35 @@ ONLINE_CAPACITY = 10.0  # nats
 ONLINE_CAPACITY_ITERATIONS = 500
 
 
-class OnlineLatentGoalExploration(GoalExploration):
-    """Options (besides the goal-exploration ones): ``bootstrap`` (default 2000),
+@dataclass(frozen=True)
+class OnlineOptions(GoalExplorationOptions):
+    """The goal-exploration options (``bootstrap`` 2000 by default), and the online VAE's:
     ``vae_iterations`` (700), ``vae_beta`` (10), ``vae_capacity`` (10 nats; null for a plain
     beta * KL loss), ``vae_capacity_iterations`` (500), ``vae_seed`` (0), ``latents`` ("raw" or
     "zscore" over the bootstrap's own outcome images)."""
 
-    name = "rge-online"
+    bootstrap: int = ONLINE_BOOTSTRAP
+    vae_iterations: int = ONLINE_ITERATIONS
+    vae_beta: float = ONLINE_BETA
+    vae_capacity: float | None = ONLINE_CAPACITY
+    vae_capacity_iterations: int = ONLINE_CAPACITY_ITERATIONS
+    vae_seed: int = 0
+    latents: Literal["raw", "zscore"] = "raw"
 
-    def __init__(self, **options: Any) -> None:
-        options.setdefault("bootstrap", ONLINE_BOOTSTRAP)
-        super().__init__(**options)
-        check_latents(self.options.get("latents", "raw"), self.name)
+
+class OnlineLatentGoalExploration(GoalExploration):
+    """Goal exploration in a VAE trained on the bootstrap's outcome images (options:
+    ``OnlineOptions``)."""
+
+    name = "rge-online"
+    Options = OnlineOptions
+
+    def __init__(self, n_params: int = N_PARAMS, **options: Any) -> None:
+        super().__init__(n_params, **options)
         if self.bootstrap < 1:
             raise StrategyError(f"{self.name}: bootstrap must be at least 1 (the VAE's data)")
         self._configs = self._vae_configs()  # bad options fail now, not after the bootstrap
         self.vae = None
-
-    def extra_options(self) -> tuple[str, ...]:
-        return (
-            "vae_iterations", "vae_beta", "vae_capacity", "vae_capacity_iterations", "vae_seed",
-            "latents",
-        )  # fmt: skip
 
     def make_space(self) -> None:
         return None  # trained after the bootstrap
@@ -67,9 +80,7 @@ class OnlineLatentGoalExploration(GoalExploration):
                 images, tmp, *self._configs,
                 progress=False,
             )  # fmt: skip
-        self._init_space(
-            latent_space(self.vae, self.modular, self.options.get("latents", "raw"), self.name)
-        )
+        self._init_space(latent_space(self.vae, self.modular, self.settings.latents, self.name))
         pending, self._pending = self._pending, []
         for rec in pending:
             self._learn(rec)
@@ -80,19 +91,14 @@ class OnlineLatentGoalExploration(GoalExploration):
         from vision.vae import VaeConfig, VaeError
         from vision.vae_train import TrainConfig
 
-        capacity = self.options.get("vae_capacity", ONLINE_CAPACITY)
+        s = self.settings
         try:
             model = VaeConfig(
-                beta=float(self.options.get("vae_beta", ONLINE_BETA)),
-                capacity=None if capacity is None else float(capacity),
-                capacity_iterations=int(
-                    self.options.get("vae_capacity_iterations", ONLINE_CAPACITY_ITERATIONS)
-                ),
+                beta=s.vae_beta,
+                capacity=s.vae_capacity,
+                capacity_iterations=s.vae_capacity_iterations,
             )
-            train = TrainConfig(
-                iterations=int(self.options.get("vae_iterations", ONLINE_ITERATIONS)),
-                seed=int(self.options.get("vae_seed", 0)),
-            )
+            train = TrainConfig(iterations=s.vae_iterations, seed=s.vae_seed)
             model.validate()
             train.validate()
         except (TypeError, ValueError, VaeError) as exc:

@@ -1,0 +1,153 @@
+"""Opening a run: the one way every writer of a run folder starts (``ergo explore``, campaign
+trials, tests, benchmarks).
+
+    with open_run(path, RunConfig(...)) as run:      # a new run, or the one already there
+        run.explore()                                # until run.config.episodes
+
+``open_run`` reads the config of a run already in ``path`` (``run.json``, checked) or checks
+the one given for a new run, builds the rig and the strategy *before* a new folder is made (a
+bad name or option leaves nothing behind), then creates or reopens the folder (verifying its
+history and cutting a torn last record). A caller that needs a special rig or strategy (a
+fault-injecting arm, an emulator) passes it; everything else comes from the config.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from contextlib import AbstractContextManager, ExitStack
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from explore.learner.strategies import Strategy, make_strategy
+from explore.rigs.rig import Rig, make_rig
+from explore.runs.config import RunConfig
+from explore.runs.explorer import Explorer, Progress
+from explore.runs.record import EpisodeRecord
+from explore.runs.store import RunStore, RunStoreError
+
+Mode = Literal["new", "resume", "auto"]
+
+
+@dataclass
+class OpenRun:
+    """A run folder opened for appending, with the config it runs and what it runs on.
+
+    Attributes:
+        config: the run's config (a resumed run's own, with the caller's overrides).
+        store: the run folder.
+        rig: the rig, built but not connected (``explore`` connects it).
+        strategy: the strategy, not yet replayed (``explore`` replays the history first).
+        resumed_from: episodes the folder held when it was opened (0 for a new run).
+    """
+
+    config: RunConfig
+    store: RunStore
+    rig: Rig
+    strategy: Strategy
+    resumed_from: int
+    _held: ExitStack = field(default_factory=ExitStack, repr=False)
+
+    @property
+    def path(self) -> Path:
+        return self.store.path
+
+    def explorer(
+        self,
+        on_episode: Callable[[Progress], None] | None = None,
+        on_record: Callable[[EpisodeRecord], None] | None = None,
+    ) -> Explorer:
+        """The exploration loop over this run."""
+        return Explorer(
+            self.rig, self.strategy, self.store, seed=self.config.seed,
+            episode_config=self.config.episode, on_episode=on_episode, on_record=on_record,
+        )  # fmt: skip
+
+    def explore(
+        self,
+        on_episode: Callable[[Progress], None] | None = None,
+        on_record: Callable[[EpisodeRecord], None] | None = None,
+    ) -> Explorer:
+        """Explore until the run holds ``config.episodes`` episodes; returns the explorer (its
+        ``metrics`` hold the cells reached)."""
+        explorer = self.explorer(on_episode, on_record)
+        explorer.run(self.config.episodes)
+        return explorer
+
+    def close(self) -> None:
+        """Close the history (and release what ``hold`` took)."""
+        self._held.close()
+
+    def __enter__(self) -> OpenRun:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def open_run(
+    path: str | Path,
+    config: RunConfig | None = None,
+    *,
+    mode: Mode = "auto",
+    episodes: int | None = None,
+    rig_options: dict[str, Any] | None = None,
+    check_resumed: Callable[[RunConfig], None] | None = None,
+    rig: Rig | None = None,
+    strategy: Strategy | None = None,
+    hold: Callable[[Path], AbstractContextManager[Any]] | None = None,
+) -> OpenRun:
+    """Create the run ``config`` describes in ``path``, or reopen the one there.
+
+    Args:
+        path: the run folder.
+        config: a new run's config (checked here); needed unless the folder holds a run.
+        mode: ``"new"`` (the folder must not hold anything), ``"resume"`` (it must hold a run)
+            or ``"auto"`` (resume if it holds a run, else create).
+        episodes, rig_options: on resume, override the run's episode count and add options to
+            its rig's (ports change between sessions); a new run takes them from ``config``.
+        check_resumed: called with a resumed run's config before anything is built (a CLI
+            refusing flags that would change it).
+        rig, strategy: use these instead of building them from the config.
+        hold: a context manager factory entered with the folder before an existing run is
+            opened, or just after a new one is made (an exclusive lock), left on ``close``.
+
+    Raises:
+        RunStoreError (a ``RunConfigError`` for a bad config), RigError, StrategyError: one
+        line each; nothing is created when the config, the rig or the strategy is bad.
+    """
+    path = Path(path)
+    if mode not in ("new", "resume", "auto"):
+        raise ValueError(f"mode must be new, resume or auto, got {mode!r}")
+    resume = mode == "resume" or (mode == "auto" and RunStore.is_run(path))
+    held = ExitStack()
+    try:
+        store = None
+        if resume:
+            if hold is not None:
+                held.enter_context(hold(path))
+            store = RunStore.open(path)
+            held.callback(store.close)
+            run_config = RunConfig.from_dict(store.config, where=path / "run.json")
+            if check_resumed is not None:
+                check_resumed(run_config)
+            if episodes is not None or rig_options:
+                run_config = run_config.with_overrides(episodes, rig_options).checked()
+        else:
+            if config is None:
+                raise RunStoreError(f"{path} holds no run and no config was given for a new one")
+            run_config = config.with_overrides(episodes, rig_options).checked()
+        # rig and strategy before a new run folder exists: a bad name leaves nothing
+        the_rig = rig if rig is not None else make_rig(run_config.rig)
+        if strategy is None:
+            s = run_config.strategy
+            strategy = make_strategy(s.name, n_params=the_rig.motor.n_params, **s.options)
+        if store is None:
+            store = RunStore.create(path, run_config.to_dict())
+            if hold is not None:
+                held.enter_context(hold(path))
+            held.callback(store.close)  # unwinds first: the history closes before the hold
+        return OpenRun(run_config, store, the_rig, strategy, len(store), held)
+    except BaseException:
+        held.close()
+        raise
