@@ -17,6 +17,7 @@ class SimArm(Arm):
     def __init__(self, twin: Twin, spec: ArmSpec | None = None, watchdog: Watchdog | None = None):
         super().__init__(spec or ergo_jr_spec(), watchdog)
         self.twin = twin
+        self._max_torques = twin.max_torques()  # the model's force range: fixed
 
     def _connect(self) -> None:
         self._torque = self.twin.torque_enabled()
@@ -32,7 +33,7 @@ class SimArm(Arm):
                 t.joint_positions(),
                 t.time,
                 velocities=t.joint_velocities(),
-                loads=tau / t.max_torques(),
+                loads=tau / self._max_torques,
                 temperatures=np.full(6, 25.0),  # the twin does not heat (constant, room temp)
             )
 
