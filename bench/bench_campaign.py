@@ -52,7 +52,7 @@ def time_online_training() -> float:
     """Seconds rge-online's VAE training takes here (its default schedule, 2000 images)."""
     import numpy as np
 
-    from explore.strategies.online import OnlineLatentGoalExploration
+    from explore.learner.strategies.online import OnlineLatentGoalExploration
     from vision.vae_train import train_vae
 
     strategy = OnlineLatentGoalExploration()
