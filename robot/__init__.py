@@ -1,10 +1,14 @@
-"""Hardware abstraction: the ``Arm`` interface, joint specs and safety. Imports no other
-package of the project."""
+"""Hardware abstraction: the ``Arm`` interface (``arm``), joint specs (``spec``), the
+watchdog (``watchdog``), torque off on signals (``signals``), the bus lock an emergency preempts
+(``bus_guard``), the bus flags (``bus_flags``), lazy name tables (``registry``), a
+fault-injecting arm (``faulty_arm``), and the Dynamixel and CANopen backends. Imports no
+other package of the project."""
 
 from robot.arm import Arm, ArmCounters, JointState, RecoveryPolicy
 from robot.errors import BusError, LinkLost, NotConnectedError, RobotError, SafetyStop
-from robot.safety import Watchdog, torque_off_on_signals
+from robot.signals import torque_off_on_signals
 from robot.spec import ArmSpec, JointSpec, ergo_jr_spec
+from robot.watchdog import Watchdog
 
 __all__ = [
     "Arm",

@@ -27,8 +27,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from robot.errors import BusError, LinkLost, NotConnectedError, SafetyStop
-from robot.safety import Watchdog
 from robot.spec import ArmSpec
+from robot.watchdog import Watchdog
 
 log = logging.getLogger(__name__)
 
@@ -145,7 +145,7 @@ class Arm(ABC):
         self._torque = False
         self._last_sent: np.ndarray | None = None
         self._resync_needed = False
-        # set from a signal (``torque_off_on_signals``): no recovery may turn torque back on
+        # set by ``interrupt`` (a signal): no recovery may turn torque back on
         self._interrupted = threading.Event()
 
     # ---- lifecycle -------------------------------------------------------------------------
@@ -366,6 +366,18 @@ class Arm(ABC):
             self._last_sent = here
         self._set_torque(enabled)
         self._torque = enabled
+
+    def interrupt(self) -> None:
+        """Cut torque now, from any thread (the signal watcher of
+        ``robot.signals.torque_off_on_signals``), and keep it off: a link recovery in progress
+        gives up instead of turning it back on, until ``clear_interrupt`` or the next
+        ``connect``. Never raises (a failed torque-off is logged)."""
+        self._interrupted.set()
+        self._emergency_torque_off()
+
+    def clear_interrupt(self) -> None:
+        """Let recoveries turn torque back on again (a new run on a connected arm)."""
+        self._interrupted.clear()
 
     def _emergency_torque_off(self) -> None:
         try:

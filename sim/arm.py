@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from robot.arm import Arm, JointState
-from robot.safety import Watchdog
 from robot.spec import ArmSpec, ergo_jr_spec
+from robot.watchdog import Watchdog
 from sim.twin import Twin
 
 

@@ -14,8 +14,9 @@ from hypothesis.extra.numpy import arrays
 
 from robot.arm import JointState
 from robot.errors import NotConnectedError, SafetyStop
-from robot.safety import Watchdog, torque_off_on_signals
+from robot.signals import torque_off_on_signals
 from robot.spec import ergo_jr_spec
+from robot.watchdog import Watchdog
 from sim.arm import SimArm
 from sim.twin import Twin
 

@@ -19,8 +19,9 @@ import pytest
 from explore.learner.dmp import Dmp, DmpConfig
 from robot import SafetyStop, torque_off_on_signals
 from robot.arm import RecoveryPolicy
-from robot.canopen.arm import CanArm, CanArmConfig, CanNodeError
+from robot.canopen.arm import CanArm, CanArmConfig
 from robot.canopen.cia402 import State
+from robot.canopen.network import CanNodeError
 from sim.canopen.drives import EmulatedDrives
 from sim.twin import Twin
 
@@ -207,7 +208,7 @@ def test_signal_inside_a_bus_cycle_is_deferred_to_its_end(rig) -> None:
     _twin, drives, can = rig
     with make_arm(can) as arm:
         arm.set_torque(True)
-        with arm._io():
+        with arm.net.guard.hold():
             arm._emergency_torque_off()  # what the handler does if it lands here
             assert enabled(drives) == [1, 2, 3, 4, 5, 6]  # not while we hold the bus
         assert enabled(drives) == []
@@ -243,7 +244,7 @@ def test_adapter_failure_is_a_clear_one_line_stop_and_reconnect_works(rig) -> No
     arm = make_arm(can)
     arm.recovery = RecoveryPolicy(attempts=0)
     arm.connect()
-    arm.network.bus.shutdown()  # the adapter goes away under the arm
+    arm.net.network.bus.shutdown()  # the adapter goes away under the arm
     with pytest.raises(SafetyStop, match=f"link lost \\(CAN bus {can} failed") as info:
         arm.command(arm.spec.rest)
     assert "\n" not in str(info.value)

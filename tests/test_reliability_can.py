@@ -104,7 +104,7 @@ def test_a_lost_adapter_is_reopened_and_the_arm_goes_on(rig) -> None:
         arm.set_torque(True)
         for _ in range(5):
             arm.command(TARGET)
-        arm.network.bus.shutdown()  # the adapter goes away under the arm ...
+        arm.net.network.bus.shutdown()  # the adapter goes away under the arm ...
         sent = arm.command(TARGET)  # ... and the next command reconnects, then goes out
         assert np.all(np.isfinite(sent)) and arm.torque_enabled
         assert enabled(drives) == [1, 2, 3, 4, 5, 6]  # held, torque back on
@@ -159,7 +159,7 @@ def test_an_adapter_lost_for_good_stops_the_arm_after_bounded_attempts(rig) -> N
         # machine was loaded (a full suite beside a campaign on 2 cores)
         arm.config = dataclasses.replace(arm.config, sdo_timeout_s=0.05)
         drives.stop()  # the drives drop off the bus (their side of the cable) ...
-        arm.network.bus.shutdown()  # ... and the adapter fails
+        arm.net.network.bus.shutdown()  # ... and the adapter fails
         with pytest.raises(SafetyStop) as info:
             arm.command(TARGET)
         message = str(info.value)

@@ -14,7 +14,7 @@ microseconds of the last byte whatever the host's load; their threads (the pty s
 SLCAN bridge and the drives' CAN reader) are run at a real-time priority where the system
 allows it, so that on this shared machine the figure measures the host's path (signal,
 watcher thread, bus write) rather than the emulator waiting for a CPU. The host's watcher
-thread asks for a real-time priority itself (``robot.safety.WATCHER_RT_PRIORITY``).
+thread asks for a real-time priority itself (``robot.signals.WATCHER_RT_PRIORITY``).
 
 One child serves several samples: after each signal it reports, waits for "again" on stdin and
 enables torque again. The bound is the issue's safety requirement (< 100 ms on every rig),
@@ -48,7 +48,7 @@ CHILD = textwrap.dedent(
     """
     import sys, time
     import numpy as np
-    from robot.safety import torque_off_on_signals
+    from robot.signals import torque_off_on_signals
     kind, port = sys.argv[1], sys.argv[2]
     if kind == "serial":
         from robot.dynamixel.arm import DynamixelArm

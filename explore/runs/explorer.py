@@ -18,7 +18,7 @@ from explore.runs.record import EpisodeRecord
 from explore.rigs.rig import Rig
 from explore.runs.store import RunStore
 from explore.learner.strategies.base import Strategy
-from robot.safety import torque_off_on_signals
+from robot.signals import torque_off_on_signals
 
 log = logging.getLogger(__name__)
 

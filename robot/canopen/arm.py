@@ -1,7 +1,9 @@
 """``CanArm``: the ``robot.Arm`` interface on six CiA 402 servo drives over CANopen.
 
-Built on python-can (the bus) and the ``canopen`` library (SDO client, PDO maps, NMT, EMCY,
-heartbeat), never hand-written SDO/PDO frames. At connect:
+The network itself (the ``canopen`` library's nodes, SDO, PDO maps, NMT, what the notifier
+thread hears, the SYNC cycle and its preemption) is ``robot.canopen.network.DriveNetwork``;
+this module is the arm on top of it: configuration, units, the CiA 402 state machine for
+torque, the health monitor. At connect:
 
 1. every node answers an SDO read of its device type 0x1000 (low word 402: a drive);
 2. units: increments per revolution from 0x608F (position encoder resolution);
@@ -24,8 +26,8 @@ Safety (on top of the base class's clamping, watchdog and torque off on exit):
 A stop turns torque off on every node at once (from a monitor thread) and makes the next
 ``read``/``command`` raise ``SafetyStop`` with a one-line reason; ``reset_faults()`` clears it.
 A torque off from another thread (the monitor, the signal watcher of
-``robot.safety.torque_off_on_signals``) preempts the cycle in progress, which gives up at once
-instead of waiting out its TPDO timeout.
+``robot.signals.torque_off_on_signals``) preempts the cycle in progress, which gives up at once
+instead of waiting out its TPDO timeout (``robot.bus_guard.BusGuard``).
 
 Link loss (the adapter fails: ``CanLinkLost``): ``robot.Arm`` reconnects (the bus reopened from
 its spec, the drives configured again, positions read, torque re-enabled holding them) at most
@@ -42,54 +44,32 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from robot.arm import Arm, JointState, RecoveryPolicy
 from robot.canopen import cia402, emcy
-from robot.canopen.bus import (
-    DEFAULT_BITRATE,
-    CanBusError,
-    CanBusSpec,
-    open_bus,
-    parse_can_spec,
-)
+from robot.canopen.bus import DEFAULT_BITRATE, CanBusSpec, parse_can_spec
 from robot.canopen.cia402 import State
+from robot.canopen.network import (
+    HEARTBEAT_OPERATIONAL,
+    CanNodeError,
+    CyclePreemptedError,
+    DriveNetwork,
+    safe_decode,
+)
 from robot.canopen.units import JointScaling
-from robot.errors import BusError, LinkLost, SafetyStop
-from robot.safety import Watchdog
+from robot.errors import SafetyStop
 from robot.spec import ArmSpec, ergo_jr_spec
+from robot.watchdog import Watchdog
 
 log = logging.getLogger(__name__)
 
 EDS_PATH = Path(__file__).resolve().parent / "ergo_drive.eds"
 CSP = 8  # modes of operation 0x6060: cyclic synchronous position (CiA 402-2)
 DEVICE_PROFILE_402 = 402  # low word of 0x1000 for a drive (CiA 402-2)
-PDO_NOT_VALID = 1 << 31  # COB-ID bit 31 of a PDO communication parameter (CiA 301)
-# Synchronous transmission type: RPDO applied at the next SYNC, TPDO sent at every SYNC.
-TRANS_SYNC = 1
-NMT_START_ALL, NMT_PRE_OPERATIONAL = 0x01, 0x80
-HEARTBEAT_OPERATIONAL = 5  # NMT state byte in a heartbeat (CiA 301)
-# Longest blocking receive of the bus's notifier thread, s: bounds how long disconnect waits
-# for it (canopen's default is 1 s; the thread wakes at once when a frame arrives).
-NOTIFIER_CYCLE_S = 0.1
-
-
-class CanNodeError(BusError):
-    """A CANopen node did not answer, or answered something a CiA 402 drive would not."""
-
-
-class CanLinkLost(CanBusError, LinkLost):
-    """The CAN adapter failed under the arm (unplugged, interface down): a ``LinkLost``,
-    which ``robot.Arm`` answers by reconnecting (the bus is reopened by its spec)."""
-
-
-class CyclePreemptedError(CanBusError):
-    """A bus cycle gave up because another thread took the bus to cut torque."""
 
 
 @dataclass(frozen=True)
@@ -172,212 +152,79 @@ class CanArm(Arm):
                 f"a heartbeat cannot be watched"
             )
         self.scaling: JointScaling | None = None
-        self.network: Any = None
-        self.nodes: list[Any] = []
-        # Cyclic state, guarded by _cond (written by the notifier thread).
-        self._cond = threading.Condition()
-        self._counts = np.zeros(n, dtype=np.int64)
-        self._statusword = np.zeros(n, dtype=np.int64)
-        self._rx_seq = np.full(n, -1, dtype=np.int64)
-        self._rx_time = np.zeros(n)
-        self._velocity = np.zeros(n)
-        self._missed = np.zeros(n, dtype=int)  # consecutive cycles without a TPDO
-        self._late_since = np.full(n, np.nan)  # first unanswered SYNC, monotonic s
-        self._emcy_active: list[tuple[int, int] | None] = [None] * n
-        self._heartbeat_at = np.zeros(n)
-        self._nmt_state = np.zeros(n, dtype=int)
         self._heartbeat_s = self.config.heartbeat_ms / 1000.0
-        # Command state: controlword and target of each node, the SYNC counter.
-        self._cw = np.zeros(n, dtype=np.int64)
-        self._target = np.zeros(n, dtype=np.int64)
-        self._seq = 0
-        self._sync_since_read = False
-        # Safety: one I/O cycle at a time; a signal inside our own cycle is deferred.
-        self._io_lock = threading.RLock()
-        self._io_owner: int | None = None
-        self._pending_off = False
-        # Set while another thread cuts torque: a cycle in progress gives up at once.
-        self._preempt = threading.Event()
-        self._preempt_by: int | None = None
-        # cycles run, cycles where a node's TPDO missed pdo_timeout_s, TPDOs missing in them
-        self.stats = {"cycles": 0, "late_cycles": 0, "missing_tpdos": 0}
+        self._wake = threading.Event()
+        # The drives' network: SDO, PDO, NMT, the notifier's state, the SYNC cycle; one cycle
+        # at a time, preempted by a torque off from another thread (its ``guard``).
+        self.net = DriveNetwork(
+            self.bus_spec, self.node_ids, self.spec.names, Path(self.config.eds),
+            self.config.sdo_timeout_s, self.config.pdo_timeout_s, on_alarm=self._wake.set,
+        )  # fmt: skip
         self._stop_reason: str | None = None
         self._trip_lock = threading.Lock()
         self._tripping = threading.Event()
-        self._started = False
-        self._wake = threading.Event()
         self._closing = threading.Event()
         self._monitor: threading.Thread | None = None
 
-    # ---- names -----------------------------------------------------------------------------
-    def _who(self, i: int) -> str:
-        return f"node {self.node_ids[i]} ({self.spec.joints[i].name})"
-
     # ---- connect ---------------------------------------------------------------------------
-    def _reset_state(self) -> None:
-        """Forget everything heard on a previous connection."""
-        with self._cond:
-            self._rx_seq[:] = -1
-            self._missed[:] = 0
-            self._late_since[:] = np.nan
-            self._statusword[:] = 0
-            self._velocity[:] = 0.0
-            self._emcy_active = [None] * self.spec.n
-            self._nmt_state[:] = 0
-        self._stop_reason = None
-        self._sync_since_read = False
-        self._pending_off = False
-
     def _connect(self) -> None:
-        import canopen
-
-        self._reset_state()
-        bus = open_bus(self.bus_spec)
-        self.network = canopen.Network(bus)
-        self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE_S
+        net = self.net
+        net.reset_state()
+        self._stop_reason = None
         try:
-            with self._io():
-                self.network.connect()
-                self.nodes = []
-                for i, nid in enumerate(self.node_ids):
-                    node = canopen.RemoteNode(nid, canopen.import_od(str(self.config.eds), nid))
-                    node.sdo.RESPONSE_TIMEOUT = self.config.sdo_timeout_s
-                    self.network.add_node(node)
-                    node.nmt.add_heartbeat_callback(lambda st, i=i: self._on_heartbeat(i, st))
-                    node.emcy.add_callback(lambda err, i=i: self._on_emcy(i, err))
-                    self.nodes.append(node)
+            with net.guard.hold():
+                net.open()
                 self._configure()
-                self._start_nodes()
+                net.start(self._heartbeat_s, self.config.state_timeout_s)
             self._start_monitor()
-            with self._io():
-                self._first_positions()
-            self._torque = bool(np.all(self._states_are(State.OPERATION_ENABLED)))
-            self._cw[:] = np.where(
-                self._states_are(State.OPERATION_ENABLED), cia402.CW_ENABLE_OPERATION, 0
-            )
-            with self._cond:
-                self._target[:] = self._counts
+            with net.guard.hold():
+                net.first_positions(self.config.state_timeout_s)
+            enabled = net.states_are(State.OPERATION_ENABLED)
+            self._torque = bool(np.all(enabled))
+            net.cw[:] = np.where(enabled, cia402.CW_ENABLE_OPERATION, 0)
+            with net.cond:
+                net.target[:] = net.counts
         except BaseException:
             self._stop_monitor()
-            self._shutdown_network()
+            net.close()
             raise
-
-    def _sdo_read(self, i: int, index: int, sub: int = 0) -> int:
-        from canopen.sdo import SdoAbortedError, SdoCommunicationError
-
-        node = self.nodes[i]
-        try:
-            var = node.sdo[index] if sub == 0 else node.sdo[index][sub]
-            return int(var.raw)
-        except SdoCommunicationError as exc:
-            raise CanNodeError(
-                f"{self._who(i)} does not answer SDO 0x{index:04X}:{sub} on {self.bus_spec} "
-                f"({exc}): powered? right node id and bitrate?"
-            ) from exc
-        except (SdoAbortedError, KeyError) as exc:
-            raise CanNodeError(
-                f"{self._who(i)} refused to read 0x{index:04X}:{sub}: {exc}"
-            ) from exc
-
-    def _sdo_write(self, i: int, index: int, sub: int, value: int) -> None:
-        from canopen.sdo import SdoAbortedError, SdoCommunicationError
-
-        node = self.nodes[i]
-        try:
-            var = node.sdo[index] if sub == 0 else node.sdo[index][sub]
-            var.raw = int(value)
-        except SdoCommunicationError as exc:
-            raise CanNodeError(
-                f"{self._who(i)} does not answer SDO 0x{index:04X}:{sub} on {self.bus_spec} ({exc})"
-            ) from exc
-        except (SdoAbortedError, KeyError) as exc:
-            raise CanNodeError(
-                f"{self._who(i)} refused 0x{index:04X}:{sub} = {value}: {exc}"
-            ) from exc
 
     def _configure(self) -> None:
         """SDO configuration of every node (NMT pre-operational first: PDOs off)."""
-        self.network.nmt.send_command(NMT_PRE_OPERATIONAL)
+        net = self.net
+        net.pre_operational()
         cpr = np.zeros(self.spec.n)
         for i in range(self.spec.n):
-            device_type = self._sdo_read(i, 0x1000)
+            device_type = net.sdo_read(i, 0x1000)
             if device_type & 0xFFFF != DEVICE_PROFILE_402:
                 raise CanNodeError(
-                    f"{self._who(i)} is not a CiA 402 drive (device type 0x{device_type:08X})"
+                    f"{net.who(i)} is not a CiA 402 drive (device type 0x{device_type:08X})"
                 )
-            increments, revolutions = self._sdo_read(i, 0x608F, 1), self._sdo_read(i, 0x608F, 2)
+            increments, revolutions = net.sdo_read(i, 0x608F, 1), net.sdo_read(i, 0x608F, 2)
             if increments <= 0 or revolutions <= 0:
                 raise CanNodeError(
-                    f"{self._who(i)} reports a position encoder resolution of "
+                    f"{net.who(i)} reports a position encoder resolution of "
                     f"{increments}/{revolutions} increments per revolution"
                 )
             cpr[i] = increments / revolutions
         self.scaling = JointScaling(cpr, self._directions, self._offsets)
+        net.velocity_units = (self.scaling.counts_per_rev, self._directions)
         lo, hi = self.scaling.limits_to_counts(self.spec.lower, self.spec.upper)
         for i in range(self.spec.n):
-            if self._sdo_read(i, 0x6060) != CSP:  # a drive may refuse it while enabled
-                self._sdo_write(i, 0x6060, 0, CSP)
-            self._sdo_write(i, 0x607D, 1, int(lo[i]))
-            self._sdo_write(i, 0x607D, 2, int(hi[i]))
-            self._sdo_write(i, 0x1017, 0, self.config.heartbeat_ms)
+            if net.sdo_read(i, 0x6060) != CSP:  # a drive may refuse it while enabled
+                net.sdo_write(i, 0x6060, 0, CSP)
+            net.sdo_write(i, 0x607D, 1, int(lo[i]))
+            net.sdo_write(i, 0x607D, 2, int(hi[i]))
+            net.sdo_write(i, 0x1017, 0, self.config.heartbeat_ms)
             if self.config.following_error_window is not None:
                 window = self.config.following_error_window * cpr[i] / (2 * np.pi)
-                self._sdo_write(i, 0x6065, 0, round(window))
-            self._map_pdos(i)
-
-    def _map_pdos(self, i: int) -> None:
-        """RPDO1 = controlword + target position, TPDO1 = statusword + position actual, both
-        synchronous; other PDOs of the EDS disabled."""
-        from canopen.sdo import SdoAbortedError, SdoCommunicationError
-
-        node, nid = self.nodes[i], self.node_ids[i]
-        try:
-            for maps, base, entries in (
-                (node.rpdo, 0x200, (0x6040, 0x607A)),
-                (node.tpdo, 0x180, (0x6041, 0x6064)),
-            ):
-                for number, pdo in maps.map.items():
-                    if number == 1:
-                        continue
-                    cob = int(pdo.com_record[1].raw)
-                    if not cob & PDO_NOT_VALID:
-                        pdo.com_record[1].raw = cob | PDO_NOT_VALID
-                pdo = maps.map[1]
-                pdo.clear()
-                for index in entries:
-                    pdo.add_variable(index)
-                pdo.cob_id = base + nid
-                pdo.trans_type = TRANS_SYNC
-                pdo.enabled = True
-                pdo.save()
-            node.tpdo.map[1].add_callback(lambda pdo, i=i: self._on_tpdo(i, pdo))
-        except (SdoCommunicationError, SdoAbortedError) as exc:
-            raise CanNodeError(f"{self._who(i)}: PDO mapping failed: {exc}") from exc
-
-    def _start_nodes(self) -> None:
-        """NMT start all, then wait for a heartbeat from every node saying OPERATIONAL."""
-        now = time.monotonic()
-        with self._cond:
-            self._heartbeat_at[:] = now
-            self._nmt_state[:] = 0
-        self.network.nmt.send_command(NMT_START_ALL)
-        deadline = now + max(3 * self._heartbeat_s, self.config.state_timeout_s)
-        with self._cond:
-            ok = self._cond.wait_for(
-                lambda: bool(np.all(self._nmt_state == HEARTBEAT_OPERATIONAL)),
-                max(0.0, deadline - time.monotonic()),
-            )
-            if not ok:
-                silent = [self._who(i) for i in np.flatnonzero(self._nmt_state != 5)]
-                raise CanNodeError(
-                    f"no OPERATIONAL heartbeat from {', '.join(silent)} after NMT start"
-                )
-        self._started = True
+                net.sdo_write(i, 0x6065, 0, round(window))
+            net.map_pdos(i)
 
     # ---- disconnect ------------------------------------------------------------------------
     def _disconnect(self) -> None:
         self._stop_monitor()
-        self._shutdown_network()
+        self.net.close()
 
     def _stop_monitor(self) -> None:
         self._closing.set()
@@ -385,50 +232,6 @@ class CanArm(Arm):
         if self._monitor is not None and self._monitor is not threading.current_thread():
             self._monitor.join(timeout=2.0)
         self._monitor = None
-
-    def _shutdown_network(self) -> None:
-        self._started = False
-        if self.network is not None:
-            try:
-                self.network.disconnect()
-            except Exception as exc:
-                log.error("closing CAN bus %s: %s", self.bus_spec, exc)
-            self.network = None
-
-    # ---- bus callbacks (notifier thread) ---------------------------------------------------
-    def _on_tpdo(self, i: int, pdo: Any) -> None:
-        sw = int(pdo[0x6041].raw)
-        counts = int(pdo[0x6064].raw)
-        now = time.monotonic()
-        with self._cond:
-            dt = now - self._rx_time[i]
-            if self._rx_seq[i] >= 0 and dt > 0 and self.scaling is not None:
-                cpr = self.scaling.counts_per_rev[i]
-                delta = (counts - self._counts[i]) * 2 * np.pi / cpr * self._directions[i]
-                self._velocity[i] = delta / dt
-            self._statusword[i] = sw
-            self._counts[i] = counts
-            self._rx_seq[i] = self._seq
-            self._rx_time[i] = now
-            self._missed[i] = 0
-            self._late_since[i] = np.nan
-            self._cond.notify_all()
-
-    def _on_heartbeat(self, i: int, state: int) -> None:
-        with self._cond:
-            self._heartbeat_at[i] = time.monotonic()
-            self._nmt_state[i] = state
-            self._cond.notify_all()
-        if state != HEARTBEAT_OPERATIONAL and self._started:
-            self._wake.set()
-
-    def _on_emcy(self, i: int, err: Any) -> None:
-        code, register = int(err.code), int(err.register)
-        with self._cond:
-            self._emcy_active[i] = None if code & 0xFF00 == 0 else (code, register)
-        log.warning("%s: %s", self._who(i), emcy.describe(code, register))
-        if code & 0xFF00:
-            self._wake.set()
 
     # ---- safety monitor --------------------------------------------------------------------
     def _start_monitor(self) -> None:
@@ -452,39 +255,40 @@ class CanArm(Arm):
 
     def _health(self) -> str | None:
         """A one-line reason to stop the arm, or None when every node is healthy."""
-        if not self._started:
+        if not self.net.started:
             return None
         now = time.monotonic()
         limit = self.config.heartbeat_factor * self._heartbeat_s
-        with self._cond:
+        net = self.net
+        with net.cond:
             for i in range(self.spec.n):
-                active = self._emcy_active[i]
+                active = net.emcy_active[i]
                 if active is not None:
-                    return f"safety stop: {self._who(i)}: {emcy.describe(*active)}; torque off"
+                    return f"safety stop: {net.who(i)}: {emcy.describe(*active)}; torque off"
             for i in range(self.spec.n):
-                silent = now - self._heartbeat_at[i]
+                silent = now - net.heartbeat_at[i]
                 if silent > limit:
                     return (
-                        f"safety stop: {self._who(i)} lost: no heartbeat for {silent:.2f} s "
+                        f"safety stop: {net.who(i)} lost: no heartbeat for {silent:.2f} s "
                         f"(heartbeat time {self._heartbeat_s:.3f} s x "
                         f"{self.config.heartbeat_factor}); torque off"
                     )
-                if self._nmt_state[i] != HEARTBEAT_OPERATIONAL:
+                if net.nmt_state[i] != HEARTBEAT_OPERATIONAL:
                     return (
-                        f"safety stop: {self._who(i)} left NMT OPERATIONAL (heartbeat state "
-                        f"{self._nmt_state[i]}); torque off"
+                        f"safety stop: {net.who(i)} left NMT OPERATIONAL (heartbeat state "
+                        f"{net.nmt_state[i]}); torque off"
                     )
             for i in range(self.spec.n):
-                if self._rx_seq[i] >= 0 and _safe_decode(self._statusword[i]) is State.FAULT:
+                if net.rx_seq[i] >= 0 and safe_decode(net.statusword[i]) is State.FAULT:
                     return (
-                        f"safety stop: {self._who(i)} in FAULT (statusword "
-                        f"0x{int(self._statusword[i]):04X}); torque off"
+                        f"safety stop: {net.who(i)} in FAULT (statusword "
+                        f"0x{int(net.statusword[i]):04X}); torque off"
                     )
-                waited = now - self._late_since[i]  # NaN when not waiting
+                waited = now - net.late_since[i]  # NaN when not waiting
                 if waited > self.config.max_position_age_s:
                     return (
-                        f"safety stop: {self._who(i)} answered no SYNC for {waited:.2f} s "
-                        f"({self._missed[i]} cycles); torque off"
+                        f"safety stop: {net.who(i)} answered no SYNC for {waited:.2f} s "
+                        f"({net.missed[i]} cycles); torque off"
                     )
         return None
 
@@ -536,121 +340,41 @@ class CanArm(Arm):
 
     def _backend_counts(self) -> dict[str, float]:
         """Cycles, late cycles (a TPDO missed ``pdo_timeout_s``) and TPDOs missing in them."""
-        return {f"can_{k}": v for k, v in self.stats.items()}
-
-    # ---- I/O cycle -------------------------------------------------------------------------
-    def _io(self) -> _IoGuard:
-        return _IoGuard(self)
-
-    def _cycle(self, send_rpdo: bool = True) -> None:
-        """RPDO1 to every node (controlword + target), then a SYNC, then wait for the TPDOs.
-
-        Raises:
-            CanBusError: the adapter failed (unplugged, bus off, serial error).
-        """
-        import can
-
-        self._check_preempted()
-        with self._cond:
-            self._seq += 1
-            seq = self._seq
-        sent_at = time.monotonic()
-        try:
-            if send_rpdo:
-                for i, node in enumerate(self.nodes):
-                    pdo = node.rpdo.map[1]
-                    pdo[0x6040].raw = int(self._cw[i])
-                    pdo[0x607A].raw = int(self._target[i])
-                    pdo.transmit()
-            self.network.sync.transmit()
-        except (can.CanError, OSError) as exc:
-            detail = " ".join(str(exc).split()) or type(exc).__name__
-            raise CanLinkLost(f"CAN bus {self.bus_spec} failed: {detail}") from exc
-        self.stats["cycles"] += 1
-        with self._cond:
-            self._cond.wait_for(
-                lambda: bool(np.all(self._rx_seq >= seq)) or self._preempted(),
-                self.config.pdo_timeout_s,
-            )
-            self._check_preempted()
-            late = self._rx_seq < seq
-            if late.any():
-                self.stats["late_cycles"] += 1
-                self.stats["missing_tpdos"] += int(late.sum())
-            self._missed[late] += 1
-            self._late_since[late & np.isnan(self._late_since)] = sent_at
-        self._sync_since_read = True
-
-    def _preempted(self) -> bool:
-        return self._preempt.is_set() and self._preempt_by != threading.get_ident()
-
-    def _check_preempted(self) -> None:
-        if self._preempted():
-            raise CyclePreemptedError(
-                f"bus cycle on {self.bus_spec} given up: another thread is cutting torque"
-            )
-
-    def _first_positions(self) -> None:
-        """SYNC until every node has sent a TPDO (or ``state_timeout_s`` passed)."""
-        deadline = time.monotonic() + self.config.state_timeout_s
-        while True:
-            self._cycle(send_rpdo=False)
-            with self._cond:
-                never = [self._who(i) for i in np.flatnonzero(self._rx_seq < 0)]
-            if not never:
-                with self._cond:
-                    self._missed[:] = 0
-                    self._late_since[:] = np.nan
-                return
-            if time.monotonic() > deadline:
-                raise CanNodeError(
-                    f"no TPDO from {', '.join(never)} after NMT start and "
-                    f"{self.config.state_timeout_s:.1f} s of SYNCs"
-                )
+        return {f"can_{k}": v for k, v in self.net.stats.items()}
 
     def _lost(self) -> set[int]:
-        """Nodes that cannot confirm anything: heartbeat silent too long, or no TPDO for 3
-        cycles (guess: one lost frame is normal, three in a row are not)."""
-        now = time.monotonic()
-        limit = self.config.heartbeat_factor * self._heartbeat_s
-        with self._cond:
-            silent = now - self._heartbeat_at > limit
-            return set(np.flatnonzero(silent | (self._missed >= 3)).tolist())
-
-    def _states(self) -> list[State | None]:
-        with self._cond:
-            return [_safe_decode(sw) for sw in self._statusword]
-
-    def _states_are(self, state: State) -> np.ndarray:
-        return np.array([s is state for s in self._states()])
+        """Nodes that cannot confirm anything (``DriveNetwork.lost``)."""
+        return self.net.lost(self.config.heartbeat_factor * self._heartbeat_s)
 
     # ---- Arm hooks -------------------------------------------------------------------------
     def _read(self) -> JointState:
+        net = self.net
         self._check()
         try:
-            with self._io():
-                if not self._sync_since_read:
-                    self._cycle(send_rpdo=False)
-                self._sync_since_read = False
+            with net.guard.hold():
+                if not net.sync_since_read:
+                    net.cycle(send_rpdo=False)
+                net.sync_since_read = False
         except CyclePreemptedError:
             self._check()  # a safety stop preempted us: say so (SafetyStop)
             raise
         self._check()
         assert self.scaling is not None
-        with self._cond:
-            q = self.scaling.to_rad(self._counts)
-            vel = self._velocity.copy()
-            errors = np.array([a[0] if a else 0 for a in self._emcy_active], dtype=int)
+        with net.cond:
+            q = self.scaling.to_rad(net.counts)
+            vel = net.velocity.copy()
+            errors = np.array([a[0] if a else 0 for a in net.emcy_active], dtype=int)
         return JointState.from_positions(q, time.monotonic(), velocities=vel, errors=errors)
 
     def _send(self, positions: np.ndarray) -> None:
+        net = self.net
         self._check()
         assert self.scaling is not None
         counts = self.scaling.to_counts(positions)
         try:
-            with self._io():
-                self._target[:] = counts
-                self._cycle(send_rpdo=True)
+            with net.guard.hold():
+                net.target[:] = counts
+                net.cycle(send_rpdo=True)
         except CyclePreemptedError:
             self._check()  # a safety stop preempted us: say so (SafetyStop)
             raise
@@ -671,141 +395,93 @@ class CanArm(Arm):
         for the confirmation of the nodes that can still give one; nodes below SWITCHED_ON or
         in FAULT already have their torque off and are left there.
         """
+        net = self.net
         deadline = time.monotonic() + self.config.state_timeout_s
-        with self._io():
-            with self._cond:
-                self._target[:] = self._counts
+        with net.guard.hold():
+            with net.cond:
+                net.target[:] = net.counts
             if target is State.SWITCHED_ON:
-                enabling = (self._cw & 0x8F) == cia402.CW_ENABLE_OPERATION
-                self._cw[enabling] = cia402.CW_DISABLE_OPERATION
+                enabling = (net.cw & 0x8F) == cia402.CW_ENABLE_OPERATION
+                net.cw[enabling] = cia402.CW_DISABLE_OPERATION
                 while True:
-                    self._cycle(send_rpdo=True)
+                    net.cycle(send_rpdo=True)
                     lost = self._lost()
                     todo = [
                         i
-                        for i, st in enumerate(self._states())
+                        for i, st in enumerate(net.states())
                         if st is State.OPERATION_ENABLED and i not in lost
                     ]
                     if not todo:
                         return
                     if time.monotonic() > deadline:
-                        names = ", ".join(self._who(i) for i in todo)
+                        names = ", ".join(net.who(i) for i in todo)
                         raise CanNodeError(f"torque off not confirmed by {names}")
             while True:
-                states = self._states()
+                states = net.states()
                 todo = []
                 for i, st in enumerate(states):
                     if st is target:
-                        self._cw[i] = cia402.CW_ENABLE_OPERATION
+                        net.cw[i] = cia402.CW_ENABLE_OPERATION
                         continue
                     if st is State.FAULT:
                         raise CanNodeError(
-                            f"{self._who(i)} is in FAULT: fix the cause, then reset_faults()"
+                            f"{net.who(i)} is in FAULT: fix the cause, then reset_faults()"
                         )
                     todo.append(i)
                     cw = None if st is None else cia402.controlword_towards(st, target)
                     if cw is not None:
-                        self._cw[i] = cw
+                        net.cw[i] = cw
                 if not todo:
                     return
                 if time.monotonic() > deadline:
                     names = ", ".join(
-                        f"{self._who(i)} in {states[i].value if states[i] else 'an unknown state'}"
+                        f"{net.who(i)} in {states[i].value if states[i] else 'an unknown state'}"
                         for i in todo
                     )
                     raise CanNodeError(f"timeout reaching {target.value!r}: {names}")
-                self._cycle(send_rpdo=True)
+                net.cycle(send_rpdo=True)
 
     def _emergency_torque_off(self) -> None:
+        guard = self.net.guard
         # A signal handler runs in the main thread between bytecodes: if that thread is inside
         # our own bus I/O (holding locks of canopen/python-can), defer to the end of the cycle.
-        if self._io_owner == threading.get_ident():
-            self._pending_off = True
+        if guard.owned_by_me:
+            guard.defer(self._emergency_torque_off)
             self._torque = False
             return
-        if self.network is None:
+        if self.net.network is None:
             self._torque = False
             return
         # From another thread (the signal watcher, the monitor): the cycle in progress gives
         # up at once instead of waiting for its TPDOs, then this thread takes the bus.
-        self._preempt_by = threading.get_ident()
-        self._preempt.set()
-        with self._cond:
-            self._cond.notify_all()
-        try:
+        with guard.preempt():
             super()._emergency_torque_off()
-        finally:
-            self._preempt.clear()
-            self._preempt_by = None
 
     def reset_faults(self) -> None:
         """After a safety stop: fault reset on the drives in FAULT, clear the EMCY record and
         the stop (a lost node must be heard again first). Torque stays off."""
+        net = self.net
         self._require()
-        with self._io():
+        with net.guard.hold():
             deadline = time.monotonic() + self.config.state_timeout_s
             while True:
-                states = self._states()
+                states = net.states()
                 faulty = [i for i, s in enumerate(states) if s is State.FAULT]
                 if not faulty:
                     break
                 if time.monotonic() > deadline:
-                    names = ", ".join(self._who(i) for i in faulty)
+                    names = ", ".join(net.who(i) for i in faulty)
                     raise CanNodeError(f"fault reset did not clear {names}")
                 for i in faulty:
                     cw = cia402.controlword_towards(
-                        State.FAULT, State.SWITCH_ON_DISABLED, int(self._cw[i])
+                        State.FAULT, State.SWITCH_ON_DISABLED, int(net.cw[i])
                     )
-                    self._cw[i] = cw if cw is not None else 0
-                self._cycle(send_rpdo=True)
-            with self._cond:
-                self._emcy_active = [None] * self.spec.n
-                self._missed[:] = 0
-                self._late_since[:] = np.nan
+                    net.cw[i] = cw if cw is not None else 0
+                net.cycle(send_rpdo=True)
+            with net.cond:
+                net.emcy_active = [None] * self.spec.n
+                net.missed[:] = 0
+                net.late_since[:] = np.nan
         self._stop_reason = None
         self._torque = False
         self._check()
-
-
-class _IoGuard:
-    """Holds the arm's I/O lock for one bus exchange; runs a deferred torque off after."""
-
-    def __init__(self, arm: CanArm) -> None:
-        self.arm = arm
-        self._outer = False
-
-    def __enter__(self) -> None:
-        self.arm._io_lock.acquire()
-        try:
-            self._outer = self.arm._io_owner is None
-            self.arm._io_owner = threading.get_ident()
-        except BaseException:  # a signal between acquire and here: do not keep the lock
-            self.arm._io_lock.release()
-            raise
-
-    def __exit__(self, *exc: object) -> None:
-        arm = self.arm
-        if self._outer:
-            arm._io_owner = None
-        arm._io_lock.release()
-        if self._outer and arm._pending_off:
-            arm._pending_off = False
-            arm._emergency_torque_off()
-
-
-def _safe_decode(statusword: int) -> State | None:
-    try:
-        return cia402.decode_statusword(int(statusword))
-    except cia402.Cia402Error:
-        return None
-
-
-def make_can_arm(
-    can: str,
-    bitrate: int | None = DEFAULT_BITRATE,
-    node_ids: Sequence[int] | None = None,
-    **config: Any,
-) -> CanArm:
-    """A ``CanArm`` for the Ergo Jr from plain options (used by the rig factory)."""
-    cfg = CanArmConfig(node_ids=tuple(node_ids) if node_ids else None, **config)
-    return CanArm(can, bitrate=bitrate, config=cfg)

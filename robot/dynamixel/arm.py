@@ -15,7 +15,7 @@ where ``servo_angle`` is 0 at the servo's centre position (512 on an XL-320). Di
 Safety: clamping, the watchdog and torque-off on disconnect are in ``robot.Arm``. Here, a
 servo's hardware alert (overload, overheating, voltage) turns every servo's torque off and
 raises ``SafetyStop``. For a run, also wrap the control loop in
-``robot.safety.torque_off_on_signals`` so that Ctrl-C or SIGTERM cuts torque at once::
+``robot.signals.torque_off_on_signals`` so that Ctrl-C or SIGTERM cuts torque at once::
 
     with DynamixelArm("/dev/ttyUSB0") as arm, torque_off_on_signals(arm):
         arm.set_torque(True)
@@ -42,8 +42,8 @@ from robot.dynamixel.bus import (
 )
 from robot.dynamixel.control_table import MODELS, Model, model_by_name
 from robot.errors import BusError, SafetyStop
-from robot.safety import Watchdog
 from robot.spec import ArmSpec, ergo_jr_spec
+from robot.watchdog import Watchdog
 
 log = logging.getLogger(__name__)
 

@@ -23,12 +23,12 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import threading
 import time
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, fields
 from typing import Any, Protocol
 
+from robot.bus_guard import BusGuard
 from robot.dynamixel import protocol as proto
 from robot.dynamixel.control_table import XL320, Model
 from robot.errors import BusError, LinkLost
@@ -254,10 +254,12 @@ class DynamixelBus:
         self.last_call_retries = 0
         self._serial: SerialLike | None = connection
         self._decoder = proto.Decoder()
-        self._lock = threading.RLock()
-        self._owner: int | None = None  # thread running a call (under _lock)
-        self._preempt = threading.Event()  # another thread needs the bus for an emergency
-        self._preempt_by: int | None = None
+        # one call at a time; a torque-off from another thread preempts it (robot/bus_guard.py)
+        self.guard = BusGuard(
+            lambda: CallPreemptedError(
+                f"call on {self.port} given up: another thread is cutting torque"
+            )
+        )
         self._last_bad = 0
 
     # ---- lifecycle ---------------------------------------------------------------------------
@@ -334,7 +336,7 @@ class DynamixelBus:
                 # was not scheduled for a while must not time out on a reply sitting in its
                 # buffer (the retry would flush it)
                 last_look = time.monotonic() >= deadline
-                self._check_preempted()
+                self.guard.check()
                 chunk = ser.read(ser.in_waiting) if last_look else ser.read(max(1, ser.in_waiting))
                 if not chunk:
                     continue
@@ -371,8 +373,8 @@ class DynamixelBus:
             id -> status parameters.
         """
         retries = self.retries if retries is None else retries
-        with self._lock, self._owned():
-            self._check_preempted()
+        with self.guard.hold():
+            self.guard.check()
             self.counters.calls += 1
             self.last_call_retries = 0
             pending = dict(expect)
@@ -446,40 +448,13 @@ class DynamixelBus:
             data[sid] = status.params
             del pending[sid]
 
-    @contextlib.contextmanager
-    def _owned(self) -> Iterator[None]:
-        """Mark the calling thread as the one using the bus (under ``_lock``; re-entrant)."""
-        outer, self._owner = self._owner, threading.get_ident()
-        try:
-            yield
-        finally:
-            self._owner = outer
-
-    def _check_preempted(self) -> None:
-        if self._preempt.is_set() and self._preempt_by != threading.get_ident():
-            raise CallPreemptedError(
-                f"call on {self.port} given up: another thread is cutting torque"
-            )
-
-    @contextlib.contextmanager
-    def preempt(self) -> Iterator[None]:
+    def preempt(self) -> contextlib.AbstractContextManager[None]:
         """Hold the bus for an emergency (torque off) from any thread: a call in progress in
         another thread gives up at its next poll (within ``POLL_S``, raising
         ``CallPreemptedError``) instead of running its timeouts and retries out, so the
         emergency waits for at most one read of the port. In the thread that already holds
-        the bus (a signal handler inside a call), the calls just nest, as before."""
-        me = threading.get_ident()
-        if self._owner == me:
-            yield
-            return
-        self._preempt_by = me
-        self._preempt.set()
-        try:
-            with self._lock:
-                yield
-        finally:
-            self._preempt.clear()
-            self._preempt_by = None
+        the bus (a signal handler inside a call), the calls just nest (``BusGuard.preempt``)."""
+        return self.guard.preempt()
 
     def _raise_alert(
         self, servo_id: int, err: proto.StatusError, what: str, data: Mapping[int, bytes]

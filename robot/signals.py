@@ -1,9 +1,7 @@
-"""Safety helpers shared by every backend: the thermal/load watchdog and signal handling.
-
-- ``Watchdog`` trips when a joint's temperature or load stays over its limit for a hold time.
-- ``torque_off_on_signals`` turns torque off on SIGINT/SIGTERM before the usual exception
-  unwinds, so a Ctrl-C never leaves a stiff arm behind; a watcher thread does it without
-  waiting for the main thread's C call in progress.
+"""Torque off on SIGINT/SIGTERM: ``torque_off_on_signals`` turns an arm's torque off before the
+usual exception unwinds, so a Ctrl-C never leaves a stiff arm behind; a watcher thread does it
+without waiting for the main thread's C call in progress. It only uses the arm's public
+``interrupt`` and ``clear_interrupt``.
 """
 
 from __future__ import annotations
@@ -15,67 +13,12 @@ import signal
 import socket
 import threading
 from collections.abc import Iterator
-from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 if TYPE_CHECKING:
-    from robot.arm import Arm, JointState
+    from robot.arm import Arm
 
 log = logging.getLogger(__name__)
-
-# XL-320 temperature limit: 65 C by default (control table address 12, ROBOTIS e-manual);
-# we stop 5 C earlier. Load limit 0.9 of max torque held for 2 s: a guess that lets normal
-# pushes of the ball through and catches a stalled joint.
-DEFAULT_MAX_TEMPERATURE_C = 60.0
-DEFAULT_MAX_LOAD = 0.9
-DEFAULT_HOLD_S = 2.0
-# Readings further apart than this do not make a continuous over-limit window (guess: 10
-# control ticks at 40 Hz).
-DEFAULT_MAX_GAP_S = 0.25
-
-
-@dataclass
-class Watchdog:
-    """Trips when temperature or |load| of any joint stays over its limit for ``hold_s``,
-    measured over readings no more than ``max_gap_s`` apart.
-
-    NaN readings (unknown) never trip it.
-    """
-
-    max_temperature_c: float = DEFAULT_MAX_TEMPERATURE_C
-    max_load: float = DEFAULT_MAX_LOAD
-    hold_s: float = DEFAULT_HOLD_S
-    max_gap_s: float = DEFAULT_MAX_GAP_S
-    _since: dict[str, float] = field(default_factory=dict)
-    _last: float | None = None
-
-    def check(self, state: JointState) -> str | None:
-        """Return a one-line reason to stop, or None."""
-        if self._last is not None and state.timestamp - self._last > self.max_gap_s:
-            self._since.clear()
-        self._last = state.timestamp
-        # Plain floats (six joints, every control tick: a third of numpy's cost); NaN
-        # (unknown) compares False with any limit, so it never trips.
-        checks = (
-            ("temperature", np.asarray(state.temperatures).tolist(), self.max_temperature_c, "C"),
-            ("load", [abs(v) for v in np.asarray(state.loads).tolist()], self.max_load,
-             "of max torque"),
-        )  # fmt: skip
-        for kind, values, limit, unit in checks:
-            over = [j for j, v in enumerate(values) if v > limit]
-            if not over:
-                self._since.pop(kind, None)
-                continue
-            start = self._since.setdefault(kind, state.timestamp)
-            if state.timestamp - start >= self.hold_s:
-                j = over[0]  # the first joint over its limit
-                return (
-                    f"safety stop: joint {j + 1} {kind} {values[j]:.2f} {unit} over the limit "
-                    f"{limit} for {state.timestamp - start:.1f} s; torque off"
-                )
-        return None
 
 
 # Signals that stop a run: Ctrl-C and the polite kill (systemd, docker stop, kill).
@@ -130,13 +73,12 @@ def torque_off_on_signals(arm: Arm) -> Iterator[None]:
         return
 
     claim = threading.Lock()  # taken by whoever turns torque off first
-    arm._interrupted.clear()  # a new block: an earlier signal no longer holds recoveries back
+    arm.clear_interrupt()  # a new block: an earlier signal no longer holds recoveries back
 
     def cut(signum: int, who: str) -> None:
         if not claim.acquire(blocking=False):
             return
-        arm._interrupted.set()
-        arm._emergency_torque_off()
+        arm.interrupt()
         log.warning("signal %d: torque off (%s)", signum, who)
 
     raised: list[int] = []  # the signals whose handler raised in the main thread

@@ -1,0 +1,389 @@
+"""The CANopen network of an arm's drives: the bus layer under ``CanArm``, as
+``robot/dynamixel/bus.py`` is under ``DynamixelArm``.
+
+Built on python-can (the bus) and the ``canopen`` library (SDO client, PDO maps, NMT, EMCY,
+heartbeat), never hand-written SDO/PDO frames. ``DriveNetwork`` owns:
+
+- the ``canopen.Network`` and one ``RemoteNode`` per drive (``open``, ``close``);
+- SDO reads and writes with one-line ``CanNodeError``s naming the node and the object;
+- the PDO mapping every drive gets: RPDO1 = controlword 0x6040 + target position 0x607A,
+  TPDO1 = statusword 0x6041 + position actual 0x6064, both synchronous, the others disabled;
+- NMT: pre-operational for configuration, start, and the wait for every node's OPERATIONAL
+  heartbeat;
+- what the notifier thread hears, under ``cond``: each node's last TPDO (statusword, position
+  in increments, the SYNC it answered, its speed), heartbeat times and NMT states, active EMCY
+  errors; ``on_alarm`` is called when a heartbeat leaves OPERATIONAL or an EMCY arrives;
+- the control cycle (``cycle``): RPDO1 to every node, a SYNC, then the wait for the TPDOs that
+  answer it (at most ``pdo_timeout_s``), late ones counted in ``stats``. One exchange at a time
+  (``guard``, ``robot.bus_guard.BusGuard``): a torque-off from another thread preempts a cycle
+  in progress, which gives up at once with ``CyclePreemptedError``.
+
+An adapter that fails under the network (unplugged, bus off, a serial error) raises
+``CanLinkLost``, a ``robot.errors.LinkLost``. Positions are drive increments here; the arm
+converts them (``robot.canopen.units.JointScaling``).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from robot.bus_guard import BusGuard
+from robot.canopen import cia402, emcy
+from robot.canopen.bus import CanBusError, CanBusSpec, open_bus
+from robot.canopen.cia402 import State
+from robot.errors import BusError, LinkLost
+
+log = logging.getLogger(__name__)
+
+PDO_NOT_VALID = 1 << 31  # COB-ID bit 31 of a PDO communication parameter (CiA 301)
+# Synchronous transmission type: RPDO applied at the next SYNC, TPDO sent at every SYNC.
+TRANS_SYNC = 1
+NMT_START_ALL, NMT_PRE_OPERATIONAL = 0x01, 0x80
+HEARTBEAT_OPERATIONAL = 5  # NMT state byte in a heartbeat (CiA 301)
+# Longest blocking receive of the bus's notifier thread, s: bounds how long disconnect waits
+# for it (canopen's default is 1 s; the thread wakes at once when a frame arrives).
+NOTIFIER_CYCLE_S = 0.1
+# A node that answered no TPDO for this many cycles in a row is lost (guess: one lost frame
+# is normal, three in a row are not).
+LOST_AFTER_CYCLES = 3
+
+
+class CanNodeError(BusError):
+    """A CANopen node did not answer, or answered something a CiA 402 drive would not."""
+
+
+class CanLinkLost(CanBusError, LinkLost):
+    """The CAN adapter failed under the arm (unplugged, interface down): a ``LinkLost``,
+    which ``robot.Arm`` answers by reconnecting (the bus is reopened by its spec)."""
+
+
+class CyclePreemptedError(CanBusError):
+    """A bus cycle gave up because another thread took the bus to cut torque."""
+
+
+def safe_decode(statusword: int) -> State | None:
+    """The CiA 402 state of a statusword, or None for a coding no state has."""
+    try:
+        return cia402.decode_statusword(int(statusword))
+    except cia402.Cia402Error:
+        return None
+
+
+class DriveNetwork:
+    """The drives of one arm on one CAN bus.
+
+    Args:
+        bus_spec: where the bus is.
+        node_ids: the drives' node ids, in joint order.
+        names: a name per drive for messages (the joint's).
+        eds: the drives' EDS (object dictionary).
+        sdo_timeout_s: SDO response timeout, s.
+        pdo_timeout_s: longest wait for the TPDOs answering a SYNC, s.
+        on_alarm: called (from the notifier thread) when a heartbeat leaves OPERATIONAL or an
+            EMCY error arrives, once the nodes were started.
+    """
+
+    def __init__(
+        self,
+        bus_spec: CanBusSpec,
+        node_ids: Sequence[int],
+        names: Sequence[str],
+        eds: Path,
+        sdo_timeout_s: float,
+        pdo_timeout_s: float,
+        on_alarm: Callable[[], None] | None = None,
+    ) -> None:
+        n = len(node_ids)
+        self.bus_spec = bus_spec
+        self.node_ids = tuple(int(i) for i in node_ids)
+        self.names = tuple(names)
+        self.eds = Path(eds)
+        self.sdo_timeout_s = sdo_timeout_s
+        self.pdo_timeout_s = pdo_timeout_s
+        self.on_alarm = on_alarm
+        self.network: Any = None
+        self.nodes: list[Any] = []
+        # What the notifier thread hears, guarded by cond.
+        self.cond = threading.Condition()
+        self.counts = np.zeros(n, dtype=np.int64)
+        self.statusword = np.zeros(n, dtype=np.int64)
+        self.rx_seq = np.full(n, -1, dtype=np.int64)
+        self.rx_time = np.zeros(n)
+        self.velocity = np.zeros(n)  # rad/s once ``velocity_units`` is set, else 0
+        self.missed = np.zeros(n, dtype=int)  # consecutive cycles without a TPDO
+        self.late_since = np.full(n, np.nan)  # first unanswered SYNC, monotonic s
+        self.emcy_active: list[tuple[int, int] | None] = [None] * n
+        self.heartbeat_at = np.zeros(n)
+        self.nmt_state = np.zeros(n, dtype=int)
+        #: (increments per revolution, direction) per node, to turn TPDOs into joint speeds
+        self.velocity_units: tuple[np.ndarray, np.ndarray] | None = None
+        # What the next cycle sends: controlword and target of each node, the SYNC counter.
+        self.cw = np.zeros(n, dtype=np.int64)
+        self.target = np.zeros(n, dtype=np.int64)
+        self.seq = 0
+        self.sync_since_read = False
+        # cycles run, cycles where a node's TPDO missed pdo_timeout_s, TPDOs missing in them
+        self.stats = {"cycles": 0, "late_cycles": 0, "missing_tpdos": 0}
+        self.started = False
+        self.guard = BusGuard(
+            lambda: CyclePreemptedError(
+                f"bus cycle on {self.bus_spec} given up: another thread is cutting torque"
+            ),
+            wake=self._notify,
+        )
+
+    def who(self, i: int) -> str:
+        """Node ``i`` in words: ``node 3 (m3)``."""
+        return f"node {self.node_ids[i]} ({self.names[i]})"
+
+    def _notify(self) -> None:
+        with self.cond:
+            self.cond.notify_all()
+
+    # ---- opening and closing ---------------------------------------------------------------
+    def reset_state(self) -> None:
+        """Forget everything heard on a previous connection."""
+        with self.cond:
+            self.rx_seq[:] = -1
+            self.missed[:] = 0
+            self.late_since[:] = np.nan
+            self.statusword[:] = 0
+            self.velocity[:] = 0.0
+            self.emcy_active = [None] * len(self.node_ids)
+            self.nmt_state[:] = 0
+        self.sync_since_read = False
+
+    def open(self) -> None:
+        """Open the bus and the network, one ``RemoteNode`` per drive with its callbacks."""
+        import canopen
+
+        bus = open_bus(self.bus_spec)
+        self.network = canopen.Network(bus)
+        self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE_S
+        self.network.connect()
+        self.nodes = []
+        for i, nid in enumerate(self.node_ids):
+            node = canopen.RemoteNode(nid, canopen.import_od(str(self.eds), nid))
+            node.sdo.RESPONSE_TIMEOUT = self.sdo_timeout_s
+            self.network.add_node(node)
+            node.nmt.add_heartbeat_callback(lambda st, i=i: self._on_heartbeat(i, st))
+            node.emcy.add_callback(lambda err, i=i: self._on_emcy(i, err))
+            self.nodes.append(node)
+
+    def close(self) -> None:
+        """Close the network and its bus; never raises (logged)."""
+        self.started = False
+        if self.network is not None:
+            try:
+                self.network.disconnect()
+            except Exception as exc:
+                log.error("closing CAN bus %s: %s", self.bus_spec, exc)
+            self.network = None
+
+    # ---- SDO -------------------------------------------------------------------------------
+    def sdo_read(self, i: int, index: int, sub: int = 0) -> int:
+        """Object ``index``:``sub`` of node ``i``, read by SDO."""
+        from canopen.sdo import SdoAbortedError, SdoCommunicationError
+
+        node = self.nodes[i]
+        try:
+            var = node.sdo[index] if sub == 0 else node.sdo[index][sub]
+            return int(var.raw)
+        except SdoCommunicationError as exc:
+            raise CanNodeError(
+                f"{self.who(i)} does not answer SDO 0x{index:04X}:{sub} on {self.bus_spec} "
+                f"({exc}): powered? right node id and bitrate?"
+            ) from exc
+        except (SdoAbortedError, KeyError) as exc:
+            raise CanNodeError(f"{self.who(i)} refused to read 0x{index:04X}:{sub}: {exc}") from exc
+
+    def sdo_write(self, i: int, index: int, sub: int, value: int) -> None:
+        """Write ``value`` to object ``index``:``sub`` of node ``i`` by SDO."""
+        from canopen.sdo import SdoAbortedError, SdoCommunicationError
+
+        node = self.nodes[i]
+        try:
+            var = node.sdo[index] if sub == 0 else node.sdo[index][sub]
+            var.raw = int(value)
+        except SdoCommunicationError as exc:
+            raise CanNodeError(
+                f"{self.who(i)} does not answer SDO 0x{index:04X}:{sub} on {self.bus_spec} ({exc})"
+            ) from exc
+        except (SdoAbortedError, KeyError) as exc:
+            raise CanNodeError(
+                f"{self.who(i)} refused 0x{index:04X}:{sub} = {value}: {exc}"
+            ) from exc
+
+    def pre_operational(self) -> None:
+        """NMT pre-operational on every node (PDOs off, for configuration)."""
+        self.network.nmt.send_command(NMT_PRE_OPERATIONAL)
+
+    def map_pdos(self, i: int) -> None:
+        """RPDO1 = controlword + target position, TPDO1 = statusword + position actual, both
+        synchronous; other PDOs of the EDS disabled."""
+        from canopen.sdo import SdoAbortedError, SdoCommunicationError
+
+        node, nid = self.nodes[i], self.node_ids[i]
+        try:
+            for maps, base, entries in (
+                (node.rpdo, 0x200, (0x6040, 0x607A)),
+                (node.tpdo, 0x180, (0x6041, 0x6064)),
+            ):
+                for number, pdo in maps.map.items():
+                    if number == 1:
+                        continue
+                    cob = int(pdo.com_record[1].raw)
+                    if not cob & PDO_NOT_VALID:
+                        pdo.com_record[1].raw = cob | PDO_NOT_VALID
+                pdo = maps.map[1]
+                pdo.clear()
+                for index in entries:
+                    pdo.add_variable(index)
+                pdo.cob_id = base + nid
+                pdo.trans_type = TRANS_SYNC
+                pdo.enabled = True
+                pdo.save()
+            node.tpdo.map[1].add_callback(lambda pdo, i=i: self._on_tpdo(i, pdo))
+        except (SdoCommunicationError, SdoAbortedError) as exc:
+            raise CanNodeError(f"{self.who(i)}: PDO mapping failed: {exc}") from exc
+
+    def start(self, heartbeat_s: float, state_timeout_s: float) -> None:
+        """NMT start all, then wait for a heartbeat from every node saying OPERATIONAL (at
+        least three heartbeat times, or ``state_timeout_s``)."""
+        now = time.monotonic()
+        with self.cond:
+            self.heartbeat_at[:] = now
+            self.nmt_state[:] = 0
+        self.network.nmt.send_command(NMT_START_ALL)
+        deadline = now + max(3 * heartbeat_s, state_timeout_s)
+        with self.cond:
+            ok = self.cond.wait_for(
+                lambda: bool(np.all(self.nmt_state == HEARTBEAT_OPERATIONAL)),
+                max(0.0, deadline - time.monotonic()),
+            )
+            if not ok:
+                silent = np.flatnonzero(self.nmt_state != HEARTBEAT_OPERATIONAL)
+                raise CanNodeError(
+                    f"no OPERATIONAL heartbeat from {', '.join(self.who(i) for i in silent)} "
+                    "after NMT start"
+                )
+        self.started = True
+
+    # ---- what the notifier thread hears ----------------------------------------------------
+    def _on_tpdo(self, i: int, pdo: Any) -> None:
+        sw = int(pdo[0x6041].raw)
+        counts = int(pdo[0x6064].raw)
+        now = time.monotonic()
+        with self.cond:
+            dt = now - self.rx_time[i]
+            if self.rx_seq[i] >= 0 and dt > 0 and self.velocity_units is not None:
+                cpr, directions = self.velocity_units
+                delta = (counts - self.counts[i]) * 2 * np.pi / cpr[i] * directions[i]
+                self.velocity[i] = delta / dt
+            self.statusword[i] = sw
+            self.counts[i] = counts
+            self.rx_seq[i] = self.seq
+            self.rx_time[i] = now
+            self.missed[i] = 0
+            self.late_since[i] = np.nan
+            self.cond.notify_all()
+
+    def _on_heartbeat(self, i: int, state: int) -> None:
+        with self.cond:
+            self.heartbeat_at[i] = time.monotonic()
+            self.nmt_state[i] = state
+            self.cond.notify_all()
+        if state != HEARTBEAT_OPERATIONAL and self.started and self.on_alarm is not None:
+            self.on_alarm()
+
+    def _on_emcy(self, i: int, err: Any) -> None:
+        code, register = int(err.code), int(err.register)
+        with self.cond:
+            self.emcy_active[i] = None if code & 0xFF00 == 0 else (code, register)
+        log.warning("%s: %s", self.who(i), emcy.describe(code, register))
+        if code & 0xFF00 and self.on_alarm is not None:
+            self.on_alarm()
+
+    # ---- the control cycle -----------------------------------------------------------------
+    def cycle(self, send_rpdo: bool = True) -> None:
+        """RPDO1 to every node (``cw`` + ``target``), then a SYNC, then wait for the TPDOs.
+        Call it inside ``guard.hold()``.
+
+        Raises:
+            CanLinkLost: the adapter failed (unplugged, bus off, serial error).
+            CyclePreemptedError: another thread is cutting torque.
+        """
+        import can
+
+        self.guard.check()
+        with self.cond:
+            self.seq += 1
+            seq = self.seq
+        sent_at = time.monotonic()
+        try:
+            if send_rpdo:
+                for i, node in enumerate(self.nodes):
+                    pdo = node.rpdo.map[1]
+                    pdo[0x6040].raw = int(self.cw[i])
+                    pdo[0x607A].raw = int(self.target[i])
+                    pdo.transmit()
+            self.network.sync.transmit()
+        except (can.CanError, OSError) as exc:
+            detail = " ".join(str(exc).split()) or type(exc).__name__
+            raise CanLinkLost(f"CAN bus {self.bus_spec} failed: {detail}") from exc
+        self.stats["cycles"] += 1
+        with self.cond:
+            self.cond.wait_for(
+                lambda: bool(np.all(self.rx_seq >= seq)) or self.guard.preempted,
+                self.pdo_timeout_s,
+            )
+            self.guard.check()
+            late = self.rx_seq < seq
+            if late.any():
+                self.stats["late_cycles"] += 1
+                self.stats["missing_tpdos"] += int(late.sum())
+            self.missed[late] += 1
+            self.late_since[late & np.isnan(self.late_since)] = sent_at
+        self.sync_since_read = True
+
+    def first_positions(self, timeout_s: float) -> None:
+        """SYNC until every node has sent a TPDO (or ``timeout_s`` passed)."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            self.cycle(send_rpdo=False)
+            with self.cond:
+                never = [self.who(i) for i in np.flatnonzero(self.rx_seq < 0)]
+            if not never:
+                with self.cond:
+                    self.missed[:] = 0
+                    self.late_since[:] = np.nan
+                return
+            if time.monotonic() > deadline:
+                raise CanNodeError(
+                    f"no TPDO from {', '.join(never)} after NMT start and "
+                    f"{timeout_s:.1f} s of SYNCs"
+                )
+
+    def lost(self, heartbeat_limit_s: float) -> set[int]:
+        """Nodes that cannot confirm anything: heartbeat silent for over ``heartbeat_limit_s``,
+        or no TPDO for ``LOST_AFTER_CYCLES`` cycles."""
+        now = time.monotonic()
+        with self.cond:
+            silent = now - self.heartbeat_at > heartbeat_limit_s
+            return set(np.flatnonzero(silent | (self.missed >= LOST_AFTER_CYCLES)).tolist())
+
+    def states(self) -> list[State | None]:
+        """The CiA 402 state of every node from its last statusword (None: undecodable)."""
+        with self.cond:
+            return [safe_decode(sw) for sw in self.statusword]
+
+    def states_are(self, state: State) -> np.ndarray:
+        """Which nodes are in ``state``, shape (n,) bool."""
+        return np.array([s is state for s in self.states()])
