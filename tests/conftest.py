@@ -1,4 +1,12 @@
-"""Shared fixtures. Rendering is headless (EGL) unless a display is set."""
+"""Shared fixtures and the hypothesis profiles. Rendering is headless (EGL) unless a display is
+set.
+
+The ``fuzz`` profile runs the decoders' fuzz properties for long (the byte-stream decoders of
+Protocol 2.0 and SLCAN; a few hundred examples each in the suite)::
+
+    pytest --hypothesis-profile fuzz tests/robot/dynamixel/test_protocol_fuzz.py \
+        tests/sim/canopen/test_slcan_fuzz.py          # FUZZ_EXAMPLES=200000 for longer
+"""
 
 from __future__ import annotations
 
@@ -8,8 +16,18 @@ if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY"):
     os.environ["MUJOCO_GL"] = "egl"
 
 import pytest
+from hypothesis import HealthCheck, settings
 
 from sim.twin import Twin
+
+# 20,000 examples per property by default (a choice: a few minutes on one core).
+settings.register_profile(
+    "fuzz",
+    max_examples=int(os.environ.get("FUZZ_EXAMPLES", "20000")),
+    deadline=None,
+    database=None,
+    suppress_health_check=list(HealthCheck),
+)
 
 
 @pytest.fixture

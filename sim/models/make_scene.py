@@ -1,6 +1,6 @@
 """Writes ``scene.xml`` (the arena around the Ergo Jr) from the geometry constants below.
 
-Run ``python sim/models/make_scene.py`` after changing a constant; tests/test_twin.py checks
+Run ``python sim/models/make_scene.py`` after changing a constant; tests/sim/test_twin.py checks
 that the committed scene.xml matches this generator.
 
 Geometry (chosen and measured, see docs/twin.md): the ball rolls on a ring between an inner

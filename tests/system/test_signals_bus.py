@@ -39,7 +39,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]  # the repository (tests/system/ is 2 deep)
 DEADLINE_MS = 100.0  # the bound
 SAMPLES = 8  # per rig, SIGINT and SIGTERM alternating
 BOUND_S = 30.0  # a bound against hangs (child start, connect), not an expectation

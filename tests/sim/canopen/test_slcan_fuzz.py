@@ -1,5 +1,5 @@
-"""Fuzzing the SLCAN codec and adapter state machine with hypothesis (the same targets as
-``bench/fuzz_slcan.py`` runs for longer)."""
+"""Fuzzing the SLCAN codec and adapter state machine with hypothesis (``pytest
+--hypothesis-profile fuzz`` runs them for long, tests/conftest.py)."""
 
 from __future__ import annotations
 
@@ -9,6 +9,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sim.canopen import slcan
+
+
+def examples(n: int) -> settings:
+    """``n`` examples in the suite; the ``fuzz`` profile's count under ``--hypothesis-profile
+    fuzz`` (tests/conftest.py)."""
+    fuzzing = settings.get_current_profile_name() == "fuzz"
+    return settings(deadline=None) if fuzzing else settings(max_examples=n, deadline=None)
+
 
 lines = st.one_of(
     st.binary(max_size=80),
@@ -24,7 +32,7 @@ frames = st.builds(
 )  # fmt: skip
 
 
-@settings(max_examples=500, deadline=None)
+@examples(500)
 @given(lines)
 def test_decode_frame_returns_a_frame_or_raises_slcan_error_only(line):
     try:
@@ -36,7 +44,7 @@ def test_decode_frame_returns_a_frame_or_raises_slcan_error_only(line):
     assert slcan.decode_frame(slcan.encode_frame(frame)) == frame
 
 
-@settings(max_examples=300, deadline=None)
+@examples(300)
 @given(frames)
 def test_frames_round_trip(frame):
     line = slcan.encode_frame(frame)
@@ -44,7 +52,7 @@ def test_frames_round_trip(frame):
     assert slcan.decode_frame(line) == frame
 
 
-@settings(max_examples=300, deadline=None)
+@examples(300)
 @given(st.lists(lines, max_size=20).map(b"".join), st.lists(st.integers(0, 5000), max_size=10))
 def test_line_splitter_is_bounded_and_cut_independent(data, cuts):
     whole = slcan.LineSplitter().feed(data)
@@ -58,7 +66,7 @@ def test_line_splitter_is_bounded_and_cut_independent(data, cuts):
     assert whole == chunked
 
 
-@settings(max_examples=300, deadline=None)
+@examples(300)
 @given(st.lists(st.one_of(st.none(), lines), max_size=30))
 def test_the_adapter_answers_any_command_sequence_without_raising(commands):
     adapter = slcan.SlcanAdapter()

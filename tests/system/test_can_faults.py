@@ -1,8 +1,8 @@
 """Faults on the CANopen bus, through ``CanArm`` and the six emulated CiA 402 drives on
 python-can's ``virtual`` bus (the twin steps one control period per SYNC: deterministic and
 fast). Lost frames, a silent heartbeat, a mute node and a following error are in
-test_canopen_arm.py; here: late TPDOs, an overload and an overheat EMCY, the adapter lost
-and back (recovered in place: on the virtual bus, and an SLCAN adapter's pty closed and
+tests/robot/canopen/test_arm.py; here: late TPDOs, an overload and an overheat EMCY, the adapter
+lost and back (recovered in place: on the virtual bus, and an SLCAN adapter's pty closed and
 reopened behind a stable link), and lost for good (safe stop).
 
 Corrupted frames are not emulated: a CAN controller's CRC rejects them and the sender
@@ -29,7 +29,7 @@ from sim.canopen.drives import EmulatedDrives
 from sim.twin import Twin
 
 PERIOD_S = 0.025  # 40 Hz, the episode's control rate
-HEARTBEAT_MS = 200  # as test_canopen_arm.py: tolerant of a loaded shared machine
+HEARTBEAT_MS = 200  # as tests/robot/canopen/test_arm.py: tolerant of a loaded shared machine
 BOUND_S = 10.0  # a bound against hangs, not an expectation
 TARGET = np.array([0.3, 0.2, -0.3, 0.2, 0.2, -0.2])
 

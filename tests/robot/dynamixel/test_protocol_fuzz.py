@@ -1,6 +1,7 @@
-"""Fuzzing the Dynamixel Protocol 2.0 streaming decoder with hypothesis (the same targets as
-``bench/fuzz_dynamixel.py`` runs for longer): any bytes, in any chunks, never raise, never
-grow the buffer beyond one maximal frame, and decode the same however they are cut."""
+"""Fuzzing the Dynamixel Protocol 2.0 streaming decoder with hypothesis (``pytest
+--hypothesis-profile fuzz`` runs them for long, tests/conftest.py): any bytes, in any chunks,
+never raise, never grow the buffer beyond one maximal frame, and decode the same however they
+are cut."""
 
 from __future__ import annotations
 
@@ -10,6 +11,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from robot.dynamixel import protocol as proto
+
+
+def examples(n: int) -> settings:
+    """``n`` examples in the suite; the ``fuzz`` profile's count under ``--hypothesis-profile
+    fuzz`` (tests/conftest.py)."""
+    fuzzing = settings.get_current_profile_name() == "fuzz"
+    return settings(deadline=None) if fuzzing else settings(max_examples=n, deadline=None)
+
 
 # Streams biased towards headers, stuffing and plausible lengths, so the fuzzer reaches the
 # decoder's deeper branches rather than only skipping garbage.
@@ -42,7 +51,7 @@ def _key(item) -> tuple:
     return (type(item).__name__, *vars(item).values())
 
 
-@settings(max_examples=400, deadline=None)
+@examples(400)
 @given(streams, st.lists(st.integers(0, 10_000), max_size=12))
 def test_any_bytes_in_any_chunks_decode_the_same_and_never_raise(data, cuts):
     whole = proto.Decoder()
@@ -57,7 +66,7 @@ def test_any_bytes_in_any_chunks_decode_the_same_and_never_raise(data, cuts):
         assert isinstance(item, proto.StatusPacket | proto.InstructionPacket | proto.CorruptFrame)
 
 
-@settings(max_examples=300, deadline=None)
+@examples(300)
 @given(streams)
 def test_every_decoded_packet_re_encodes_to_itself(data):
     for item in proto.Decoder().feed(data):
@@ -65,7 +74,7 @@ def test_every_decoded_packet_re_encodes_to_itself(data):
             assert [_key(p) for p in proto.decode_all(item.encode())] == [_key(item)]
 
 
-@settings(max_examples=300, deadline=None)
+@examples(300)
 @given(st.integers(0, 252), st.integers(0, 255), st.binary(max_size=64), streams, streams)
 def test_a_valid_status_packet_between_garbage_is_found(sid, err, params, before, after):
     packet = proto.StatusPacket(sid, err, params)

@@ -11,6 +11,9 @@ ideal (it is where the last goal that reached it says). The properties:
   goal that really went out);
 - NaN, inf, huge values and wrong shapes never reach the backend;
 - disconnect turns torque off when it can and always ends disconnected.
+
+Then, on the twin's arm: torque off on leaving the block (exception too), no command without a
+connection, torque enabled holding the current pose.
 """
 
 from __future__ import annotations
@@ -25,8 +28,9 @@ from hypothesis import strategies as st
 
 from explore.learner.dmp import Dmp, DmpConfig
 from robot.arm import Arm, JointState, RecoveryPolicy
-from robot.errors import BusError, LinkLost, SafetyStop
+from robot.errors import BusError, LinkLost, NotConnectedError, SafetyStop
 from robot.spec import ArmSpec, JointSpec, ergo_jr_spec
+from sim.arm import SimArm
 
 BASE = ergo_jr_spec()
 
@@ -355,3 +359,31 @@ def test_a_reconnection_that_fails_while_reading_back_keeps_the_step_bound():
     np.testing.assert_allclose(out, np.full(6, -0.5))  # one max_step, not the whole way
     arm.faults = []
     arm.disconnect()
+
+
+# ---- on the twin's arm (a concrete backend) --------------------------------------------------
+def test_torque_goes_off_on_exit_and_on_exception(twin):
+    with SimArm(twin) as arm:
+        arm.set_torque(True)
+        assert twin.torque_enabled()
+    assert not twin.torque_enabled() and not arm.is_connected
+
+    with pytest.raises(RuntimeError, match="boom"), SimArm(twin) as arm:
+        arm.set_torque(True)
+        raise RuntimeError("boom")
+    assert not twin.torque_enabled()
+
+
+def test_commands_need_a_connection(twin):
+    with pytest.raises(NotConnectedError, match="connect"):
+        SimArm(twin).command(np.zeros(6))
+
+
+def test_enabling_torque_holds_the_current_pose(twin):
+    """A limp arm moved by hand must not jump back to its old command when torque returns."""
+    with SimArm(twin) as arm:
+        arm.set_torque(False)
+        twin.data.qpos[twin._qpos_idx[1]] = 0.7  # moved by hand
+        twin.step()
+        arm.set_torque(True)
+        assert arm.last_sent[1] == pytest.approx(twin.joint_positions()[1], abs=1e-6)

@@ -18,7 +18,7 @@ from explore.rigs.clock import RealClock
 from robot.canopen.arm import CanArm, CanArmConfig
 from robot.canopen.scan import scan_cli
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[3]  # the repository (tests/sim/canopen/ is 3 deep)
 START_BOUND_S = 30.0  # a bound against hangs (the server imports MuJoCo), not an expectation
 
 pytestmark = pytest.mark.slow
@@ -81,3 +81,23 @@ def test_bad_pty_is_a_clear_error() -> None:
 
     with pytest.raises(CanBusError, match="no such device /dev/pts/9999"):
         CanArm("slcan:/dev/pts/9999").connect()
+
+
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        ({"overload_servo": 9}, "--overload-servo 9 is not a node id"),
+        ({"drop_rate": 1.5}, "--drop-rate 1.5"),
+        ({"delay_ms": -1.0}, "--delay-ms -1.0 is negative"),
+    ],
+)
+def test_server_flag_errors(flags, message, capsys) -> None:
+    import argparse
+
+    from sim.canopen.server import serve
+
+    args = argparse.Namespace(
+        **{"drop_rate": 0.0, "delay_ms": 0.0, "overload_servo": None, **flags}
+    )
+    assert serve(args) == 2
+    assert message in capsys.readouterr().err

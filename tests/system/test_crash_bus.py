@@ -7,7 +7,7 @@ After every kill the history on disk must verify (checksums), hold episodes 0..k
 missing or duplicated, and never shrink; the emulated servos are left with torque on by the
 killed process (a SIGKILL runs no handler), and the next child takes the arm over from there.
 At the end an uninterrupted child completes the run, whose history is then exactly 0..N-1.
-The twin runs in real time here, so unlike test_reliability_crash.py the history is not
+The twin runs in real time here, so unlike tests/system/test_crash.py the history is not
 compared with a reference run (physics timing differs run to run); the integrity checks are
 the same. Together with that file's 20 kills on the twin, the campaign has 26 kills.
 
@@ -36,7 +36,7 @@ from explore.runs.open_run import open_run
 from explore.runs.record import EpisodeRecord
 from explore.runs.store import RunStore, _scan
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]  # the repository (tests/system/ is 2 deep)
 EPISODES = 10
 KILLS = 6
 LAUNCH_KILLS = (1, 4)  # which kills land during start-up; the others mid-exploration

@@ -18,7 +18,7 @@ import pytest
 import serial
 
 from explore.rigs.clock import RealClock
-from explore.rigs.rig import RigConfig, RigError, make_rig
+from explore.rigs.rig import RigConfig, make_rig
 from robot.dynamixel import protocol as proto
 from robot.dynamixel.arm import DynamixelArm
 from robot.dynamixel.bus import DynamixelBus, HardwareAlertError, ServoError
@@ -245,9 +245,19 @@ def test_mjpeg_stream_opens_in_opencv() -> None:
         twin.close()
 
 
-def test_rig_needs_a_port() -> None:
-    with pytest.raises(RigError, match=r"options\.port"):
-        make_rig(RigConfig(name="dynamixel", options={}))
+def test_twin_serve_prints_its_pty_and_camera_and_answers() -> None:
+    cmd = [sys.executable, "-m", "explore.cli", "twin", "serve", "--bus", "dynamixel"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        first = proc.stdout.readline().strip()
+        second = proc.stdout.readline().strip()
+        assert first.startswith("dynamixel bus on /dev/"), (first, proc.stderr.read())
+        assert second.startswith("camera on http://127.0.0.1:")
+        with DynamixelBus(first.split()[-1], latency_s=LATENCY_S, retries=5) as bus:
+            assert bus.ping(6).model_number == 350
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
 
 
 def test_rig_runs_against_the_emulated_arm_and_camera() -> None:
@@ -264,18 +274,3 @@ def test_rig_runs_against_the_emulated_arm_and_camera() -> None:
             rig.arm.command(rig.arm.read().positions + 0.05)
             rig.clock.advance(0.025)
         assert not any(emulator.torque_states().values())
-
-
-def test_twin_serve_prints_its_pty_and_camera_and_answers() -> None:
-    cmd = [sys.executable, "-m", "explore.cli", "twin", "serve", "--bus", "dynamixel"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        first = proc.stdout.readline().strip()
-        second = proc.stdout.readline().strip()
-        assert first.startswith("dynamixel bus on /dev/"), (first, proc.stderr.read())
-        assert second.startswith("camera on http://127.0.0.1:")
-        with DynamixelBus(first.split()[-1], latency_s=LATENCY_S, retries=5) as bus:
-            assert bus.ping(6).model_number == 350
-    finally:
-        proc.terminate()
-        proc.wait(timeout=10)

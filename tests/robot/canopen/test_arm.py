@@ -239,7 +239,7 @@ def test_scan_lists_the_drives(rig, capsys) -> None:
 
 @pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")
 def test_adapter_failure_is_a_clear_one_line_stop_and_reconnect_works(rig) -> None:
-    """Without reconnection attempts (test_reliability_can.py has the recovery itself)."""
+    """Without reconnection attempts (tests/system/test_can_faults.py has the recovery itself)."""
     _twin, drives, can = rig
     arm = make_arm(can)
     arm.recovery = RecoveryPolicy(attempts=0)

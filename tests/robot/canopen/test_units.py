@@ -9,7 +9,6 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from explore.rigs.rig import RigConfig, RigError, make_rig
 from robot.canopen import emcy
 from robot.canopen.bus import CanBusError, CanBusSpec, open_bus, parse_can_spec
 from robot.canopen.units import JointScaling, UnitsError
@@ -115,49 +114,3 @@ def test_emcy_descriptions() -> None:
     assert emcy.describe_code(0x4299) == "temperature"
     assert emcy.describe_code(0x0123) == "unknown error"
     assert emcy.unpack(emcy.pack(0x8611, 0x21)) == (0x8611, 0x21, b"\0" * 5)
-
-
-@pytest.mark.parametrize(
-    ("options", "message"),
-    [
-        ({}, "needs option can"),
-        ({"can": "nope"}, "expected INTERFACE:CHANNEL"),
-        ({"can": "virtual:x", "node_ids": [1, 2]}, "needs 6 values"),
-        ({"can": "virtual:x", "port": "/dev/ttyUSB0"}, "option port is unknown; known: "),
-        ({"can": "virtual:x", "camera": 1.5}, "camera must be"),
-        ({"can": "virtual:x", "eds": "/nonexistent/drive.eds"}, "EDS file not found"),
-    ],
-)
-def test_rig_options_errors(options, message) -> None:
-    with pytest.raises(RigError, match=message):
-        make_rig(RigConfig("canopen", options=options))
-
-
-def test_rig_builds_unconnected() -> None:
-    rig = make_rig(
-        RigConfig("canopen", options={"can": "slcan:/dev/pts/99", "camera": "0", "bitrate": 500000})
-    )
-    assert rig.twin is None and not rig.arm.is_connected
-    assert str(rig.arm.bus_spec) == "slcan:/dev/pts/99" and rig.arm.bus_spec.bitrate == 500000
-    assert type(rig.camera).__name__ == "OpenCVCamera"
-    assert type(rig.clock).__name__ == "RealClock"
-
-
-@pytest.mark.parametrize(
-    ("flags", "message"),
-    [
-        ({"overload_servo": 9}, "--overload-servo 9 is not a node id"),
-        ({"drop_rate": 1.5}, "--drop-rate 1.5"),
-        ({"delay_ms": -1.0}, "--delay-ms -1.0 is negative"),
-    ],
-)
-def test_server_flag_errors(flags, message, capsys) -> None:
-    import argparse
-
-    from sim.canopen.server import serve
-
-    args = argparse.Namespace(
-        **{"drop_rate": 0.0, "delay_ms": 0.0, "overload_servo": None, **flags}
-    )
-    assert serve(args) == 2
-    assert message in capsys.readouterr().err

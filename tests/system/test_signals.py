@@ -11,7 +11,7 @@ process exits. A Python signal handler alone runs only between bytecodes of the 
 after the C call in progress (a 240 x 240 MuJoCo render takes about 0.2 s here), which gave
 a median of 74 ms and a max of 115 ms; ``torque_off_on_signals`` now also cuts torque from a
 watcher thread woken by ``signal.set_wakeup_fd``, which those C calls do not hold up. The
-figures are printed (docs/reliability.md); the bus rigs are in test_reliability_signals_bus.py.
+figures are printed (docs/reliability.md); the bus rigs are in tests/system/test_signals_bus.py.
 """
 
 from __future__ import annotations
