@@ -1,4 +1,5 @@
-"""``ergo experiment`` (campaigns of runs), ``ergo vae train`` and ``ergo dataset outcomes``.
+"""``ergo experiment`` (campaigns of runs), ``ergo vae train``, ``ergo sae train`` and ``ergo
+dataset outcomes``.
 
 A campaign is a folder ``CAMPAIGN/STRATEGY/seed-S`` of ordinary run folders (explore/store.py),
 one per (strategy, seed), each run by the usual ``Explorer`` as a trial (explore/campaign.py),
@@ -13,7 +14,10 @@ ball positions per strategy, and summary.md / summary.html (``--no-report`` skip
 from __future__ import annotations
 
 import argparse
+import json
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from explore.campaign import (  # re-exported: bench/ and tests import them from here
     BACKENDS,
@@ -67,6 +71,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     p.add_argument("--vae", type=Path, help="VAE model for the *-vae strategies")
     p.add_argument("--betavae", type=Path, help="beta-VAE model for the *-betavae strategies")
+    p.add_argument("--sae", type=Path, help="spatial autoencoder for the *-sae strategies")
     p.add_argument(
         "--option", action="append", default=[], metavar="KEY=JSON",
         help="strategy option for every goal-exploration run, e.g. bootstrap=100, or for one "
@@ -99,13 +104,22 @@ def register(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     t.add_argument("--lr", type=float, default=None, help="Adam learning rate (default 1e-3)")
     t.add_argument("--batch", type=int, default=None, help="batch size (default 64)")
-    t.add_argument("--seed", type=int, default=0, help="random seed")
-    t.add_argument(
-        "--device", choices=("auto", "cpu", "cuda"), default="auto",
-        help="where to train: a CUDA GPU where torch sees one (auto, the default), or cpu/cuda",
-    )  # fmt: skip
-    t.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_training_arguments(t)
     t.set_defaults(func=run_vae_train)
+
+    a = sub.add_parser("sae", help="representation learning (spatial autoencoder)")
+    asub = a.add_subparsers(dest="sae_command", metavar="COMMAND")
+    asub.required = True
+    t = asub.add_parser(
+        "train", help="train a spatial autoencoder on an outcome database",
+        description="Resumable: rerun the same command to continue from the last checkpoint.",
+    )  # fmt: skip
+    t.add_argument("--data", type=Path, required=True, help="dataset .npz (ergo dataset outcomes)")
+    t.add_argument("--out", type=Path, required=True, help="model folder")
+    t.add_argument("--iterations", type=int, default=None, help="total iterations (default 700)")
+    t.add_argument("--features", type=int, default=8, help="feature maps (default 8)")
+    add_training_arguments(t)
+    t.set_defaults(func=run_sae_train)
 
     d = sub.add_parser("dataset", help="datasets rendered on the twin")
     dsub = d.add_subparsers(dest="dataset_command", metavar="COMMAND")
@@ -176,7 +190,8 @@ def run_experiment(args: argparse.Namespace) -> int:
            "options": rig_options(args)}  # fmt: skip
     try:
         rows = run_campaign(
-            args.out, strategies, seeds, args.episodes, args.jobs, args.vae, args.betavae,
+            args.out, strategies, seeds, args.episodes, args.jobs,
+            {"vae": args.vae, "betavae": args.betavae, "sae": args.sae},
             parse_key_values(args.option, "--option"), progress=not args.no_progress,
             backend=args.backend, ray_address=args.ray_address, rig=rig, retries=args.retries,
         )  # fmt: skip
@@ -198,6 +213,21 @@ def run_experiment(args: argparse.Namespace) -> int:
 
 
 # ---- representation and dataset -------------------------------------------------------------
+def add_training_arguments(t: argparse.ArgumentParser) -> None:
+    """Seeds, device and progress of a representation's training."""
+    t.add_argument("--seed", type=int, default=0, help="random seed")
+    t.add_argument(
+        "--seeds", default=None, metavar="SEEDS",
+        help="train several seeds (8, 0-7 or 0,3) into OUT/seed-S and keep in OUT the one that "
+        "best explains held-out images (selection.json)",
+    )  # fmt: skip
+    t.add_argument(
+        "--device", choices=("auto", "cpu", "cuda"), default="auto",
+        help="where to train: a CUDA GPU where torch sees one (auto, the default), or cpu/cuda",
+    )  # fmt: skip
+    t.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
 def run_vae_train(args: argparse.Namespace) -> int:
     from vision.vae import VaeConfig, VaeError
     from vision.vae_train import TrainConfig, load_images, resolve_device, train_vae
@@ -210,20 +240,83 @@ def run_vae_train(args: argparse.Namespace) -> int:
             capacity_iterations=args.capacity_iterations or VaeConfig().capacity_iterations,
         )
         defaults = TrainConfig()
-        train_cfg = TrainConfig(
-            iterations=args.iterations or defaults.iterations,
-            lr=args.lr or defaults.lr,
-            batch=args.batch or defaults.batch,
-            seed=args.seed,
-            device=args.device,
-        )
-        vae = train_vae(images, args.out, model_cfg, train_cfg, progress=not args.no_progress)
+
+        def train_one(seed: int, out: Path) -> Any:
+            cfg = TrainConfig(
+                iterations=args.iterations or defaults.iterations, lr=args.lr or defaults.lr,
+                batch=args.batch or defaults.batch, seed=seed, device=args.device,
+            )  # fmt: skip
+            return train_vae(
+                images, out, model_cfg, cfg, progress=not args.no_progress, heldout=HELDOUT
+            )
+
+        vae = train_and_select(args.out, seeds_of(args), train_one)
     except VaeError as exc:
         raise CliError(str(exc)) from exc
     kl = ", ".join(f"{v:.2f}" for v in vae.config.kl_per_latent or [])
     print(f"{args.out}: VAE saved (trained on {resolve_device(args.device)}); "
-          f"KL per latent (nats): {kl}")  # fmt: skip
+          f"KL per latent (nats): {kl}; held-out explained pixel variance "
+          f"{vae.config.heldout_explained_variance:.3f}")  # fmt: skip
     return 0
+
+
+def run_sae_train(args: argparse.Namespace) -> int:
+    from vision.sae_train import SAE_ITERATIONS, train_sae
+    from vision.spatial_ae import SaeConfig
+    from vision.vae import VaeError
+    from vision.vae_train import TrainConfig, load_images
+
+    try:
+        images = load_images(args.data)
+        model_cfg = SaeConfig(features=args.features)
+        model_cfg.validate()
+
+        def train_one(seed: int, out: Path) -> Any:
+            cfg = TrainConfig(
+                iterations=args.iterations or SAE_ITERATIONS, seed=seed, device=args.device
+            )
+            return train_sae(images, out, model_cfg, cfg, HELDOUT, progress=not args.no_progress)
+
+        sae = train_and_select(args.out, seeds_of(args), train_one)
+    except VaeError as exc:
+        raise CliError(str(exc)) from exc
+    from explore.goal_spaces import live_features
+
+    live = live_features(sae.config.code_std)
+    print(f"{args.out}: spatial autoencoder saved; features that move: {len(live)} of "
+          f"{sae.config.features} ({', '.join(map(str, live))}); held-out explained pixel "
+          f"variance {sae.config.heldout_explained_variance:.3f}")  # fmt: skip
+    return 0
+
+
+HELDOUT = 0.1  # share of a dataset kept out of training to score the model (guess)
+SELECTION_FILE = "selection.json"
+
+
+def seeds_of(args: argparse.Namespace) -> list[int]:
+    """The training seeds: ``--seeds`` (as ``ergo experiment`` reads them), else ``--seed``."""
+    return parse_seeds(args.seeds) if args.seeds is not None else [args.seed]
+
+
+def train_and_select(out: Path, seeds: list[int], train_one: Callable[[int, Path], Any]) -> Any:
+    """One seed: ``train_one(seed, out)``. Several: each into ``out/seed-S`` (each resumable),
+    then the model with the largest held-out explained pixel variance (a criterion that looks
+    at images only, never at the ball's true position) is saved into ``out`` itself, and
+    ``out/selection.json`` records every seed's value and the choice."""
+    if len(seeds) == 1:
+        return train_one(seeds[0], out)
+    models = {s: train_one(s, out / f"seed-{s}") for s in seeds}
+    scores = {s: float(m.config.heldout_explained_variance) for s, m in models.items()}
+    best = max(seeds, key=lambda s: (scores[s], -s))
+    models[best].save(out)
+    from explore.store import atomic_write_text
+
+    record = {"criterion": "heldout_explained_variance", "scores": scores, "chosen": best}
+    atomic_write_text(out / SELECTION_FILE, json.dumps(record, indent=1))
+    for s in seeds:
+        print(f"seed {s}: held-out explained pixel variance {scores[s]:.3f}"
+              f"{'  <- chosen' if s == best else ''}")  # fmt: skip
+    return models[best]
 
 
 def run_dataset_outcomes(args: argparse.Namespace) -> int:

@@ -11,7 +11,8 @@ truth for now; the tracker provides the same (x, y) on hardware). Two forms:
 - ``"polar"``: (r_n, t / pi), the paper's features, with its discontinuity at t = +-pi;
 - ``"wrap-safe"`` (default): (r_n, cos t, sin t), continuous all around the ring.
 
-Learned: the VAE's latent means of ``record.image`` (see ``LatentGoalSpace``).
+Learned: the VAE's latent means of ``record.image`` (see ``LatentGoalSpace``), or the image
+positions of a spatial autoencoder's features (``spatial_goal_space``).
 """
 
 from __future__ import annotations
@@ -192,3 +193,38 @@ class LatentGoalSpace(GoalSpace):
 
     def context(self, record: Any) -> np.ndarray:
         raise NotImplementedError("latent contexts are tracked by the strategy (previous outcome)")
+
+
+# A feature of a spatial autoencoder whose position moves less than this over the training
+# images (standard deviation, in image half-widths) is left out of the goal space: it follows
+# something still (measured: such features stay within 0.02 of their mean, those that follow
+# the ball spread over 0.3-0.6; docs/results.md). Guess between the two.
+LIVE_FEATURE_STD = 0.05
+
+
+def live_features(code_std: Sequence[float], threshold: float = LIVE_FEATURE_STD) -> list[int]:
+    """Indices of the features (pairs of code numbers x, y) whose larger standard deviation
+    over the training images reaches ``threshold``; every feature if none does."""
+    std = np.asarray(code_std, dtype=float).reshape(-1, 2).max(axis=1)
+    live = [int(k) for k in np.flatnonzero(std >= threshold)]
+    return live or list(range(len(std)))
+
+
+def spatial_goal_space(
+    encode: Any, code_std: Sequence[float], modular: bool, threshold: float = LIVE_FEATURE_STD
+) -> LatentGoalSpace:
+    """The goal space of a spatial autoencoder: the image positions (x, y) of its live
+    features (``live_features``), one module per feature for MGE (object-centred: a feature
+    follows one thing), the whole for RGE. ``encode`` maps BGR uint8 images (n, 64, 64, 3) to
+    codes (n, 2 * features); the outcome keeps the live features' coordinates only."""
+    live = live_features(code_std, threshold)
+    keep = np.array([i for k in live for i in (2 * k, 2 * k + 1)])
+
+    def encode_live(images: np.ndarray) -> np.ndarray:
+        return np.asarray(encode(images))[:, keep]
+
+    space = LatentGoalSpace(encode_live, len(keep), modular=False)
+    if modular:
+        space.modules = [np.array([2 * i, 2 * i + 1]) for i in range(len(live))]
+    space.features = live
+    return space

@@ -68,6 +68,8 @@ MAKE_VAE = {
     "--capacity-iterations 500 --iterations 700",
     "betavae": "ergo dataset outcomes --n 10000 --out data/outcomes.npz && "
     "ergo vae train --data data/outcomes.npz --out models/betavae --beta 4 --capacity 10",
+    "sae": "ergo dataset outcomes --n 3000 --out data/outcomes.npz && "
+    "ergo sae train --data data/outcomes.npz --out models/sae",
 }
 
 STRATEGIES: dict[str, str] = {
@@ -79,6 +81,8 @@ STRATEGIES: dict[str, str] = {
     "mge-vae": "explore.strategies.goal_exploration:ModularLatentGoalExploration",
     "mge-betavae": "explore.strategies.goal_exploration:ModularBetaLatentGoalExploration",
     "rge-online": "explore.strategies.online:OnlineLatentGoalExploration",
+    "rge-sae": "explore.strategies.goal_exploration:SpatialGoalExploration",
+    "mge-sae": "explore.strategies.goal_exploration:ModularSpatialGoalExploration",
 }
 
 

@@ -20,7 +20,12 @@ import numpy as np
 
 from explore.dmp import N_PARAMS
 from explore.episode import Observation
-from explore.goal_spaces import EngineeredGoalSpace, GoalSpace, LatentGoalSpace
+from explore.goal_spaces import (
+    EngineeredGoalSpace,
+    GoalSpace,
+    LatentGoalSpace,
+    spatial_goal_space,
+)
 from explore.meta_policy import MetaPolicy
 from explore.record import EpisodeRecord
 from explore.strategies.base import MAKE_VAE, Proposal, Strategy, StrategyError
@@ -297,4 +302,40 @@ class ModularLatentGoalExploration(LatentGoalExploration):
 
 class ModularBetaLatentGoalExploration(LatentGoalExploration):
     name = "mge-betavae"
+    modular_default = True
+
+
+class SpatialGoalExploration(GoalExploration):
+    """Goal exploration in the image positions of a spatial autoencoder's features (option
+    ``sae``: the model folder from ``ergo sae train``): its live features' (x, y), the whole
+    code for RGE, one module per feature for MGE. Goals are uniform in the bounds reached (the
+    code has no prior to sample from); the context is the previous outcome's code."""
+
+    name = "rge-sae"
+
+    def extra_options(self) -> tuple[str, ...]:
+        return ("sae",)
+
+    def make_space(self) -> GoalSpace:
+        path = self.options.get("sae")
+        if not path:
+            raise StrategyError(
+                f"{self.name} needs option sae=PATH (make one with: {MAKE_VAE['sae']})"
+            )
+        from vision.spatial_ae import load_sae
+        from vision.vae import VaeError
+
+        try:
+            sae = load_sae(path)
+        except (VaeError, FileNotFoundError) as exc:
+            raise StrategyError(f"{self.name}: {exc}") from exc
+        if sae.config.code_std is None:
+            raise StrategyError(f"{path} has no code statistics: train it with `ergo sae train`")
+        if self.goal_sampling == "normal":
+            raise StrategyError(f"{self.name}: goals must be uniform (the code has no prior)")
+        return spatial_goal_space(sae.encode_bgr, sae.config.code_std, self.modular)
+
+
+class ModularSpatialGoalExploration(SpatialGoalExploration):
+    name = "mge-sae"
     modular_default = True
