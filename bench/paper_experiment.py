@@ -51,7 +51,8 @@ def main() -> int:
     seeds = [int(s) for s in args.seeds.split(",")]
     t0 = time.perf_counter()
     rows = run_campaign(
-        args.out, strategies, seeds, args.episodes, args.jobs, args.vae, args.betavae,
+        args.out, strategies, seeds, args.episodes, args.jobs,
+        {"vae": args.vae, "betavae": args.betavae},
         {"bootstrap": args.bootstrap}, progress=False,
     )  # fmt: skip
     print(format_table(rows))

@@ -11,6 +11,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 MAX_INDEX = 10  # device indices probed by default (/dev/video0..9): a convention
 
@@ -65,13 +66,73 @@ def register(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     t.add_argument("--lr", type=float, default=None, help="Adam learning rate (default 1e-3)")
     t.add_argument("--batch", type=int, default=None, help="batch size (default 64)")
+    _add_training_arguments(t)
+    t.set_defaults(func=_vae_train)
+
+    a = sub.add_parser("sae", help="representation learning (spatial autoencoder)")
+    asub = a.add_subparsers(dest="sae_command", metavar="COMMAND")
+    asub.required = True
+    t = asub.add_parser(
+        "train", help="train a spatial autoencoder on an outcome database",
+        description="Resumable: rerun the same command to continue from the last checkpoint.",
+    )  # fmt: skip
+    t.add_argument("--data", type=Path, required=True, help="dataset .npz (ergo dataset outcomes)")
+    t.add_argument("--out", type=Path, required=True, help="model folder")
+    t.add_argument("--iterations", type=int, default=None, help="total iterations (default 700)")
+    t.add_argument("--features", type=int, default=8, help="feature maps (default 8)")
+    _add_training_arguments(t)
+    t.set_defaults(func=_sae_train)
+
+
+def _add_training_arguments(t: argparse.ArgumentParser) -> None:
+    """Seeds, device and progress of a representation's training."""
     t.add_argument("--seed", type=int, default=0, help="random seed")
+    t.add_argument(
+        "--seeds", default=None, metavar="SEEDS",
+        help="train several seeds (8, 0-7 or 0,3) into OUT/seed-S and keep in OUT the one that "
+        "best explains held-out images (selection.json)",
+    )  # fmt: skip
     t.add_argument(
         "--device", choices=("auto", "cpu", "cuda"), default="auto",
         help="where to train: a CUDA GPU where torch sees one (auto, the default), or cpu/cuda",
     )  # fmt: skip
     t.add_argument("--no-progress", action="store_true", help="no progress bar")
-    t.set_defaults(func=_vae_train)
+
+
+def parse_seeds(text: str) -> list[int]:
+    """The seeds syntax of every command that takes ``--seeds`` (``ergo vae train``, ``ergo sae
+    train``, ``ergo experiment``): "8" -> [0..7] (a count), "0,2,5" -> [0, 2, 5], "3-7" ->
+    [3..7], "4-4" -> [4]; lists may mix both ("0,3-5"). Raises ``ValueError`` (one line)."""
+    text = text.strip()
+    if "," not in text and "-" not in text:
+        try:
+            count = int(text)
+        except ValueError:
+            raise ValueError(f"--seeds {text!r}: give a count, a list or a range") from None
+        if count < 1:
+            raise ValueError(f"--seeds {count}: a count must be at least 1 (one seed S: S-S)")
+        return list(range(count))
+    items = [s.strip() for s in text.split(",") if s.strip()]
+    if not items:
+        raise ValueError("--seeds: give at least one value")
+    seeds: list[int] = []
+    for item in items:
+        try:
+            bounds = [int(v) for v in item.split("-")] if "-" in item else [int(item)] * 2
+        except ValueError:  # also a negative seed: "-1" splits into "" and "1"
+            raise ValueError(f"--seeds {item!r}: not a seed or a range of seeds") from None
+        if len(bounds) != 2:
+            raise ValueError(f"--seeds {item!r}: not a seed or a range of seeds")
+        lo, hi = bounds
+        if hi < lo:
+            raise ValueError(f"--seeds {item}: an empty range")
+        seeds.extend(range(lo, hi + 1))
+    return list(dict.fromkeys(seeds))  # each seed once, in the order given
+
+
+def _seeds_of(args: argparse.Namespace) -> list[int]:
+    """The training seeds: ``--seeds`` if given, else ``--seed``."""
+    return parse_seeds(args.seeds) if args.seeds is not None else [args.seed]
 
 
 def _error(message: str) -> int:
@@ -182,10 +243,12 @@ def _track(args: argparse.Namespace) -> int:
 
 
 def _vae_train(args: argparse.Namespace) -> int:
+    from vision.representation_quality import HELDOUT, train_and_select
     from vision.vae import VaeConfig, VaeError
     from vision.vae_train import TrainConfig, load_images, resolve_device, train_vae
 
     try:
+        seeds = _seeds_of(args)
         images = load_images(args.data)
         model_cfg = VaeConfig(
             beta=1.0 if args.beta is None else args.beta,
@@ -193,17 +256,51 @@ def _vae_train(args: argparse.Namespace) -> int:
             capacity_iterations=args.capacity_iterations or VaeConfig().capacity_iterations,
         )
         defaults = TrainConfig()
-        train_cfg = TrainConfig(
-            iterations=args.iterations or defaults.iterations,
-            lr=args.lr or defaults.lr,
-            batch=args.batch or defaults.batch,
-            seed=args.seed,
-            device=args.device,
-        )
-        vae = train_vae(images, args.out, model_cfg, train_cfg, progress=not args.no_progress)
-    except VaeError as exc:
+
+        def train_one(seed: int, out: Path) -> Any:
+            cfg = TrainConfig(
+                iterations=args.iterations or defaults.iterations, lr=args.lr or defaults.lr,
+                batch=args.batch or defaults.batch, seed=seed, device=args.device,
+            )  # fmt: skip
+            return train_vae(
+                images, out, model_cfg, cfg, progress=not args.no_progress, heldout=HELDOUT
+            )
+
+        vae = train_and_select(args.out, seeds, train_one)
+    except (VaeError, ValueError) as exc:
         return _error(str(exc))
     kl = ", ".join(f"{v:.2f}" for v in vae.config.kl_per_latent or [])
     print(f"{args.out}: VAE saved (trained on {resolve_device(args.device)}); "
-          f"KL per latent (nats): {kl}")  # fmt: skip
+          f"KL per latent (nats): {kl}; held-out explained pixel variance "
+          f"{vae.config.heldout_explained_variance:.3f}")  # fmt: skip
+    return 0
+
+
+def _sae_train(args: argparse.Namespace) -> int:
+    from vision.representation_quality import HELDOUT, train_and_select
+    from vision.sae_train import SAE_ITERATIONS, train_sae
+    from vision.spatial_ae import SaeConfig
+    from vision.spatial_code import live_features
+    from vision.vae import VaeError
+    from vision.vae_train import TrainConfig, load_images
+
+    try:
+        seeds = _seeds_of(args)
+        images = load_images(args.data)
+        model_cfg = SaeConfig(features=args.features)
+        model_cfg.validate()
+
+        def train_one(seed: int, out: Path) -> Any:
+            cfg = TrainConfig(
+                iterations=args.iterations or SAE_ITERATIONS, seed=seed, device=args.device
+            )
+            return train_sae(images, out, model_cfg, cfg, HELDOUT, progress=not args.no_progress)
+
+        sae = train_and_select(args.out, seeds, train_one)
+    except (VaeError, ValueError) as exc:
+        return _error(str(exc))
+    live = live_features(sae.config.code_std)
+    print(f"{args.out}: spatial autoencoder saved; features that move: {len(live)} of "
+          f"{sae.config.features} ({', '.join(map(str, live))}); held-out explained pixel "
+          f"variance {sae.config.heldout_explained_variance:.3f}")  # fmt: skip
     return 0

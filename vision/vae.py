@@ -82,6 +82,8 @@ class VaeConfig:
             ranks the latents into MGE modules).
         latent_mean, latent_std: mean and standard deviation of each latent mean over the
             training data (filled after training; a goal space can z-score latents with them).
+        heldout_explained_variance: the model-selection criterion on the images held out of
+            training (``vision.representation_quality``; filled when some were held out).
     """
 
     latent_dim: int = LATENT_DIM
@@ -93,6 +95,7 @@ class VaeConfig:
     kl_per_latent: list[float] | None = field(default=None)
     latent_mean: list[float] | None = field(default=None)
     latent_std: list[float] | None = field(default=None)
+    heldout_explained_variance: float | None = None
 
     def validate(self) -> None:
         if self.latent_dim < 1 or self.channels < 1 or self.hidden < 1:

@@ -1,4 +1,5 @@
-"""Training a ``vision.vae.Vae`` on an image database: progress, checkpoints, resume.
+"""Training a ``vision.vae.Vae`` (and, with ``fit``, any representation of 64x64 observations)
+on an image database: progress, checkpoints, resume.
 
 Deterministic given the data and the seed: the batch of iteration i is drawn by
 ``numpy.random.default_rng([seed, i])`` and the reparameterisation noise by
@@ -19,12 +20,15 @@ and the final ``vae.pt`` + ``vae.json`` (``Vae.save``).
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
 
+from vision.representation_quality import explained_pixel_variance, heldout_split
 from vision.vae import MAX_THREADS, Vae, VaeConfig, VaeError, limit_threads, to_tensor
 
 CHECKPOINT = "checkpoint.pt"
@@ -106,13 +110,50 @@ def train_vae(
     model_config: VaeConfig | None = None,
     config: TrainConfig | None = None,
     progress: bool = True,
+    heldout: float = 0.0,
 ) -> Vae:
     """Train (or resume training) a VAE on ``images`` (n, 64, 64, 3) BGR uint8 into ``out``.
 
     An existing checkpoint in ``out`` is resumed (its model config wins; a different one given
-    here is refused). Returns the trained model, also saved as ``out/vae.pt`` + ``vae.json``.
+    here is refused). ``heldout``: share of the images kept out of training (a split seeded by
+    the training seed) to score the model (``VaeConfig.heldout_explained_variance``). Returns
+    the trained model, also saved as ``out/vae.pt`` + ``vae.json``.
     """
     config = config or TrainConfig()
+    model_config = model_config or VaeConfig()
+    images = np.asarray(images)
+    train_idx, test_idx = heldout_split(len(images), heldout, config.seed)
+    train = images[train_idx] if len(test_idx) else images
+    vae = fit(
+        lambda settings: Vae(VaeConfig(**settings)), asdict(_without_statistics(model_config)),
+        train, out, config, progress, desc="vae",
+    )  # fmt: skip
+    sample = train[np.random.default_rng(config.seed).permutation(len(train))[:KL_SAMPLE]]
+    vae.config.kl_per_latent = vae.mean_kl_per_latent(sample)
+    vae.config.latent_mean, vae.config.latent_std = vae.latent_stats(sample)
+    if len(test_idx):
+        vae.config.heldout_explained_variance = explained_pixel_variance(
+            lambda x: vae.decode_bgr(vae.encode_bgr(x)), images[test_idx],
+            train.astype(np.float64).mean(axis=0),
+        )  # fmt: skip
+    vae.save(out)
+    return vae
+
+
+def fit(
+    make_model: Callable[[dict[str, Any]], torch.nn.Module],
+    settings: dict[str, Any],
+    images: np.ndarray,
+    out: str | Path,
+    config: TrainConfig,
+    progress: bool = True,
+    desc: str = "train",
+) -> Any:
+    """The training loop of every representation: ``make_model(settings)`` (a module with a
+    ``loss(x, iteration) -> dict`` whose ``"loss"`` is minimised; the other terms are logged)
+    trained on ``images`` (n, 64, 64, 3) BGR uint8 with Adam, checkpointed into ``out`` and
+    resumed from there (the checkpoint's settings must equal ``settings``). Returns the model
+    on the CPU in eval mode; the caller measures and saves it."""
     config.validate()
     if len(images) < 1:
         raise VaeError("no images to train on")
@@ -121,27 +162,23 @@ def train_vae(
     out.mkdir(parents=True, exist_ok=True)
     limit_threads(config.threads)
     device = resolve_device(config.device)
-    model_config = model_config or VaeConfig()
     start = 0
     ckpt_path = out / CHECKPOINT
     state = None
     if ckpt_path.exists():
         state = torch.load(ckpt_path, map_location="cpu", weights_only=True)
-        saved = _without_statistics(VaeConfig(**state["model_config"]))
-        given = _without_statistics(model_config)
-        if asdict(saved) != asdict(given):
+        if state["model_config"] != settings:
             raise VaeError(
-                f"{ckpt_path} was trained with {asdict(saved)}; remove it or use the same "
-                "settings to resume"
+                f"{ckpt_path} was trained with {state['model_config']}; remove it or use the "
+                "same settings to resume"
             )
-        model_config = saved
         start = int(state["iteration"])
     torch.manual_seed(config.seed)  # initial weights
-    vae = Vae(model_config)
+    model = make_model(settings)
     if state is not None:
-        vae.load_state_dict(state["model"])
-    vae.to(device)
-    optim = torch.optim.Adam(vae.parameters(), lr=config.lr)
+        model.load_state_dict(state["model"])
+    model.to(device)
+    optim = torch.optim.Adam(model.parameters(), lr=config.lr)
     if state is not None:
         optim.load_state_dict(state["optim"])  # moved onto the parameters' device
     data = torch.from_numpy(np.ascontiguousarray(images)).to(device)  # uint8, per batch
@@ -150,60 +187,66 @@ def train_vae(
         from tqdm import tqdm
 
         bar = tqdm(total=config.iterations, initial=start, unit="it", file=sys.stderr,
-                   mininterval=1.0, desc="vae")  # fmt: skip
+                   mininterval=1.0, desc=desc)  # fmt: skip
     log_rows: list[str] = []
-    vae.train()
+    header = ""
+    model.train()
     for it in range(start, config.iterations):
         idx = np.random.default_rng([config.seed, it]).integers(0, len(images), config.batch)
         torch.manual_seed(config.seed * 1_000_003 + it)
         x = batch_tensor(data, torch.from_numpy(idx).to(device))
-        terms = vae.loss(x, it)
+        terms = model.loss(x, it)
         optim.zero_grad(set_to_none=True)
         terms["loss"].backward()
         optim.step()
         if it % 10 == 0 or it == config.iterations - 1:
             vals = {k: float(v.detach()) for k, v in terms.items()}
-            log_rows.append(f"{it},{vals['loss']:.3f},{vals['recon']:.3f},{vals['kl']:.3f}")
+            header = ",".join(["iteration", *vals])
+            log_rows.append(",".join([str(it), *(f"{v:.3f}" for v in vals.values())]))
             if bar is not None:
-                bar.set_postfix(loss=f"{vals['loss']:.1f}", kl=f"{vals['kl']:.1f}", refresh=False)
+                bar.set_postfix({k: f"{v:.1f}" for k, v in vals.items() if k != "recon"},
+                                refresh=False)  # fmt: skip
         if bar is not None:
             bar.update(1)
         done = it + 1
         if done % config.checkpoint_every == 0 or done == config.iterations:
-            _checkpoint(ckpt_path, vae, optim, done)
-            _append_log(out / LOG, log_rows)
+            _checkpoint(ckpt_path, model, optim, done, settings)
+            _append_log(out / LOG, header, log_rows)
             log_rows = []
     if bar is not None:
         bar.close()
-    vae.to("cpu").eval()
-    sample = images[np.random.default_rng(config.seed).permutation(len(images))[:KL_SAMPLE]]
-    vae.config.kl_per_latent = vae.mean_kl_per_latent(sample)
-    vae.config.latent_mean, vae.config.latent_std = vae.latent_stats(sample)
-    vae.save(out)
-    return vae
+    return model.to("cpu").eval()
 
 
 def _without_statistics(config: VaeConfig) -> VaeConfig:
     """A copy of ``config`` with the statistics measured after training cleared (they are not
     settings)."""
-    return replace(config, kl_per_latent=None, latent_mean=None, latent_std=None)
+    return replace(
+        config, kl_per_latent=None, latent_mean=None, latent_std=None,
+        heldout_explained_variance=None,
+    )  # fmt: skip
 
 
-def _checkpoint(path: Path, vae: Vae, optim: torch.optim.Optimizer, iteration: int) -> None:
-    cfg = asdict(_without_statistics(vae.config))
+def _checkpoint(
+    path: Path,
+    model: torch.nn.Module,
+    optim: torch.optim.Optimizer,
+    iteration: int,
+    settings: dict[str, Any],
+) -> None:
     tmp = path.with_name(path.name + ".tmp")
     torch.save(
-        {"model": vae.state_dict(), "optim": optim.state_dict(), "iteration": iteration,
-         "model_config": cfg},
+        {"model": model.state_dict(), "optim": optim.state_dict(), "iteration": iteration,
+         "model_config": settings},
         tmp,
     )  # fmt: skip
     tmp.replace(path)
 
 
-def _append_log(path: Path, rows: list[str]) -> None:
+def _append_log(path: Path, header: str, rows: list[str]) -> None:
     new = not path.exists()
     with open(path, "a") as f:
         if new:
-            f.write("iteration,loss,recon,kl\n")
+            f.write(header + "\n")
         for r in rows:
             f.write(r + "\n")

@@ -28,10 +28,14 @@ from explore.campaigns.trial import (
     trial_resources,
 )
 
-# strategies that need a representation trained beforehand, and the flag that gives it
-VAE_FLAGS = {
+# strategies that need a representation trained beforehand, and the flag that gives it (the
+# key of ``run_campaign``'s ``models``, of ``MAKE_VAE`` and the ergo experiment flag)
+MODEL_FLAGS = {
     "rge-vae": "vae", "mge-vae": "vae", "rge-betavae": "betavae", "mge-betavae": "betavae",
+    "rge-sae": "sae", "mge-sae": "sae",
 }  # fmt: skip
+# the strategy option that names the model, per flag
+MODEL_OPTION = {"vae": "vae", "betavae": "vae", "sae": "sae"}
 
 
 def option_target(key: str) -> tuple[str | None, str]:
@@ -42,11 +46,12 @@ def option_target(key: str) -> tuple[str | None, str]:
 
 
 def strategy_options(
-    name: str, vae: Path | None, betavae: Path | None, common: dict[str, Any]
+    name: str, models: dict[str, Path | None], common: dict[str, Any]
 ) -> dict[str, Any]:
     """Options of one strategy in a campaign: every plain ``KEY`` of ``common`` (goal-exploration
-    strategies, not rpe) and every ``NAME:KEY`` for this strategy (e.g. ``rge-vae:latents``);
-    raises CampaignError naming the command that makes a missing VAE."""
+    strategies, not rpe), every ``NAME:KEY`` for this strategy (e.g. ``rge-vae:latents``) and
+    its model from ``models`` (flag -> path, ``MODEL_FLAGS``); raises CampaignError naming the
+    command that makes a missing model."""
     opts: dict[str, Any] = {}
     for key, value in common.items():
         target, option = option_target(key)
@@ -54,15 +59,15 @@ def strategy_options(
             opts[option] = value
     from explore.learner.strategies import MAKE_VAE
 
-    flag = VAE_FLAGS.get(name)
+    flag = MODEL_FLAGS.get(name)
     if flag is not None:
-        path = vae if flag == "vae" else betavae
+        path = models.get(flag)
         if path is None:
             raise CampaignError(f"{name} needs --{flag} PATH; make one with: {MAKE_VAE[flag]}")
         if not path.exists():
             raise CampaignError(f"--{flag} {path}: no such file or folder; make one with: "
                                 f"{MAKE_VAE[flag]}")  # fmt: skip
-        opts["vae"] = str(path.resolve())
+        opts[MODEL_OPTION[flag]] = str(path.resolve())
     return opts
 
 
@@ -121,8 +126,7 @@ def run_campaign(
     seeds: list[int],
     episodes: int,
     jobs: int | None = None,
-    vae: Path | None = None,
-    betavae: Path | None = None,
+    models: dict[str, Path | None] | None = None,
     options: dict[str, Any] | None = None,
     progress: bool = False,
     backend: str = "local",
@@ -131,7 +135,8 @@ def run_campaign(
     retries: int = DEFAULT_RETRIES,
 ) -> list[dict[str, Any]]:
     """Run every (strategy, seed) not finished yet on ``backend``; returns the summary rows
-    (and writes ``out/summary.csv``). Raises ``CampaignError`` (one line)."""
+    (and writes ``out/summary.csv``). ``models``: representation flag ("vae", "betavae",
+    "sae") -> model path, for the strategies that need one. Raises ``CampaignError``."""
     from calibration.store import CalibrationError, check_rig_id
     from explore.learner.strategies import STRATEGIES
 
@@ -159,7 +164,7 @@ def run_campaign(
     if ray_address is not None and backend != "ray":
         raise CampaignError("--ray-address goes with --backend ray")
     run = load_backend(backend)
-    opts = {s: strategy_options(s, vae, betavae, options or {}) for s in strategies}
+    opts = {s: strategy_options(s, models or {}, options or {}) for s in strategies}
     out = out.resolve()  # workers elsewhere see the same absolute path
     todo = plan_trials(out, strategies, seeds, episodes, opts, rig, campaign_id(out))
     if todo:

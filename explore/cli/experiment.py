@@ -57,6 +57,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     p.add_argument("--vae", type=Path, help="VAE model for the *-vae strategies")
     p.add_argument("--betavae", type=Path, help="beta-VAE model for the *-betavae strategies")
+    p.add_argument("--sae", type=Path, help="spatial autoencoder for the *-sae strategies")
     p.add_argument(
         "--option", action="append", default=[], metavar="KEY=JSON",
         help="strategy option for every goal-exploration run, e.g. bootstrap=100, or for one "
@@ -101,30 +102,14 @@ def _csv_list(text: str, what: str) -> list[str]:
 
 
 def parse_seeds(text: str) -> list[int]:
-    """``--seeds``: "8" -> [0..7] (a count, as in ``--seeds 8``), "0,2,5" -> [0, 2, 5],
-    "3-7" -> [3..7], "4-4" -> [4]; lists may mix both ("0,3-5"). Raises CliError."""
-    text = text.strip()
-    if "," not in text and "-" not in text:
-        try:
-            count = int(text)
-        except ValueError:
-            raise CliError(f"--seeds {text!r}: give a count, a list or a range") from None
-        if count < 1:
-            raise CliError(f"--seeds {count}: a count must be at least 1 (one seed S: S-S)")
-        return list(range(count))
-    seeds: list[int] = []
-    for item in _csv_list(text, "seeds"):
-        try:
-            if "-" in item:
-                lo, hi = (int(v) for v in item.split("-"))
-                if hi < lo:
-                    raise CliError(f"--seeds {item}: an empty range")
-                seeds.extend(range(lo, hi + 1))
-            else:
-                seeds.append(int(item))
-        except ValueError:  # also a negative seed: "-1" splits into "" and "1"
-            raise CliError(f"--seeds {item!r}: not a seed or a range of seeds") from None
-    return list(dict.fromkeys(seeds))  # each seed once, in the order given
+    """``--seeds`` (``vision.cli.parse_seeds``: a count, a list or ranges); a bad one is a
+    ``CliError``."""
+    from vision.cli import parse_seeds as parse
+
+    try:
+        return parse(text)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
 
 
 def run_experiment(args: argparse.Namespace) -> int:
@@ -143,7 +128,8 @@ def run_experiment(args: argparse.Namespace) -> int:
 
     try:
         rows = run_campaign(
-            args.out, strategies, seeds, args.episodes, args.jobs, args.vae, args.betavae,
+            args.out, strategies, seeds, args.episodes, args.jobs,
+            {"vae": args.vae, "betavae": args.betavae, "sae": args.sae},
             parse_key_values(args.option, "--option"), progress=not args.no_progress,
             backend=args.backend, ray_address=args.ray_address, rig=rig, retries=args.retries,
         )  # fmt: skip

@@ -11,7 +11,8 @@ truth for now; the tracker provides the same (x, y) on hardware). Two forms:
 - ``"polar"``: (r_n, t / pi), the paper's features, with its discontinuity at t = +-pi;
 - ``"wrap-safe"`` (default): (r_n, cos t, sin t), continuous all around the ring.
 
-Learned: the VAE's latent means of ``record.image`` (see ``LatentGoalSpace``).
+Learned: the VAE's latent means of ``record.image`` (see ``LatentGoalSpace``), or the image
+positions of a spatial autoencoder's features (``spatial_goal_space``).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import numpy as np
 
 from robot.spec import ERGO_JR_REACH_M
 from sim.models.make_scene import BALL_RADIUS, INNER_RADIUS, OUTER_RADIUS
+from vision.spatial_code import LIVE_FEATURE_STD, live_features
 
 # The ball's centre lies between these radii, m (the twin's ring between its kerb and its wall,
 # less the ball's radius: 0.13-0.17 m; sim/models/make_scene.py): r_n = (r - R_MID) / R_HALF maps
@@ -196,3 +198,23 @@ class LatentGoalSpace(GoalSpace):
 
     def context(self, record: Any) -> np.ndarray:
         raise NotImplementedError("latent contexts are tracked by the strategy (previous outcome)")
+
+
+def spatial_goal_space(
+    encode: Any, code_std: Sequence[float], modular: bool, threshold: float = LIVE_FEATURE_STD
+) -> LatentGoalSpace:
+    """The goal space of a spatial autoencoder: the image positions (x, y) of its live
+    features (``live_features``), one module per feature for MGE (object-centred: a feature
+    follows one thing), the whole for RGE. ``encode`` maps BGR uint8 images (n, 64, 64, 3) to
+    codes (n, 2 * features); the outcome keeps the live features' coordinates only."""
+    live = live_features(code_std, threshold)
+    keep = np.array([i for k in live for i in (2 * k, 2 * k + 1)])
+
+    def encode_live(images: np.ndarray) -> np.ndarray:
+        return np.asarray(encode(images))[:, keep]
+
+    space = LatentGoalSpace(encode_live, len(keep), modular=False)
+    if modular:
+        space.modules = [np.array([2 * i, 2 * i + 1]) for i in range(len(live))]
+    space.features = live
+    return space

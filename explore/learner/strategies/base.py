@@ -94,6 +94,8 @@ MAKE_VAE = {
     "--capacity-iterations 500 --iterations 700",
     "betavae": "ergo dataset outcomes --n 10000 --out data/outcomes.npz && "
     "ergo vae train --data data/outcomes.npz --out models/betavae --beta 4 --capacity 10",
+    "sae": "ergo dataset outcomes --n 3000 --out data/outcomes.npz && "
+    "ergo sae train --data data/outcomes.npz --out models/sae",
 }
 
 # name -> "module:Class"
@@ -110,6 +112,8 @@ STRATEGIES = LazyTable(
             "explore.learner.strategies.goal_exploration:ModularBetaLatentGoalExploration"
         ),
         "rge-online": "explore.learner.strategies.online:OnlineLatentGoalExploration",
+        "rge-sae": "explore.learner.strategies.goal_exploration:SpatialGoalExploration",
+        "mge-sae": "explore.learner.strategies.goal_exploration:ModularSpatialGoalExploration",
     },
     error=StrategyError,
 )

@@ -21,7 +21,12 @@ import numpy as np
 
 from explore.learner.dmp import N_PARAMS
 from explore.learner.experience import Experience, Observation
-from explore.learner.goal_spaces import EngineeredGoalSpace, GoalSpace, LatentGoalSpace
+from explore.learner.goal_spaces import (
+    EngineeredGoalSpace,
+    GoalSpace,
+    LatentGoalSpace,
+    spatial_goal_space,
+)
 from explore.learner.interest import RANDOM_CHOICE, WINDOW, ModuleInterest
 from explore.learner.meta_policy import MetaPolicy
 from explore.learner.strategies.base import MAKE_VAE, Proposal, Strategy, StrategyError
@@ -307,4 +312,46 @@ class ModularLatentGoalExploration(LatentGoalExploration):
 
 class ModularBetaLatentGoalExploration(LatentGoalExploration):
     name = "mge-betavae"
+    modular_default = True
+
+
+@dataclass(frozen=True)
+class SpatialOptions(GoalExplorationOptions):
+    """Goal-exploration options, and ``sae``: the model folder from ``ergo sae train``
+    (required)."""
+
+    sae: str | None = None
+
+
+class SpatialGoalExploration(GoalExploration):
+    """Goal exploration in the image positions of a spatial autoencoder's features (options:
+    ``SpatialOptions``): its live features' (x, y), the whole code for RGE, one module per
+    feature for MGE. Goals are uniform in the bounds reached (the code has no prior to sample
+    from); the context is the previous outcome's code."""
+
+    name = "rge-sae"
+    Options = SpatialOptions
+
+    def make_space(self) -> GoalSpace:
+        path = self.settings.sae
+        if not path:
+            raise StrategyError(
+                f"{self.name} needs option sae=PATH (make one with: {MAKE_VAE['sae']})"
+            )
+        from vision.spatial_ae import load_sae
+        from vision.vae import VaeError
+
+        try:
+            sae = load_sae(path)
+        except (VaeError, FileNotFoundError) as exc:
+            raise StrategyError(f"{self.name}: {exc}") from exc
+        if sae.config.code_std is None:
+            raise StrategyError(f"{path} has no code statistics: train it with `ergo sae train`")
+        if self.goal_sampling == "normal":
+            raise StrategyError(f"{self.name}: goals must be uniform (the code has no prior)")
+        return spatial_goal_space(sae.encode_bgr, sae.config.code_std, self.modular)
+
+
+class ModularSpatialGoalExploration(SpatialGoalExploration):
+    name = "mge-sae"
     modular_default = True
