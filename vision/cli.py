@@ -140,34 +140,16 @@ def _error(message: str) -> int:
     return 2
 
 
-def parse_hsv(text: str):
-    """``"27,45,70:38,255,255"`` -> ``HSVRange``."""
-    from vision.tracker import HSVRange
-
-    try:
-        lo, hi = text.split(":")
-        return HSVRange(tuple(int(v) for v in lo.split(",")), tuple(int(v) for v in hi.split(",")))
-    except ValueError as exc:
-        raise ValueError(f"bad --hsv {text!r} ({exc}): expected H,S,V:H,S,V") from None
-
-
-def load_arena_file(path: Path):
-    """(ArenaModel, list of HSVRange or None, ball radius m or None) from an arena file.
-
-    The file's format belongs to ``calibration.store`` (which validates it when writing);
-    only its ``data`` object is read here, since ``vision`` imports no other package.
-    """
-    from vision.rectify import ArenaModel
-    from vision.tracker import HSVRange
-
+def _read_arena_data(path: Path) -> dict:
+    """The ``data`` object of an arena calibration file (``calibration.store`` writes and
+    validates the file; ``vision`` imports no other package, so only that object is read)."""
     try:
         data = json.loads(path.read_text())["data"]
-        model = ArenaModel.from_dict(data)
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise ValueError(f"cannot read arena calibration {path}: {exc}") from None
-    ranges = data.get("ball_hsv_ranges")
-    ranges = [HSVRange.from_list(r) for r in ranges] if ranges else None
-    return model, ranges, data.get("ball_radius_m")
+    except OSError as exc:
+        raise ValueError(str(exc)) from None
+    if not isinstance(data, dict):
+        raise TypeError(f"its data is a {type(data).__name__}, not an object")
+    return data
 
 
 def _find_cameras(args: argparse.Namespace) -> int:
@@ -200,21 +182,23 @@ def _track(args: argparse.Namespace) -> int:
     import dataclasses
 
     from vision.camera import CameraError, make_camera
-    from vision.tracker import BallTracker, TrackerConfig
+    from vision.rectify import ArenaModel
+    from vision.tracker import BallTracker, HSVRange, TrackerConfig, tracker_config_from_arena
 
-    arena, ranges, ball_radius = None, None, None
-    try:
-        if args.arena is not None:
-            arena, ranges, ball_radius = load_arena_file(args.arena)
-        if args.hsv:
-            ranges = [parse_hsv(h) for h in args.hsv]
-    except ValueError as exc:
-        return _error(str(exc))
-    config = TrackerConfig()
-    if ranges:
-        config = dataclasses.replace(config, ranges=tuple(ranges))
-    if ball_radius:
-        config = dataclasses.replace(config, ball_radius_m=float(ball_radius))
+    arena, config = None, TrackerConfig()
+    if args.arena is not None:
+        try:
+            data = _read_arena_data(args.arena)
+            arena = ArenaModel.from_dict(data)
+            config = tracker_config_from_arena(data)
+        except (ValueError, KeyError, TypeError) as exc:
+            return _error(f"cannot read arena calibration {args.arena}: {exc}")
+    if args.hsv:
+        try:
+            ranges = tuple(HSVRange.parse(h) for h in args.hsv)
+        except ValueError as exc:
+            return _error(f"--hsv: {exc}")
+        config = dataclasses.replace(config, ranges=ranges)
     tracker = BallTracker(config, arena)
     try:
         camera = make_camera(args.camera, args.width, args.height, args.fps, args.fourcc)

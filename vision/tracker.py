@@ -59,6 +59,15 @@ class HSVRange:
         lo, hi = value
         return cls(tuple(lo), tuple(hi))
 
+    @classmethod
+    def parse(cls, text: str) -> HSVRange:
+        """``"27,45,70:38,255,255"`` (lower:upper) -> ``HSVRange``; ``ValueError`` if not."""
+        try:
+            lo, hi = text.split(":")
+            return cls(tuple(int(v) for v in lo.split(",")), tuple(int(v) for v in hi.split(",")))
+        except ValueError as exc:
+            raise ValueError(f"bad HSV range {text!r} ({exc}): expected H,S,V:H,S,V") from None
+
 
 @dataclass(frozen=True)
 class TrackerConfig:
@@ -330,3 +339,19 @@ class BallTracker:
                 reason=f"outside the arena (r {r * 1000:.0f} mm > {limit * 1000:.0f} mm)",
             )
         return replace(obs, xy=(float(xy[0]), float(xy[1])), r=float(r), theta=float(theta))
+
+
+def tracker_config_from_arena(
+    data: dict[str, Any], base: TrackerConfig | None = None
+) -> TrackerConfig:
+    """``base`` (default ``TrackerConfig()``) with the ball colour ranges and radius an arena
+    calibration's ``data`` holds, where it holds them. The file's format belongs to
+    ``calibration.store``; only this object is read here (``vision`` imports no other
+    package). Its arena is ``ArenaModel.from_dict(data)``."""
+    config = base if base is not None else TrackerConfig()
+    if data.get("ball_hsv_ranges"):
+        ranges = tuple(HSVRange.from_list(r) for r in data["ball_hsv_ranges"])
+        config = replace(config, ranges=ranges)
+    if data.get("ball_radius_m"):
+        config = replace(config, ball_radius_m=float(data["ball_radius_m"]))
+    return config

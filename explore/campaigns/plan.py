@@ -20,13 +20,13 @@ from explore.campaigns.backends import DEFAULT_RETRIES, BackendSettings, load_ba
 from explore.campaigns.stats import final_cells, write_summary
 from explore.campaigns.trial import (
     CAMPAIGN_FILE,
-    TWIN_RIG,
     CampaignError,
     Trial,
     is_physical,
     read_json,
     trial_resources,
 )
+from explore.rigs.rig import RigConfig
 
 # strategies that need a representation trained beforehand, and the flag that gives it (the
 # key of ``run_campaign``'s ``models``, of ``MAKE_VAE`` and the ergo experiment flag)
@@ -150,7 +150,7 @@ def run_campaign(
                 f"--option {key}: {target!r} is not a strategy of this campaign "
                 f"({', '.join(strategies)})"
             )
-    rig = dict(TWIN_RIG) if rig is None else rig
+    rig = RigConfig().to_dict() if rig is None else rig
     if is_physical(rig):
         try:
             check_rig_id(rig["rig_id"])

@@ -28,14 +28,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from explore.rigs import rig as rigs
+from explore.rigs.rig import RigConfig
+
 CAMPAIGN_FILE = "campaign.json"
 TRIAL_FILE = "trial.json"
 LOCK_FILE = "trial.lock"
 
-# rigs with nothing physical attached: any host can run them (explore/rigs/rig.py RIGS)
-VIRTUAL_RIGS = frozenset({"sim"})
 RIG_RESOURCE_PREFIX = "rig:"  # Ray custom resource of a physical rig: "rig:<rig_id>"
-TWIN_RIG: dict[str, Any] = {"name": "sim", "rig_id": "twin", "options": {}}
 
 
 class CampaignError(RuntimeError):
@@ -64,7 +64,7 @@ class Trial:
     seed: int
     episodes: int
     options: dict[str, Any] = field(default_factory=dict)
-    rig: dict[str, Any] = field(default_factory=lambda: dict(TWIN_RIG))
+    rig: dict[str, Any] = field(default_factory=lambda: RigConfig().to_dict())
     campaign_id: str | None = None
     resources: dict[str, float] = field(default_factory=dict)
 
@@ -104,8 +104,12 @@ class TrialResult:
 
 # ---- rigs as resources -----------------------------------------------------------------------
 def is_physical(rig: dict[str, Any]) -> bool:
-    """Whether a trial on this rig needs a real arm (a host that has it)."""
-    return rig["name"] not in VIRTUAL_RIGS
+    """Whether a trial on this rig needs a real arm (a host that has it): the rig module's
+    ``PHYSICAL``; a ``CampaignError`` for an unknown rig."""
+    try:
+        return rigs.is_physical(rig["name"])
+    except rigs.RigError as exc:
+        raise CampaignError(str(exc)) from None
 
 
 def rig_resource(rig_id: str) -> str:

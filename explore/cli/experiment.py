@@ -18,7 +18,7 @@ from pathlib import Path
 from explore.campaigns.backends import BACKENDS, DEFAULT_RETRIES
 from explore.campaigns.trial import CampaignError
 from explore.cli import CliError
-from explore.cli.explore import add_rig_arguments, parse_key_values, rig_options
+from explore.cli.explore import add_rig_arguments, parse_key_values, rig_of
 from sim import RENDER_QUALITIES
 
 
@@ -121,8 +121,7 @@ def run_experiment(args: argparse.Namespace) -> int:
         raise CliError(f"--retries must be at least 0, got {args.retries}")
     strategies = _csv_list(args.strategies, "strategies")
     seeds = parse_seeds(args.seeds)
-    rig = {"name": args.rig or "sim", "rig_id": args.rig_id or "twin",
-           "options": rig_options(args)}  # fmt: skip
+    rig = rig_of(args).to_dict()
     from explore.campaigns.plan import run_campaign
     from explore.campaigns.stats import format_table
 

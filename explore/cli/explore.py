@@ -14,8 +14,6 @@ from explore.cli.rerun_flags import add_rerun_arguments
 from explore.rigs.rig import RIGS
 from robot.bus_flags import add_bus_arguments, bus_flags
 
-DEFAULT_RIG, DEFAULT_RIG_ID = "sim", "twin"
-
 
 def add_rig_arguments(p: argparse.ArgumentParser) -> None:
     """Flags that choose and configure a rig (shared by the commands that drive one)."""
@@ -42,7 +40,7 @@ def rig_of(args: argparse.Namespace) -> Any:
     """The ``RigConfig`` the rig flags describe (``--rig``, ``--rig-id``, options)."""
     from explore.rigs.rig import RigConfig
 
-    return RigConfig(args.rig or DEFAULT_RIG, args.rig_id or DEFAULT_RIG_ID, rig_options(args))
+    return RigConfig(args.rig or RigConfig.name, args.rig_id or RigConfig.rig_id, rig_options(args))
 
 
 def parse_key_values(items: list[str], flag: str) -> dict[str, Any]:

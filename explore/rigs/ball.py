@@ -65,16 +65,9 @@ def calibrated_locator(rig_id: str, directory: str | None = None) -> BallLocator
 def locator_from_calibration(data: dict[str, Any]) -> BallLocator:
     """The tracker from an ``arena`` calibration's data (its model and ball colour ranges)."""
     from vision.rectify import ArenaModel
-    from vision.tracker import BALL_RADIUS_M, HSVRange, TrackerConfig
+    from vision.tracker import tracker_config_from_arena
 
-    arena = ArenaModel.from_dict(data)
-    config = None
-    if data.get("ball_hsv_ranges"):
-        ranges = tuple(HSVRange.from_list(r) for r in data["ball_hsv_ranges"])
-        config = TrackerConfig(
-            ranges=ranges, ball_radius_m=float(data.get("ball_radius_m", BALL_RADIUS_M))
-        )
-    return tracker_locator(arena, config)
+    return tracker_locator(ArenaModel.from_dict(data), tracker_config_from_arena(data))
 
 
 def rig_ball_locator(config: Any) -> BallLocator | None:

@@ -15,6 +15,7 @@ from explore.rigs.rig import Rig, RigConfig, RigError
 # a shared machine, and gaps over 150 ms were seen with the camera rendering under load (a
 # guess with margin).
 PTY_HEARTBEAT_MS = 500
+PHYSICAL = True  # an arm on a host: one trial at a time, on the host that has it
 
 
 @dataclass(frozen=True)

@@ -13,6 +13,7 @@ from explore.rigs.rig import Rig, RigConfig, RigError
 from robot.bus_flags import DEFAULT_BAUD
 
 POSITIVE = "a positive integer"
+PHYSICAL = True  # an arm on a host: one trial at a time, on the host that has it
 
 
 @dataclass(frozen=True)

@@ -4,8 +4,8 @@ for ground truth).
 Rigs are built by name from ``RIGS``, a table of name -> module imported lazily
 (``robot.registry.LazyTable``), so a user without a CAN adapter library never imports it. Each
 rig module defines its typed ``Options`` (a dataclass: unknown keys and wrong types are refused
-by ``explore.options.parse_options``) and ``make_rig(config, options) -> Rig``, which returns
-an unconnected rig.
+by ``explore.options.parse_options``), ``make_rig(config, options) -> Rig``, which returns
+an unconnected rig, and ``PHYSICAL`` (a real arm, or nothing physical attached).
 """
 
 from __future__ import annotations
@@ -28,7 +28,8 @@ class RigError(RuntimeError):
     """A rig could not be built or connected."""
 
 
-# name -> the module with its ``Options`` and ``make_rig``
+# name -> the module with its ``Options``, ``make_rig`` and ``PHYSICAL`` (whether a real arm is
+# attached, which only the host that has it can run)
 RIGS = LazyTable(
     "rig",
     {
@@ -109,6 +110,11 @@ def rig_options(config: RigConfig) -> Any:
         return parse_options(module.Options, config.options, f"rig {config.name!r}")
     except OptionsError as exc:
         raise RigError(str(exc)) from None
+
+
+def is_physical(name: str) -> bool:
+    """Whether the rig ``name`` drives a real arm (``RigError`` for an unknown rig)."""
+    return bool(RIGS.load(name).PHYSICAL)
 
 
 def make_rig(config: RigConfig) -> Rig:

@@ -18,6 +18,7 @@ from sim.twin import Twin
 # render takes seconds (guesses, on the safe side).
 RENDER_SIDE = (16, 2048)
 RENDER_SIZE = f"[height, width], integers in [{RENDER_SIDE[0]}, {RENDER_SIDE[1]}]"
+PHYSICAL = False  # nothing physical attached: any host can run it
 
 
 @dataclass(frozen=True)

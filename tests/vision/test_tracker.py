@@ -204,3 +204,22 @@ def test_default_ball_radius_is_the_twins():
     from vision.tracker import BALL_RADIUS_M
 
     assert BALL_RADIUS_M == make_scene.BALL_RADIUS
+
+
+def test_hsv_ranges_parse_from_text_in_one_line_errors():
+    assert HSVRange.parse("27,45,70:38,255,255") == HSVRange((27, 45, 70), (38, 255, 255))
+    for bad in ("27,45,70", "27,45:38,255,255", "a,b,c:1,2,3", "30,0,0:20,0,0"):
+        with pytest.raises(ValueError) as info:
+            HSVRange.parse(bad)
+        assert "\n" not in str(info.value)
+
+
+def test_an_arena_calibration_gives_the_tracker_its_ball_colour_and_radius():
+    from vision.tracker import tracker_config_from_arena
+
+    base = TrackerConfig()
+    assert tracker_config_from_arena({}) == base  # nothing in the file: the defaults
+    data = {"ball_hsv_ranges": [[[0, 50, 50], [8, 255, 255]]], "ball_radius_m": 0.025}
+    config = tracker_config_from_arena(data)
+    assert config.ranges == (HSVRange((0, 50, 50), (8, 255, 255)),)
+    assert config.ball_radius_m == 0.025 and config.open_px == base.open_px
