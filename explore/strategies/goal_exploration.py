@@ -129,7 +129,7 @@ class GoalExploration(Strategy):
         assert self.space is not None
         if isinstance(self.space, LatentGoalSpace):
             return self._last_latent  # type: ignore[return-value]
-        return self.space.context_of_ball(context.ball)  # type: ignore[attr-defined]
+        return self.space.context_of(context.ball, context.distractor)  # type: ignore[attr-defined]
 
     def update(self, record: EpisodeRecord) -> None:
         self.n_seen += 1
@@ -208,18 +208,23 @@ class EngineeredGoalExploration(GoalExploration):
     """Goal exploration on the ball's engineered polar features (EFR).
 
     Extra options: ``form`` ("wrap-safe" (default) or "polar"); ``hand_module`` (MGE: the
-    tool tip as a second module; default True when modular).
+    tool tip as a module; default True when modular); ``distractor`` (the distractor's
+    features as a module and in the context, for a rig with ``distractor=walk``; default
+    False).
     """
 
     name = "rge-efr"
 
     def extra_options(self) -> tuple[str, ...]:
-        return ("form", "hand_module")
+        return ("form", "hand_module", "distractor")
 
     def make_space(self) -> GoalSpace:
         form = self.options.get("form", "wrap-safe")
         try:
-            return EngineeredGoalSpace(form, bool(self.options.get("hand_module", self.modular)))
+            return EngineeredGoalSpace(
+                form, bool(self.options.get("hand_module", self.modular)),
+                bool(self.options.get("distractor", False)),
+            )  # fmt: skip
         except ValueError as exc:
             raise StrategyError(f"{self.name}: {exc}") from exc
 
