@@ -24,6 +24,7 @@ import numpy as np  # noqa: E402
 
 MODELS = Path(__file__).parent / "models"
 SCENE = MODELS / "scene.xml"
+SCENE_DISTRACTOR = MODELS / "scene_distractor.xml"  # the same with a second ball (make_scene.py)
 JOINTS = ERGO_JR_JOINTS  # the MJCF's joint and actuator names (sim/models/ergo_jr.xml)
 # MuJoCo's default visual quality (MJCF reference, <visual><quality>): what the scene rendered
 # with before it set its own (sim/models/make_scene.py).
@@ -81,6 +82,9 @@ class Twin:
         self._ball_qpos = int(ball.qposadr[0])
         self._ball_qvel = int(ball.dofadr[0])
         self.ball_radius = float(m.geom("ball").size[0])
+        # the distractor's mocap index, or None when the scene has none
+        ids = [i for i in range(m.nbody) if m.body(i).name == "distractor"]
+        self._distractor = int(m.body(ids[0]).mocapid[0]) if ids else None
         self._tip_site = m.site("tip").id
         self._kp = self.model.actuator_gainprm[self._act_idx, 0].copy()
         self._bias = self.model.actuator_biasprm[self._act_idx, :3].copy()
@@ -119,6 +123,24 @@ class Twin:
             if ball_xy is not None:
                 self.data.qpos[q : q + 2] = ball_xy
             self.data.qvel[self._ball_qvel : self._ball_qvel + 6] = 0.0
+            mujoco.mj_forward(self.model, self.data)
+
+    @property
+    def has_distractor(self) -> bool:
+        return self._distractor is not None
+
+    def distractor_position(self) -> np.ndarray:
+        """Distractor centre, shape (3,), m; NaN when the scene has none."""
+        if self._distractor is None:
+            return np.full(3, np.nan)
+        return self.data.mocap_pos[self._distractor].copy()
+
+    def place_distractor(self, xy: tuple[float, float] | np.ndarray) -> None:
+        """Put the distractor at ``xy`` (m) on the floor (it collides with nothing)."""
+        if self._distractor is None:
+            raise TwinError("this scene has no distractor (use SCENE_DISTRACTOR)")
+        with self.lock:
+            self.data.mocap_pos[self._distractor, :2] = xy
             mujoco.mj_forward(self.model, self.data)
 
     def get_state(self) -> np.ndarray:

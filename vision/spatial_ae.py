@@ -35,6 +35,9 @@ from vision.vae import VaeError, few_threads_for, to_tensor
 FEATURES = 8  # feature maps, a 16-D code (guess, tried: see docs/results.md)
 CHANNELS = 16  # convolution channels (guess; 32 trained 4x slower for the same code)
 HIDDEN = 256  # decoder's dense layer (guess, the VAE's width)
+DECODERS = ("dense", "gaussian")
+GAUSS_SIZE = 16  # side of the gaussian decoder's keypoint maps, pixels
+GAUSS_SIGMA = 1.5  # their blobs' standard deviation, pixels of that map (6 px of the image)
 SHARPNESS = 5.0  # initial multiplier of the standardised maps in the softmax (guess, tried)
 MODEL_FILE, CONFIG_FILE = "sae.pt", "sae.json"
 
@@ -55,6 +58,7 @@ class SaeConfig:
     features: int = FEATURES
     channels: int = CHANNELS
     hidden: int = HIDDEN
+    decoder: str = "dense"
     code_mean: list[float] | None = field(default=None)
     code_std: list[float] | None = field(default=None)
     heldout_explained_variance: float | None = None
@@ -66,11 +70,14 @@ class SaeConfig:
     def validate(self) -> None:
         if self.features < 1 or self.channels < 1 or self.hidden < 1:
             raise VaeError("features, channels and hidden must be positive")
+        if self.decoder not in DECODERS:
+            raise VaeError(f"decoder must be one of {', '.join(DECODERS)}, got {self.decoder!r}")
 
-    def settings(self) -> dict[str, int]:
+    def settings(self) -> dict[str, int | str]:
         """What defines the model (the statistics left out): a checkpoint resumes only with
         the same settings."""
-        return {"features": self.features, "channels": self.channels, "hidden": self.hidden}
+        return {"features": self.features, "channels": self.channels, "hidden": self.hidden,
+                "decoder": self.decoder}  # fmt: skip
 
 
 def spatial_softmax_xy(maps: torch.Tensor, sharpness: torch.Tensor) -> torch.Tensor:
@@ -100,6 +107,18 @@ def spatial_softmax_xy(maps: torch.Tensor, sharpness: torch.Tensor) -> torch.Ten
     return torch.stack([x, y], dim=-1).reshape(n, 2 * k)
 
 
+def keypoint_maps(code: torch.Tensor, size: int, sigma: float) -> torch.Tensor:
+    """A gaussian blob at each code position: code (n, 2k) in [-1, 1] -> maps (n, k, size,
+    size), blobs of standard deviation ``sigma`` pixels of the map."""
+    n = code.shape[0]
+    xy = code.view(n, -1, 2)
+    grid = torch.linspace(-1.0, 1.0, size, device=code.device, dtype=code.dtype)
+    s = 2.0 * sigma / (size - 1)  # sigma in [-1, 1] units
+    gx = torch.exp(-((grid.view(1, 1, size) - xy[..., :1]) ** 2) / (2 * s * s))  # (n, k, W)
+    gy = torch.exp(-((grid.view(1, 1, size) - xy[..., 1:]) ** 2) / (2 * s * s))  # (n, k, H)
+    return gy.unsqueeze(-1) * gx.unsqueeze(-2)
+
+
 class SpatialAutoencoder(nn.Module):
     """Conv features -> spatial softmax -> (x, y) per map; a dense + transposed-conv decoder
     reconstructs the image from the code (Bernoulli logits, as the VAE's)."""
@@ -116,12 +135,17 @@ class SpatialAutoencoder(nn.Module):
         )  # fmt: skip
         self.log_sharpness = nn.Parameter(torch.full((k,), math.log(SHARPNESS)))
         self.register_buffer("background", torch.zeros(3, 64, 64))
-        self.decoder_fc = nn.Sequential(
-            nn.Linear(2 * k, h), nn.ReLU(),
-            nn.Linear(h, c * 8 * 8), nn.ReLU(),
-        )  # fmt: skip
+        if self.config.decoder == "dense":
+            self.decoder_fc = nn.Sequential(
+                nn.Linear(2 * k, h), nn.ReLU(),
+                nn.Linear(h, c * 8 * 8), nn.ReLU(),
+            )  # fmt: skip
+            first = nn.ConvTranspose2d(c, c, 4, 2, 1)  # 8 -> 16
+        else:
+            self.decoder_fc = None
+            first = nn.Conv2d(k, c, 3, 1, 1)  # keypoint maps, 16 x 16
         self.decoder_conv = nn.Sequential(
-            nn.ConvTranspose2d(c, c, 4, 2, 1), nn.ReLU(),  # 8 -> 16
+            first, nn.ReLU(),
             nn.ConvTranspose2d(c, c, 4, 2, 1), nn.ReLU(),  # 16 -> 32
             nn.ConvTranspose2d(c, 3, 4, 2, 1),  # 32 -> 64
         )  # fmt: skip
@@ -134,7 +158,9 @@ class SpatialAutoencoder(nn.Module):
         """code (n, 2 * features) -> pixel logits (n, 3, 64, 64): the background's logits (the
         training images' mean, ``set_background``) plus what the code draws over it."""
         c = self.config.channels
-        return self.background + self.decoder_conv(self.decoder_fc(code).view(-1, c, 8, 8))
+        if self.decoder_fc is not None:
+            return self.background + self.decoder_conv(self.decoder_fc(code).view(-1, c, 8, 8))
+        return self.background + self.decoder_conv(keypoint_maps(code, GAUSS_SIZE, GAUSS_SIGMA))
 
     def set_background(self, mean_rgb: torch.Tensor) -> None:
         """The mean training image, (3, 64, 64) RGB in [0, 1]: the decoder draws over it, so

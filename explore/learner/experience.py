@@ -8,7 +8,7 @@ can be explored without a special case in the learner.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
@@ -22,11 +22,14 @@ class Observation:
         ball: ball centre (x, y) in metres, shape (2,); NaN when not seen.
         image: square observation, shape (obs_size, obs_size, 3), BGR uint8; None if not rendered.
         frame: full overhead frame, shape (H, W, 3), BGR uint8; None if not rendered.
+        distractor: the distractor's centre (x, y) in metres, shape (2,); NaN without one (the
+            twin's ground truth; no tracker follows it yet).
     """
 
     ball: np.ndarray
     image: np.ndarray | None = None
     frame: np.ndarray | None = None
+    distractor: np.ndarray = field(default_factory=lambda: np.full(2, np.nan))
 
 
 class Experience(Protocol):

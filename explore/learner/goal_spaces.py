@@ -81,32 +81,55 @@ class GoalSpace:
 
 
 class EngineeredGoalSpace(GoalSpace):
-    """Ball polar features; optionally a second module, the arm's final tool tip (x, y)/REACH.
+    """Ball polar features; optionally the distractor's, and the arm's final tool tip (x, y) /
+    REACH, each as a module of its own.
 
     Args:
         form: ``"wrap-safe"`` (r_n, cos t, sin t) or ``"polar"`` (r_n, t / pi).
         hand_module: add the end effector as a module (for MGE-EFR: one module per object, as
             the paper's engineered modules). Records without a known tool tip skip it.
+        distractor: add the distractor's features (same form) as a module, after the ball's,
+            and to the context: the engineered description of a scene with two balls.
+            Records without a distractor seen skip that module.
+
+    Outcome: [ball, distractor (if), hand (if)]; context: [ball, distractor (if)] before the
+    move.
     """
 
-    def __init__(self, form: str = "wrap-safe", hand_module: bool = False) -> None:
+    def __init__(
+        self, form: str = "wrap-safe", hand_module: bool = False, distractor: bool = False
+    ) -> None:
         if form not in POLAR_FORMS:
             raise ValueError(f"unknown polar form {form!r}; choose one of {', '.join(POLAR_FORMS)}")
         self.form = form
         self.features = wrap_safe_features if form == "wrap-safe" else polar_features
         self.ball_dim = 3 if form == "wrap-safe" else 2
         self.hand_module = hand_module
-        self.dim = self.ball_dim + (2 if hand_module else 0)
-        self.context_dim = self.ball_dim
-        self.modules = [np.arange(self.ball_dim)]
+        self.distractor = distractor
+        objects = 2 if distractor else 1
+        self.context_dim = objects * self.ball_dim
+        self.dim = self.context_dim + (2 if hand_module else 0)
+        self.modules = [
+            np.arange(k * self.ball_dim, (k + 1) * self.ball_dim) for k in range(objects)
+        ]
         if hand_module:
-            self.modules.append(np.arange(self.ball_dim, self.dim))
+            self.modules.append(np.arange(self.context_dim, self.dim))
+
+    def _objects(self, ball: np.ndarray, distractor: np.ndarray | None) -> np.ndarray:
+        """Features of the scene's objects (ball, distractor if this space has one): NaN
+        where not seen."""
+        o = self.features(np.asarray(ball, dtype=float)[:2])
+        if not self.distractor:
+            return o
+        d = np.full(2, np.nan) if distractor is None else np.asarray(distractor, dtype=float)
+        return np.concatenate([o, self.features(d[:2])])
 
     def outcome(self, record: Any) -> np.ndarray | None:
         ball = np.asarray(record.ball, dtype=float)[:2]
         if not np.all(np.isfinite(ball)):
             return None
-        o = self.features(ball)
+        # a NaN distractor: its module skips the record
+        o = self._objects(ball, getattr(record, "distractor", None))
         if self.hand_module:
             tip = np.asarray(record.end_effector, dtype=float)[-1, :2] / REACH
             o = np.concatenate([o, tip])  # NaN tip -> the hand module skips this record
@@ -117,14 +140,13 @@ class EngineeredGoalSpace(GoalSpace):
         return [None if v is None or not np.all(np.isfinite(v)) else v for v in out]
 
     def context(self, record: Any) -> np.ndarray:
-        return self.context_of_ball(record.context_ball)
+        return self.context_of(record.context_ball, getattr(record, "context_distractor", None))
 
-    def context_of_ball(self, ball: np.ndarray) -> np.ndarray:
-        """Context from a ball position (m), shape (context_dim,); zeros when not seen."""
-        ball = np.asarray(ball, dtype=float)[:2]
-        if not np.all(np.isfinite(ball)):
-            return np.zeros(self.context_dim)
-        return self.features(ball)
+    def context_of(self, ball: np.ndarray, distractor: np.ndarray | None) -> np.ndarray:
+        """Context from the ball's and the distractor's positions (m), shape (context_dim,);
+        zeros for an object not seen."""
+        c = self._objects(ball, distractor)
+        return np.where(np.isfinite(c), c, 0.0)
 
 
 def kl_ranked_modules(kl_per_latent: Sequence[float], size: int = 2) -> list[np.ndarray]:

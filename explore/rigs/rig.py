@@ -74,8 +74,9 @@ class Rig:
     twin: Any = None
     #: frame (H, W, 3) BGR -> ball (x, y) m or NaN; None on the twin = its ground truth
     ball_locator: Callable[[np.ndarray], np.ndarray] | None = None
-    #: called with the arm at rest before each episode's context is observed (twin: ball reset)
-    before_episode: Callable[[], None] | None = None
+    #: called with the arm at rest before each episode's context is observed, with the
+    #: episode's own random stream for the scene (twin: ball reset, the distractor's walk)
+    before_episode: Callable[[np.random.Generator], None] | None = None
     #: side (pixels) -> the square observation (side, side, 3) BGR uint8, rendered directly
     #: at that size; set where nothing needs the full frame (the twin with its ground truth)
     square_view: Callable[[int], np.ndarray] | None = None

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Literal
+
+import numpy as np
 
 from explore.options import BadOption
 from explore.rigs.ball import tracker_locator, twin_arena_model
@@ -12,12 +15,20 @@ from explore.rigs.rig import Rig, RigConfig
 from sim import RENDER_QUALITIES
 from sim.arm import SimArm
 from sim.camera import SimCamera
-from sim.twin import Twin
+from sim.twin import SCENE, SCENE_DISTRACTOR, Twin
 
 # Rendered frame side, pixels: below 16 the tracker has nothing to see, above 2048 a software
 # render takes seconds (guesses, on the safe side).
 RENDER_SIDE = (16, 2048)
 RENDER_SIZE = f"[height, width], integers in [{RENDER_SIDE[0]}, {RENDER_SIDE[1]}]"
+# The distractor's walk before each episode, on the ring where the ball's centre lies
+# (explore/learner/goal_spaces.py R_MIN..R_MAX): its angle takes a N(0, step) step, 0.5 rad by
+# default (75 mm at the ring's middle, about 6 of the metric's cells), its radius a N(0, 1 cm)
+# step reflected into the ring. Guesses: it wanders all round within some 100 episodes, and one
+# episode's move is a fraction of the ring, as ArmBalls' distractor moves a fraction of its
+# square per episode (docs/armballs.md).
+DISTRACTOR_STEP = 0.5  # rad
+DISTRACTOR_RADIUS_STEP = 0.01  # m
 PHYSICAL = False  # nothing physical attached: any host can run it
 
 
@@ -36,17 +47,30 @@ class Options:
         render_quality: ``chosen`` (default: the scene's own settings, docs/twin.md) or
             ``legacy`` (MuJoCo's default quality and full frames reduced to the observation,
             the twin's images before 2026-12-01); ``sim.RENDER_QUALITIES``.
+        distractor: ``none`` (default) or ``walk``: a second ball (red) that the arm cannot
+            move, taking a random step on the ball's ring before every episode
+            (``distractor_walk``).
+        distractor_step: the standard deviation of the walk's angle step, rad, in [0, pi]
+            (default ``DISTRACTOR_STEP``).
     """
 
     render_size: tuple[int, int] = field(default=(240, 240), metadata={"expected": RENDER_SIZE})
     ball: Literal["truth", "tracker"] = "truth"
     ball_reset: Literal["none", "start"] = "none"
     render_quality: str = "chosen"
+    distractor: Literal["none", "walk"] = "none"
+    distractor_step: float = field(
+        default=DISTRACTOR_STEP, metadata={"expected": "radians in [0, pi]"}
+    )
 
     def __post_init__(self) -> None:
         lo, hi = RENDER_SIDE
         if not all(lo <= side <= hi for side in self.render_size):
             raise BadOption("render_size", f"must be {RENDER_SIZE}, got {list(self.render_size)}")
+        if not 0 <= self.distractor_step <= math.pi:
+            raise BadOption(
+                "distractor_step", f"must be radians in [0, pi], got {self.distractor_step}"
+            )
         if self.render_quality not in RENDER_QUALITIES:
             raise BadOption(
                 "render_quality",
@@ -56,13 +80,24 @@ class Options:
 
 def make_rig(config: RigConfig, options: Options) -> Rig:
     """The twin rig (unconnected) with ``options``."""
-    twin = Twin(render_size=options.render_size, render_quality=options.render_quality)
+    walk = options.distractor == "walk"
+    scene = SCENE_DISTRACTOR if walk else SCENE
+    twin = Twin(scene, render_size=options.render_size, render_quality=options.render_quality)
     camera = SimCamera(twin)
     locator = tracker_locator(twin_arena_model(camera)) if options.ball == "tracker" else None
+    reset = options.ball_reset == "start"
+
+    def before_episode(rng: np.random.Generator) -> None:
+        if reset:
+            twin.place_ball()
+        if walk:
+            xy = twin.distractor_position()[:2]
+            twin.place_distractor(distractor_walk(xy, options.distractor_step, rng))
+
     return Rig(
         arm=SimArm(twin), camera=camera, clock=TwinClock(twin), config=config, twin=twin,
         ball_locator=locator,
-        before_episode=twin.place_ball if options.ball_reset == "start" else None,
+        before_episode=before_episode if reset or walk else None,
         # with the ground truth, the outcome image is all a frame is for: render it at its size
         square_view=(
             (lambda side: camera.read_square(side).image)
@@ -70,3 +105,14 @@ def make_rig(config: RigConfig, options: Options) -> Rig:
             else None  # legacy: reduced from the full frame, as those images were made
         ),
     )  # fmt: skip
+
+
+def distractor_walk(xy: np.ndarray, step: float, rng: np.random.Generator) -> np.ndarray:
+    """One step of the distractor's random walk from ``xy`` (2,) m: the new (x, y), m."""
+    from explore.learner.goal_spaces import R_MAX, R_MIN
+
+    r = float(np.hypot(*xy)) + rng.normal(0.0, DISTRACTOR_RADIUS_STEP)
+    span = R_MAX - R_MIN
+    r = R_MIN + span - abs(span - abs(r - R_MIN) % (2 * span))  # reflected into the ring
+    t = float(np.arctan2(xy[1], xy[0])) + rng.normal(0.0, step)
+    return np.array([r * np.cos(t), r * np.sin(t)])

@@ -85,23 +85,29 @@ class EpisodeRunner:
         own size when the rig has a ``square_view``; then ``frame`` is None).
         """
         rig = self.rig
+        distractor = self._true_distractor()
         if rig.ball_locator is None and not render:
-            return Observation(ball=self._true_ball())
+            return Observation(ball=self._true_ball(), distractor=distractor)
         if rig.ball_locator is None and rig.square_view is not None:
             # only the observation is used: rendered at its own size, no full frame
             image = rig.square_view(self.config.obs_size)
-            return Observation(ball=self._true_ball(), image=image)
+            return Observation(ball=self._true_ball(), image=image, distractor=distractor)
         frame = rig.camera.read().image
         ball = self._true_ball() if rig.ball_locator is None else rig.ball_locator(frame)
         if not render:
-            return Observation(ball=ball)
+            return Observation(ball=ball, distractor=distractor)
         return Observation(
-            ball=ball, image=square_observation(frame, self.config.obs_size), frame=frame
-        )
+            ball=ball, image=square_observation(frame, self.config.obs_size), frame=frame,
+            distractor=distractor,
+        )  # fmt: skip
 
     def _true_ball(self) -> np.ndarray:
         twin = self.rig.twin
         return twin.ball_position()[:2] if twin is not None else np.full(2, np.nan)
+
+    def _true_distractor(self) -> np.ndarray:
+        twin = self.rig.twin
+        return twin.distractor_position()[:2] if twin is not None else np.full(2, np.nan)
 
     def play(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Play the motor primitive of ``theta`` (n_params,) at the control rate.

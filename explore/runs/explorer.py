@@ -48,6 +48,11 @@ def add_fault_counts(run_path: Path, counts: dict[str, float]) -> dict[str, floa
     return totals
 
 
+# The scene's own random stream of an episode (the rig's ``before_episode``: the distractor's
+# walk), apart from the strategy's: numpy.random.default_rng([seed, episode, SCENE_STREAM]).
+SCENE_STREAM = 1
+
+
 def episode_rng(seed: int, episode: int) -> np.random.Generator:
     """The random stream of one episode: a function of (seed, episode) only, so a resumed run
     draws exactly what the uninterrupted run would have."""
@@ -166,7 +171,7 @@ class Explorer:
         rng = episode_rng(self.seed, k)
         self.runner.go_rest()
         if self.rig.before_episode is not None:
-            self.rig.before_episode()
+            self.rig.before_episode(np.random.default_rng([self.seed, k, SCENE_STREAM]))
         context = self.runner.observe(render=self.strategy.needs_context_image)
         proposal = self.strategy.propose(context, rng)
         result = self.runner.run(proposal.theta, context)
@@ -179,6 +184,8 @@ class Explorer:
             kind=proposal.kind,
             context_ball=context.ball,
             ball=result.outcome.ball,
+            context_distractor=context.distractor,
+            distractor=result.outcome.distractor,
             ball_moved=result.ball_moved,
             targets=result.targets,
             measured=result.measured,

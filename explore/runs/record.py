@@ -1,7 +1,9 @@
 """The record of one episode, as stored in a run's history.
 
 Shapes and units: theta (48,) in [-1, 1]; goal (g,) in the strategy's goal space (g may be 0);
-context_ball, ball (2,) m (NaN when not seen); targets, measured (T, 6) rad; end_effector
+context_ball, ball (2,) m (NaN when not seen); context_distractor, distractor (2,) m, the
+second ball of a scene with a distractor (NaN without one: then they are not stored, and
+records written before they existed read as NaN); targets, measured (T, 6) rad; end_effector
 (T, 3) m; image (64, 64, 3) BGR uint8; sim_state (k,) the twin's integration state after the
 episode (empty on hardware); settle_s, duration_s seconds.
 """
@@ -10,7 +12,7 @@ from __future__ import annotations
 
 import io
 import zipfile
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -18,6 +20,8 @@ _ARRAY_FIELDS = (
     "theta", "goal", "context_ball", "ball", "targets", "measured", "end_effector", "image",
     "sim_state",
 )  # fmt: skip
+# stored only when known (finite somewhere); NaN (2,) when absent
+_OPTIONAL_FIELDS = ("context_distractor", "distractor")
 _SCALAR_FIELDS = {
     "episode": int, "module": int, "kind": str, "ball_moved": bool, "settle_s": float,
     "duration_s": float,
@@ -50,6 +54,8 @@ class EpisodeRecord:
     sim_state: np.ndarray
     settle_s: float
     duration_s: float
+    context_distractor: np.ndarray = field(default_factory=lambda: np.full(2, np.nan))
+    distractor: np.ndarray = field(default_factory=lambda: np.full(2, np.nan))
 
     @property
     def final_end_effector(self) -> np.ndarray:
@@ -61,7 +67,8 @@ class EpisodeRecord:
         it but at zlib level 1 (``NPZ_LEVEL``): any ``np.load`` reads it."""
         buf = io.BytesIO()
         with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED, compresslevel=NPZ_LEVEL) as zf:
-            for name in (*_ARRAY_FIELDS, *_SCALAR_FIELDS):
+            known = [n for n in _OPTIONAL_FIELDS if np.isfinite(getattr(self, n)).any()]
+            for name in (*_ARRAY_FIELDS, *known, *_SCALAR_FIELDS):
                 with zf.open(name + ".npy", "w") as f:
                     np.lib.format.write_array(f, np.asarray(getattr(self, name)))
         return buf.getvalue()
@@ -71,6 +78,7 @@ class EpisodeRecord:
         try:
             with np.load(io.BytesIO(data), allow_pickle=False) as z:
                 kw: dict[str, object] = {name: z[name] for name in _ARRAY_FIELDS}
+                kw.update({n: z[n] for n in _OPTIONAL_FIELDS if n in z.files})
                 for name, typ in _SCALAR_FIELDS.items():
                     kw[name] = typ(z[name].item())
         except (KeyError, ValueError, OSError) as exc:

@@ -83,11 +83,14 @@ class GoalExplorationOptions:
 
 @dataclass(frozen=True)
 class EngineeredOptions(GoalExplorationOptions):
-    """Goal-exploration options, and: ``form`` ("wrap-safe" (default) or "polar") and
-    ``hand_module`` (the tool tip as a second module; default True when modular)."""
+    """Goal-exploration options, and: ``form`` ("wrap-safe" (default) or "polar"),
+    ``hand_module`` (the tool tip as a module; default True when modular) and ``distractor``
+    (the distractor's features as a module and in the context, for a rig with
+    ``distractor=walk``; default False)."""
 
     form: Literal["wrap-safe", "polar"] = "wrap-safe"
     hand_module: bool | None = None
+    distractor: bool = False
 
 
 @dataclass(frozen=True)
@@ -153,7 +156,7 @@ class GoalExploration(Strategy):
         assert self.space is not None
         if isinstance(self.space, LatentGoalSpace):
             return self._last_latent  # type: ignore[return-value]
-        return self.space.context_of_ball(context.ball)  # type: ignore[attr-defined]
+        return self.space.context_of(context.ball, context.distractor)  # type: ignore[attr-defined]
 
     def update(self, record: Experience) -> None:
         self.n_seen += 1
@@ -238,7 +241,7 @@ class EngineeredGoalExploration(GoalExploration):
     def make_space(self) -> GoalSpace:
         s = self.settings
         hand = self.modular if s.hand_module is None else s.hand_module
-        return EngineeredGoalSpace(s.form, hand)
+        return EngineeredGoalSpace(s.form, hand, s.distractor)
 
 
 class ModularEngineeredGoalExploration(EngineeredGoalExploration):
