@@ -138,6 +138,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--render-quality", choices=RENDER_QUALITIES, default="chosen",
         help="the twin's render settings (default chosen; legacy: the images before 2026-12-01)",
     )  # fmt: skip
+    o.add_argument(
+        "--distractor", action="store_true",
+        help="the scene with the distractor (rig option distractor=walk), placed over the ring",
+    )  # fmt: skip
     o.add_argument("--no-progress", action="store_true", help="no progress bar")
     o.set_defaults(func=run_dataset_outcomes)
 
@@ -280,12 +284,12 @@ def run_sae_train(args: argparse.Namespace) -> int:
         sae = train_and_select(args.out, seeds_of(args), train_one)
     except VaeError as exc:
         raise CliError(str(exc)) from exc
-    from explore.goal_spaces import live_features
+    from explore.goal_spaces import distinct_features
 
-    live = live_features(sae.config.code_std)
-    print(f"{args.out}: spatial autoencoder saved; features that move: {len(live)} of "
-          f"{sae.config.features} ({', '.join(map(str, live))}); held-out explained pixel "
-          f"variance {sae.config.heldout_explained_variance:.3f}")  # fmt: skip
+    kept = distinct_features(sae.config.code_std, sae.config.code_corr)
+    print(f"{args.out}: spatial autoencoder saved; distinct moving features (the goal space's "
+          f"modules): {', '.join(map(str, kept))} of {sae.config.features}; held-out explained "
+          f"pixel variance {sae.config.heldout_explained_variance:.3f}")  # fmt: skip
     return 0
 
 
@@ -328,7 +332,7 @@ def run_dataset_outcomes(args: argparse.Namespace) -> int:
         raise CliError(f"--out {args.out}: expected a .npz file name")
     data = make_outcome_dataset(
         args.n, seed=args.seed, progress=not args.no_progress, arm=args.arm,
-        render_quality=args.render_quality,
+        render_quality=args.render_quality, distractor=args.distractor,
     )  # fmt: skip
     save_dataset(args.out, data)
     print(f"{args.out}: {args.n} images {data['images'].shape[1:]} with ball positions")
