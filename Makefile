@@ -9,7 +9,7 @@ TORCH_VERSION ?= 2.13.0
 EPISODES ?= 300
 export MUJOCO_GL ?= egl
 
-.PHONY: run test install lint format bench bench-all clean
+.PHONY: run test install lint format bench bench-all paper clean
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -47,6 +47,13 @@ bench-all: bench
 	$(BIN)/python bench/bench_vae.py --out $(BENCH_VAE) --beta 10 --capacity 10 \
 	    --capacity-iterations 500 --iterations 700 --every 100
 	$(BIN)/python bench/bench_goal_space.py --data $(BENCH_VAE)/dataset.npz --vae $(BENCH_VAE)
+
+# The paper's experiment on the twin (docs/results.md): datasets, representations chosen by a
+# label-free criterion, both conditions x 8 seeds x 5000 episodes. Hours on 2 cores;
+# resumable: run it again after anything stopped it.
+PAPER ?= runs/paper
+paper: $(STAMP)
+	bash bench/paper_campaign.sh $(PAPER) 2
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache

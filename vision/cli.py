@@ -264,7 +264,7 @@ def _sae_train(args: argparse.Namespace) -> int:
     from vision.representation_quality import HELDOUT, train_and_select
     from vision.sae_train import SAE_ITERATIONS, train_sae
     from vision.spatial_ae import SaeConfig
-    from vision.spatial_code import live_features
+    from vision.spatial_code import distinct_features
     from vision.vae import VaeError
     from vision.vae_train import TrainConfig, load_images
 
@@ -283,8 +283,8 @@ def _sae_train(args: argparse.Namespace) -> int:
         sae = train_and_select(args.out, seeds, train_one)
     except (VaeError, ValueError) as exc:
         return _error(str(exc))
-    live = live_features(sae.config.code_std)
-    print(f"{args.out}: spatial autoencoder saved; features that move: {len(live)} of "
-          f"{sae.config.features} ({', '.join(map(str, live))}); held-out explained pixel "
-          f"variance {sae.config.heldout_explained_variance:.3f}")  # fmt: skip
+    kept = distinct_features(sae.config.code_std, sae.config.code_corr)
+    print(f"{args.out}: spatial autoencoder saved; distinct moving features (the goal space's "
+          f"modules): {', '.join(map(str, kept))} of {sae.config.features}; held-out explained "
+          f"pixel variance {sae.config.heldout_explained_variance:.3f}")  # fmt: skip
     return 0

@@ -49,7 +49,15 @@ def train_sae(
 
     model = fit(make, settings, train, out, config, progress, desc="sae")
     code = model.encode_bgr(train)
-    stats = {"code_mean": code.mean(axis=0).tolist(), "code_std": code.std(axis=0).tolist()}
+    std = code.std(axis=0)
+    corr = np.zeros((code.shape[1], code.shape[1]))
+    moving = std > 0
+    if moving.any():
+        corr[np.ix_(moving, moving)] = np.atleast_2d(np.corrcoef(code[:, moving].T))
+    stats = {
+        "code_mean": code.mean(axis=0).tolist(), "code_std": std.tolist(),
+        "code_corr": corr.tolist(),
+    }  # fmt: skip
     if len(test_idx):
         mean_image = train.astype(np.float64).mean(axis=0)
         stats["heldout_explained_variance"] = explained_pixel_variance(

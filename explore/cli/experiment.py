@@ -89,6 +89,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--render-quality", choices=RENDER_QUALITIES, default="chosen",
         help="the twin's render settings (default chosen; legacy: the images before 2026-12-01)",
     )  # fmt: skip
+    o.add_argument(
+        "--distractor", action="store_true",
+        help="the scene with the distractor (rig option distractor=walk), placed over the ring",
+    )  # fmt: skip
     o.add_argument("--no-progress", action="store_true", help="no progress bar")
     o.set_defaults(func=run_dataset_outcomes)
 
@@ -159,7 +163,7 @@ def run_dataset_outcomes(args: argparse.Namespace) -> int:
         raise CliError(f"--out {args.out}: expected a .npz file name")
     data = make_outcome_dataset(
         args.n, seed=args.seed, progress=not args.no_progress, arm=args.arm,
-        render_quality=args.render_quality,
+        render_quality=args.render_quality, distractor=args.distractor,
     )  # fmt: skip
     save_dataset(args.out, data)
     print(f"{args.out}: {args.n} images {data['images'].shape[1:]} with ball positions")

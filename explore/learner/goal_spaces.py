@@ -24,7 +24,7 @@ import numpy as np
 
 from robot.spec import ERGO_JR_REACH_M
 from sim.models.make_scene import BALL_RADIUS, INNER_RADIUS, OUTER_RADIUS
-from vision.spatial_code import LIVE_FEATURE_STD, live_features
+from vision.spatial_code import distinct_features
 
 # The ball's centre lies between these radii, m (the twin's ring between its kerb and its wall,
 # less the ball's radius: 0.13-0.17 m; sim/models/make_scene.py): r_n = (r - R_MID) / R_HALF maps
@@ -223,13 +223,16 @@ class LatentGoalSpace(GoalSpace):
 
 
 def spatial_goal_space(
-    encode: Any, code_std: Sequence[float], modular: bool, threshold: float = LIVE_FEATURE_STD
+    encode: Any,
+    code_std: Sequence[float],
+    modular: bool,
+    code_corr: Sequence[Sequence[float]] | None = None,
 ) -> LatentGoalSpace:
-    """The goal space of a spatial autoencoder: the image positions (x, y) of its live
-    features (``live_features``), one module per feature for MGE (object-centred: a feature
-    follows one thing), the whole for RGE. ``encode`` maps BGR uint8 images (n, 64, 64, 3) to
-    codes (n, 2 * features); the outcome keeps the live features' coordinates only."""
-    live = live_features(code_std, threshold)
+    """The goal space of a spatial autoencoder: the image positions (x, y) of its distinct
+    moving features (``distinct_features``), one module per feature for MGE (object-centred:
+    a feature follows one thing), the whole for RGE. ``encode`` maps BGR uint8 images (n, 64,
+    64, 3) to codes (n, 2 * features); the outcome keeps the kept features' coordinates."""
+    live = distinct_features(code_std, code_corr)
     keep = np.array([i for k in live for i in (2 * k, 2 * k + 1)])
 
     def encode_live(images: np.ndarray) -> np.ndarray:

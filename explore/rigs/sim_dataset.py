@@ -40,28 +40,32 @@ def make_outcome_dataset(
     progress: bool = True,
     arm: str = "rest",
     render_quality: str = "chosen",
+    distractor: bool = False,
 ) -> dict[str, np.ndarray]:
     """Render ``n`` scenes with the arm at rest (``arm="rest"``) or in random poses (``"random"``),
     with the twin's ``render_quality`` (``sim.twin.Twin``; "legacy" reduces full frames, as the
-    sim rig does with it).
+    sim rig does with it). ``distractor``: the scene with the distractor, placed uniformly over
+    the ring too, independently of the ball (as its walk leaves it in the long run).
 
     Returns:
         images: (n, 64, 64, 3) BGR uint8; ball: (n, 2) m after the arm moved; placed: (n, 2) m
-        where the ball was put; joints: (n, 6) rad, the arm's pose at the render.
+        where the ball was put; joints: (n, 6) rad, the arm's pose at the render; with the
+        distractor also distractor: (n, 2) m.
     """
     from sim.camera import SimCamera
-    from sim.twin import JOINTS, Twin
+    from sim.twin import JOINTS, SCENE, SCENE_DISTRACTOR, Twin
 
     if arm not in ARM_POSES:
         raise ValueError(f"arm={arm!r}: expected one of {', '.join(ARM_POSES)}")
     rng = np.random.default_rng(seed)
-    twin = Twin(render_quality=render_quality)
+    twin = Twin(SCENE_DISTRACTOR if distractor else SCENE, render_quality=render_quality)
     camera = SimCamera(twin)
     camera.connect()
     lo = np.array([twin.model.joint(j).range[0] for j in JOINTS])
     hi = np.array([twin.model.joint(j).range[1] for j in JOINTS])
     size = OBSERVATION_SIZE
     placed = ring_positions(n, rng)
+    others = ring_positions(n, rng) if distractor else None
     targets = rng.uniform(lo, hi, (n, len(JOINTS)))
     if arm == "rest":
         targets[:] = ergo_jr_spec().rest
@@ -76,6 +80,8 @@ def make_outcome_dataset(
     try:
         for i in range(n):
             twin.reset(tuple(placed[i]))
+            if others is not None:
+                twin.place_distractor(others[i])
             twin.set_targets(targets[i])
             twin.step(settle_s)
             if render_quality == "legacy":
@@ -90,7 +96,10 @@ def make_outcome_dataset(
         if bar is not None:
             bar.close()
         twin.close()
-    return {"images": images, "ball": ball, "placed": placed, "joints": joints}
+    out = {"images": images, "ball": ball, "placed": placed, "joints": joints}
+    if others is not None:
+        out["distractor"] = others
+    return out
 
 
 def save_dataset(path: str | Path, data: dict[str, np.ndarray]) -> None:

@@ -138,3 +138,23 @@ def test_heldout_split_is_a_seeded_partition():
     assert np.array_equal(te, te2) and np.array_equal(tr, tr2)
     with pytest.raises(ValueError, match="held-out fraction"):
         heldout_split(10, 1.0, 0)
+
+
+def test_distinct_features_keep_one_feature_per_moving_thing():
+    """Label-free: from the code's statistics over the training images, features that do not
+    move are dropped, and of features that follow the same thing (one predicts the other
+    linearly) only the one that spreads most is kept."""
+    from explore.learner.goal_spaces import spatial_goal_space
+    from vision.spatial_code import distinct_features
+
+    rng = np.random.default_rng(0)
+    ball, other = rng.uniform(-0.5, 0.5, (500, 2)), rng.uniform(-0.5, 0.5, (500, 2))
+    still = np.full((500, 2), 0.3) + rng.normal(0, 0.01, (500, 2))
+    rotated = ball @ np.array([[0.6, -0.8], [0.8, 0.6]]) * 0.9 + 0.05  # the ball again
+    code = np.hstack([still, rotated, other, ball])  # features 0..3
+    std, corr = code.std(axis=0), np.corrcoef(code.T)
+    assert distinct_features(std, corr) == [2, 3]  # the ball's widest copy and the other
+    assert distinct_features(std) == [1, 2, 3]  # without correlations: every moving one
+    space = spatial_goal_space(lambda im: code[: len(im)], std, modular=True, code_corr=corr)
+    assert space.dim == 4 and [m.tolist() for m in space.modules] == [[0, 1], [2, 3]]
+    np.testing.assert_array_equal(space.outcomes(np.zeros((3, 64, 64, 3)))[:, 2:], ball[:3])

@@ -352,7 +352,9 @@ class SpatialGoalExploration(GoalExploration):
             raise StrategyError(f"{path} has no code statistics: train it with `ergo sae train`")
         if self.goal_sampling == "normal":
             raise StrategyError(f"{self.name}: goals must be uniform (the code has no prior)")
-        return spatial_goal_space(sae.encode_bgr, sae.config.code_std, self.modular)
+        return spatial_goal_space(
+            sae.encode_bgr, sae.config.code_std, self.modular, sae.config.code_corr
+        )
 
 
 class ModularSpatialGoalExploration(SpatialGoalExploration):
