@@ -43,7 +43,8 @@ def final_cells(run: Path) -> int | None:
     metrics = run / "metrics.csv"
     if not metrics.exists():
         return None
-    rows = list(csv.DictReader(open(metrics)))
+    with open(metrics) as f:
+        rows = list(csv.DictReader(f))
     return int(rows[-1]["ball_cells"]) if rows else None
 
 
