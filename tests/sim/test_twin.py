@@ -10,10 +10,12 @@ import numpy as np
 import pytest
 
 from sim.models import make_scene
-from sim.twin import MODELS, SCENE, Twin, TwinError
+from sim.twin import MODELS, SCENE, SCENE_DISTRACTOR, Twin, TwinError
 
 
-@pytest.mark.parametrize("path", [MODELS / "ergo_jr.xml", SCENE], ids=["arm", "scene"])
+@pytest.mark.parametrize(
+    "path", [MODELS / "ergo_jr.xml", SCENE, SCENE_DISTRACTOR], ids=["arm", "scene", "distractor"]
+)
 def test_every_scene_steps_one_second_under_random_controls_without_warnings(path):
     model = mujoco.MjModel.from_xml_path(str(path))
     data = mujoco.MjData(model)
@@ -32,6 +34,7 @@ def test_every_scene_steps_one_second_under_random_controls_without_warnings(pat
 
 def test_committed_scene_matches_its_generator():
     assert SCENE.read_text() == make_scene.scene_xml()
+    assert SCENE_DISTRACTOR.read_text() == make_scene.scene_xml(distractor=True)
 
 
 def test_joint_ranges_are_the_ergo_jr_limits_in_radians():
