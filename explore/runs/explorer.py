@@ -11,13 +11,13 @@ from pathlib import Path
 
 import numpy as np
 
+from explore.learner.strategies.base import Strategy
+from explore.rigs.rig import Rig
 from explore.runs.config import EpisodeConfig
 from explore.runs.episode import EpisodeRunner
 from explore.runs.metrics import MetricsLog
 from explore.runs.record import EpisodeRecord
-from explore.rigs.rig import Rig
 from explore.runs.store import RunStore
-from explore.learner.strategies.base import Strategy
 from robot.signals import torque_off_on_signals
 
 log = logging.getLogger(__name__)
