@@ -141,12 +141,15 @@ def open_run(
         the_rig = rig if rig is not None else make_rig(run_config.rig)
         if strategy is None:
             s = run_config.strategy
-            strategy = make_strategy(s.name, n_params=the_rig.motor.n_params, **s.options)
+            strategy = make_strategy(
+                s.name, n_params=the_rig.motor.n_params, scene=the_rig.scene, **s.options
+            )
         if store is None:
             store = RunStore.create(path, run_config.to_dict())
             if hold is not None:
                 held.enter_context(hold(path))
             held.callback(store.close)  # unwinds first: the history closes before the hold
+        store.sync_interval_s = the_rig.sync_interval_s
         return OpenRun(run_config, store, the_rig, strategy, len(store), held)
     except BaseException:
         held.close()

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from explore.runs.record import EpisodeRecord
+from explore.runs.record import EpisodeRecord, RecordError
 from explore.runs.store import RunStore, RunStoreError
 
 
@@ -30,6 +30,24 @@ def test_records_round_trip(tmp_path):
     again = RunStore.open(tmp_path / "run")
     assert len(again) == 3 and again.config == {"seed": 1}
     assert all(a.equals(make_record(k)) for k, a in enumerate(again))
+
+
+def test_records_written_as_npz_before_the_packed_form_still_read(tmp_path):
+    import io
+
+    from explore.runs.record import PACKED_MAGIC, EpisodeRecord
+
+    rec = make_record(4)
+    assert rec.to_bytes()[:4] == PACKED_MAGIC
+    fields = ("theta", "goal", "context_ball", "ball", "targets", "measured", "end_effector",
+              "image", "sim_state", "episode", "module", "kind", "ball_moved", "settle_s",
+              "duration_s")  # fmt: skip
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **{f: np.asarray(getattr(rec, f)) for f in fields})
+    old = EpisodeRecord.from_bytes(buf.getvalue())
+    assert old.equals(rec) and np.all(np.isnan(old.distractor))
+    with pytest.raises(RecordError):
+        EpisodeRecord.from_bytes(PACKED_MAGIC + b"\x05\x00\x00\x00{}")
 
 
 @pytest.mark.parametrize("cut", [1, 7, 12, 200])
