@@ -140,10 +140,7 @@ def open_run(
         # rig and strategy before a new run folder exists: a bad name leaves nothing
         the_rig = rig if rig is not None else make_rig(run_config.rig)
         if strategy is None:
-            s = run_config.strategy
-            strategy = make_strategy(
-                s.name, n_params=the_rig.motor.n_params, scene=the_rig.scene, **s.options
-            )
+            strategy = strategy_for(run_config, the_rig)
         if store is None:
             store = RunStore.create(path, run_config.to_dict())
             if hold is not None:
@@ -154,3 +151,12 @@ def open_run(
     except BaseException:
         held.close()
         raise
+
+
+def strategy_for(config: RunConfig, rig: Rig | None = None) -> Strategy:
+    """The strategy ``config`` describes, for its rig (``rig``, or the one the config names,
+    built but not connected): its motor primitive's ``n_params`` and its ``scene``; not yet
+    replayed (feed it the run's records with ``update`` to rebuild its state)."""
+    rig = rig if rig is not None else make_rig(config.rig)
+    s = config.strategy
+    return make_strategy(s.name, n_params=rig.motor.n_params, scene=rig.scene, **s.options)
