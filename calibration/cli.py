@@ -23,8 +23,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     def common(q: argparse.ArgumentParser) -> None:
         q.add_argument(
-            "--rig", "--rig-id", dest="rig", default="default", help="rig id (a folder per rig)"
+            "--rig-id", dest="rig_id", default="default", help="rig id (a folder per rig)"
         )
+        # ``--rig`` is the rig type in ``ergo explore`` (sim, dynamixel, canopen): here it is
+        # refused with a line naming --rig-id, not taken as an abbreviation of it
+        q.add_argument("--rig", dest="rig_type", default=None, help=argparse.SUPPRESS)
         q.add_argument(
             "--dir",
             type=Path,
@@ -123,6 +126,11 @@ def _run(func, args: argparse.Namespace) -> int:
     from calibration.store import CalibrationError
     from vision.camera import CameraError
 
+    if args.rig_type is not None:
+        return _error(
+            f"--rig {args.rig_type}: ergo calibrate takes the rig id as --rig-id ID "
+            "(--rig is the rig type of ergo explore)"
+        )
     try:
         return int(func(args) or 0)
     except (CalibrationError, CameraError) as exc:
@@ -163,7 +171,7 @@ def _camera_impl(args: argparse.Namespace) -> int:
     else:
         raise store.CalibrationError("give --images FOLDER or --camera SOURCE (or --print-board)")
     result = charuco.calibrate(views, size, fit_k3=args.fit_k3)
-    path = store.save("camera", args.rig, result.to_dict(spec), args.dir)
+    path = store.save("camera", args.rig_id, result.to_dict(spec), args.dir)
     k = result.camera_matrix
     print(
         f"camera: {result.n_views} views, RMS reprojection error {result.rms_px:.3f} px; "
@@ -238,11 +246,11 @@ def _intrinsics(args: argparse.Namespace, size: tuple[int, int]):
     from calibration import store
 
     try:
-        data = store.load("camera", args.rig, args.dir)
+        data = store.load("camera", args.rig_id, args.dir)
     except store.CalibrationError as exc:
         if args.fovy is None:
             raise store.CalibrationError(
-                f"{exc}: run `ergo calibrate camera --rig {args.rig}` first, or pass --fovy "
+                f"{exc}: run `ergo calibrate camera --rig-id {args.rig_id}` first, or pass --fovy "
                 "for an ideal pinhole camera"
             ) from None
         w, h = size
@@ -306,7 +314,7 @@ def _arena_impl(args: argparse.Namespace) -> int:
             + " + ".join(f"{r.lower}-{r.upper}" for r in ranges)
         )
     payload = ar.arena_payload(fit, ranges, args.ball_radius, f"{source}; {k_source}", layout)
-    path = store.save("arena", args.rig, payload, args.dir)
+    path = store.save("arena", args.rig_id, payload, args.dir)
     pos = fit.model.camera_position
     height = f"camera {pos[2] * 1000:.0f} mm above the floor" if pos is not None else ""
     print(
@@ -334,12 +342,12 @@ def _joints_impl(args: argparse.Namespace) -> int:
     from calibration import store
     from calibration.joints import calibrate_joints, interactive_prompt
 
-    store.check_rig_id(args.rig)
+    store.check_rig_id(args.rig_id)
     arm = _make_arm(args)
     print("torque goes off: hold the arm. Move each joint as asked, then press Enter.")
     with arm:
         result = calibrate_joints(arm, interactive_prompt, joints=args.joints)
-    path = store.save("joints", args.rig, result.to_dict(), args.dir)
+    path = store.save("joints", args.rig_id, result.to_dict(), args.dir)
     for i, name in enumerate(result.names):
         print(
             f"{name}: offset {math.degrees(result.offsets[i]):+.1f} deg, direction "
@@ -376,7 +384,7 @@ def _show_impl(args: argparse.Namespace) -> int:
 
     bad = 0
     for kind in store.KINDS:
-        path = store.calibration_path(kind, args.rig, args.dir)
+        path = store.calibration_path(kind, args.rig_id, args.dir)
         if not path.exists():
             print(f"{kind}: none ({path})")
             continue

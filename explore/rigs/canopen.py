@@ -73,7 +73,8 @@ def make_rig(config: RigConfig, options: Options) -> Rig:
         arm = CanArm(spec, config=CanArmConfig(**given))
     except (CanBusError, ValueError) as exc:
         raise RigError(f"rig 'canopen': {exc}") from exc
+    locator, why = rig_ball_locator(config)
     return Rig(
         arm=arm, camera=camera, clock=RealClock(), config=config,
-        ball_locator=rig_ball_locator(config),
+        ball_locator=locator, ball_locator_error=why,
     )  # fmt: skip

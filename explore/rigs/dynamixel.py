@@ -70,7 +70,8 @@ def make_rig(config: RigConfig, options: Options) -> Rig:
         )
     except (ValueError, KeyError, TypeError, BusError) as exc:
         raise RigError(f"dynamixel rig: {exc}") from exc
+    locator, why = rig_ball_locator(config)
     return Rig(
         arm=arm, camera=rig_camera(options, config.name), clock=RealClock(), config=config,
-        ball_locator=rig_ball_locator(config),
+        ball_locator=locator, ball_locator_error=why,
     )  # fmt: skip

@@ -82,6 +82,8 @@ class Rig:
     square_view: Callable[[int], np.ndarray] | None = None
     #: motor parameters (n_params,) -> joint trajectory (T, n_joints) rad
     motor: MotorPrimitive = field(default_factory=Dmp)
+    #: why a physical rig has no ``ball_locator`` (its arena calibration's error), else None
+    ball_locator_error: str | None = None
 
     def connect(self) -> None:
         self.camera.connect()

@@ -151,7 +151,7 @@ def test_cli_arena_then_track(marker_twin, tmp_path, capsys):
         [
             "calibrate",
             "arena",
-            "--rig",
+            "--rig-id",
             "twin",
             "--dir",
             str(caldir),
@@ -168,7 +168,9 @@ def test_cli_arena_then_track(marker_twin, tmp_path, capsys):
     assert data["ball_hsv_ranges"] and data["camera_position"][2] == pytest.approx(0.55, abs=0.01)
 
     # Without intrinsics or --fovy: a one-line error.
-    rc = main(["calibrate", "arena", "--rig", "other", "--dir", str(caldir), "--image", str(frame)])
+    rc = main(
+        ["calibrate", "arena", "--rig-id", "other", "--dir", str(caldir), "--image", str(frame)]
+    )
     err = capsys.readouterr().err
     assert rc == 2 and "ergo calibrate camera" in err and err.count("\n") == 1
 
@@ -196,7 +198,7 @@ def test_cli_arena_then_track(marker_twin, tmp_path, capsys):
         [
             "calibrate",
             "arena",
-            "--rig",
+            "--rig-id",
             "clicked",
             "--dir",
             str(caldir),
@@ -215,7 +217,7 @@ def test_cli_arena_then_track(marker_twin, tmp_path, capsys):
     assert "from clicked points (4 points)" in out.out
     assert "ball_hsv_ranges" not in store.load("arena", "clicked", caldir)
 
-    rc = main(["calibrate", "show", "--rig", "twin", "--dir", str(caldir)])
+    rc = main(["calibrate", "show", "--rig-id", "twin", "--dir", str(caldir)])
     out = capsys.readouterr().out
     assert rc == 0 and "arena: centre" in out and "camera: none" in out
     assert math.isfinite(data["residual_max_mm"])

@@ -3,10 +3,19 @@
 from explore.learner.strategies.base import (
     MAKE_VAE,
     STRATEGIES,
+    STRATEGY_SUMMARIES,
     Proposal,
     Strategy,
     StrategyError,
     make_strategy,
 )
 
-__all__ = ["MAKE_VAE", "STRATEGIES", "Proposal", "Strategy", "StrategyError", "make_strategy"]
+__all__ = [
+    "MAKE_VAE",
+    "STRATEGIES",
+    "STRATEGY_SUMMARIES",
+    "Proposal",
+    "Strategy",
+    "StrategyError",
+    "make_strategy",
+]

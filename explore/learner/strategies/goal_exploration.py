@@ -110,6 +110,7 @@ class GoalExploration(Strategy):
     name = "goal-exploration"
     Options: type = GoalExplorationOptions
     modular_default = False
+    needs_ball = True
 
     def __init__(self, n_params: int = N_PARAMS, **options: Any) -> None:
         super().__init__(n_params, **options)
