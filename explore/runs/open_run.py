@@ -25,7 +25,7 @@ from explore.rigs.rig import Rig, RigError, make_rig
 from explore.runs.config import RunConfig
 from explore.runs.explorer import Explorer, Progress
 from explore.runs.record import EpisodeRecord
-from explore.runs.store import RunStore, RunStoreError
+from explore.runs.store import RunStore, RunStoreError, writer_lock
 
 Mode = Literal["new", "resume", "auto"]
 log = logging.getLogger(__name__)
@@ -131,6 +131,8 @@ def open_run(
         rig, strategy: use these instead of building them from the config.
         hold: a context manager factory entered with the folder before an existing run is
             opened, or just after a new one is made (an exclusive lock), left on ``close``.
+            ``RUN/writer.lock`` is always held the same way (``store.writer_lock``): a second
+            writer of the same run is refused in one line.
 
     Raises:
         RunStoreError (a ``RunConfigError`` for a bad config), RigError, StrategyError: one
@@ -146,6 +148,7 @@ def open_run(
         if resume:
             if hold is not None:
                 held.enter_context(hold(path))
+            held.enter_context(writer_lock(path))  # before a torn tail is cut
             store = RunStore.open(path)
             held.callback(store.close)
             run_config = RunConfig.from_dict(store.config, where=path / "run.json")
@@ -167,6 +170,7 @@ def open_run(
             store = RunStore.create(path, run_config.to_dict())
             if hold is not None:
                 held.enter_context(hold(path))
+            held.enter_context(writer_lock(path))
             held.callback(store.close)  # unwinds first: the history closes before the hold
         return OpenRun(run_config, store, the_rig, strategy, len(store), held)
     except BaseException:

@@ -88,6 +88,28 @@ class Strategy(ABC):
         """A short label of what the strategy is doing now (for progress displays)."""
         return self.name
 
+    def describe(self, record: Experience) -> Description | None:
+        """A finished episode in this strategy's goal space, as ``update`` is about to learn
+        from it (call it just before ``update(record)``); None while the strategy has no goal
+        space (RPE, an online representation before its training)."""
+        return None
+
+
+@dataclass
+class Description:
+    """An episode in a goal space (``Strategy.describe``).
+
+    Attributes:
+        context: the scene before the move, shape (context_dim,).
+        outcome: what the move produced, shape (dim,); NaN where not seen.
+        goal: the episode's goal in the whole space, shape (dim,): NaN outside the module it
+            was sampled in, all NaN for an episode without a goal (motor babbling).
+    """
+
+    context: np.ndarray
+    outcome: np.ndarray
+    goal: np.ndarray
+
 
 # How to make the model a latent strategy needs (option ``vae``; the campaign's ``--vae`` or
 # ``--betavae``). "vae" is the recipe of docs/results.md: a plain VAE (beta 1) collapses at
