@@ -36,17 +36,26 @@ def register(sub: argparse._SubParsersAction) -> None:
             "~/.config/ergo-explore/calibration)",
         )
 
-    cam = cal.add_parser("camera", help="intrinsics from ChArUco board views")
+    cam = cal.add_parser("camera", help="intrinsics from ChArUco or chessboard views")
     common(cam)
     src = cam.add_mutually_exclusive_group()
     src.add_argument("--images", type=Path, help="folder of board images")
     src.add_argument("--camera", help="live camera (device index or URL) or a recorded video")
     cam.add_argument("--views", type=int, default=DEFAULT_VIEWS, help="live views to collect")
     cam.add_argument("--max-frames", type=int, default=3000, help="live frames to look at")
-    cam.add_argument("--squares", type=int, nargs=2, default=(7, 5), metavar=("COLS", "ROWS"))
+    cam.add_argument(
+        "--board", choices=("charuco", "chessboard"), default="charuco",
+        help="the target: a ChArUco board (default) or a plain chessboard",
+    )  # fmt: skip
+    cam.add_argument(
+        "--squares", type=int, nargs=2, default=(7, 5), metavar=("COLS", "ROWS"),
+        help="squares of the board (a chessboard of 9 x 6 inner corners has 10 x 7)",
+    )  # fmt: skip
     cam.add_argument("--square-m", type=float, default=0.030, help="measured square side, m")
-    cam.add_argument("--marker-m", type=float, default=0.022, help="measured marker side, m")
-    cam.add_argument("--dictionary", default="DICT_5X5_100", help="cv2.aruco dictionary")
+    cam.add_argument(
+        "--marker-m", type=float, default=0.022, help="ChArUco: measured marker side, m"
+    )
+    cam.add_argument("--dictionary", default="DICT_5X5_100", help="ChArUco: cv2.aruco dictionary")
     cam.add_argument("--fit-k3", action="store_true", help="also fit the k3 radial term")
     cam.add_argument("--print-board", type=Path, metavar="OUT.png", help="write the board")
     cam.add_argument("--dpi", type=float, default=300.0, help="--print-board resolution")
@@ -146,8 +155,12 @@ def _camera_impl(args: argparse.Namespace) -> int:
     import cv2
 
     from calibration import charuco, store
+    from calibration.chessboard import ChessboardSpec
 
-    spec = charuco.BoardSpec(tuple(args.squares), args.square_m, args.marker_m, args.dictionary)
+    if args.board == "chessboard":
+        spec: Any = ChessboardSpec(tuple(args.squares), args.square_m)
+    else:
+        spec = charuco.BoardSpec(tuple(args.squares), args.square_m, args.marker_m, args.dictionary)
     if args.print_board is not None:
         px_per_m = args.dpi / 0.0254
         image = spec.image(px_per_m, margin_px=round(spec.square_m * px_per_m))
@@ -170,7 +183,7 @@ def _camera_impl(args: argparse.Namespace) -> int:
         views, size = _live_views(args, spec)
     else:
         raise store.CalibrationError("give --images FOLDER or --camera SOURCE (or --print-board)")
-    result = charuco.calibrate(views, size, fit_k3=args.fit_k3)
+    result = charuco.calibrate(views, size, fit_k3=args.fit_k3, board=spec)
     path = store.save("camera", args.rig_id, result.to_dict(spec), args.dir)
     k = result.camera_matrix
     print(
@@ -187,7 +200,6 @@ def _camera_impl(args: argparse.Namespace) -> int:
 def _live_views(args: argparse.Namespace, spec) -> tuple[list, tuple[int, int]]:
     import numpy as np
 
-    from calibration import charuco
     from vision.camera import CameraError, make_camera
 
     views: list = []
@@ -205,7 +217,7 @@ def _live_views(args: argparse.Namespace, spec) -> tuple[list, tuple[int, int]]:
                     break
                 raise
             size = (image.shape[1], image.shape[0])
-            view = charuco.detect_view(image, spec, f"frame{n}")
+            view = spec.detect(image, f"frame{n}")
             if view is None:
                 continue
             centre = view.image_points.mean(axis=0)
