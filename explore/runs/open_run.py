@@ -148,6 +148,7 @@ def open_run(
         if resume:
             if hold is not None:
                 held.enter_context(hold(path))
+            RunStore.read_meta(path)  # a folder that is not a run: its one-line error first
             held.enter_context(writer_lock(path))  # before a torn tail is cut
             store = RunStore.open(path)
             held.callback(store.close)

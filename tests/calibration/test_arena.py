@@ -102,8 +102,8 @@ def test_markers_distorted_noisy_camera(marker_twin):
 
 def test_markers_near_the_edge_of_a_distorted_view_are_found_in_the_raw_frame(tmp_path):
     """Markers 21 cm out in each direction, seen through barrel distortion from the twin's
-    camera height: undistorting the whole frame first cut marker 2 out of it (measured: 3 of 4
-    found); detected raw, all four are, and the calibration holds."""
+    camera height: undistorting the whole frame cuts marker 2 out of it (measured: 3 of 4
+    found there); looked for in the raw frame too, all four are, and the calibration holds."""
     r = 0.21
     layout = MarkerLayout({0: (-r, r), 1: (r, r), 2: (r, -r), 3: (-r, -r)})
     size = (480, 480)
