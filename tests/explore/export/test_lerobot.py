@@ -286,3 +286,34 @@ def test_record_video_takes_an_even_side(tmp_path, capsys):
     assert "record_video" in err and "even" in err and not (tmp_path / "r").exists()
     with pytest.raises(ExportError):
         export_lerobot([tmp_path / "missing"], tmp_path / "o")
+
+
+def test_a_learned_goal_space_is_the_runs_own(tmp_path):
+    torch = pytest.importorskip("torch")
+    from vision.vae import Vae, VaeConfig, load_vae
+
+    torch.manual_seed(0)
+    vae = Vae(VaeConfig())
+    vae.config.kl_per_latent = [float(v) for v in np.arange(10)[::-1]]
+    model = vae.save(tmp_path / "vae")
+    run = tmp_path / "mge-vae"
+    assert main(["explore", "--strategy", "mge-vae", "--episodes", "8", "--seed", "1", "--out",
+                 str(run), "--no-progress", "--rerun", "off", "--rig-option", "render_size=[64,64]",
+                 "--strategy-option", f"vae={model}", "--strategy-option", "bootstrap=4",
+                 "--strategy-option", "random_episodes=0"]) == 0  # fmt: skip
+    export_lerobot([run], tmp_path / "o", video=False)
+    table = pq.read_table(tmp_path / "o/data/chunk-000/file-000.parquet").to_pydict()
+    per_episode = {
+        k: np.array(table[k][::40], dtype=float) for k in table if k.startswith("episode.")
+    }
+    records = read_history(run).records
+    latents = load_vae(model).encode_bgr(np.stack([r.image for r in records]))
+    np.testing.assert_allclose(per_episode["episode.outcome"], latents, atol=1e-5)
+    # the context of a latent space is the previous outcome (zeros before the first)
+    np.testing.assert_allclose(per_episode["episode.context"][0], 0.0)
+    np.testing.assert_allclose(per_episode["episode.context"][1:], latents[:-1], atol=1e-5)
+    for rec, goal in zip(records, per_episode["episode.goal"], strict=True):
+        if rec.kind == "random":
+            assert np.isnan(goal).all()
+        else:  # a goal in a module of two latents: NaN elsewhere
+            assert np.isfinite(goal).sum() == 2 and np.allclose(goal[np.isfinite(goal)], rec.goal)
