@@ -26,11 +26,16 @@ class EpisodeResult:
 
     Attributes:
         targets: commands actually sent during the movement, shape (T, n_joints), rad.
-        measured: joint positions read at each tick, shape (T, n_joints), rad.
+        measured: joint positions read at the end of each tick, shape (T, n_joints), rad.
         end_effector: tool tip at each tick, shape (T, 3) (NaN where unknown).
         outcome: the observation after the ball settled.
         settle_s: how long the ball took to settle (or the cap).
         ball_moved: whether the episode moved the ball.
+        start_positions: joint positions read just before the first command, (n_joints,) rad
+            (empty where the rig has none to read: ArmBalls).
+        frames: with the rig's ``video_frame``, the overhead camera at the start of each tick
+            (before its command, when ``start_positions``/``measured[i - 1]`` were read), shape
+            (T, side, side, 3) BGR uint8; else None.
     """
 
     targets: np.ndarray
@@ -40,6 +45,8 @@ class EpisodeResult:
     settle_s: float
     ball_moved: bool
     extras: dict[str, float] = field(default_factory=dict)
+    start_positions: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    frames: np.ndarray | None = None
 
 
 class EpisodePlayer(Protocol):

@@ -102,6 +102,11 @@ class Rig:
     #: a millisecond of computing, which a crash of the machine can only make it redo, need
     #: not wait 2 ms for the disk at each one (a killed process loses nothing either way)
     sync_interval_s: float = 0.0
+    #: why a physical rig has no ``ball_locator`` (its arena calibration's error), else None
+    ball_locator_error: str | None = None
+    #: the rig option ``record_video``: () -> the overhead camera now, a square (side, side, 3)
+    #: BGR uint8 frame, taken at every control tick of a movement (``RUN/frames/``); else None
+    video_frame: Callable[[], np.ndarray] | None = None
 
     @property
     def scene(self) -> Scene:

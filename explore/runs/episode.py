@@ -12,6 +12,8 @@ durations in seconds.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from explore.learner.dmp import MotorPrimitive
@@ -20,6 +22,25 @@ from explore.rigs.episodes import EpisodeResult
 from explore.rigs.rig import Rig
 from explore.runs.config import EpisodeConfig
 from vision.observation import square_observation
+
+
+@dataclass
+class Movement:
+    """What playing a motor primitive produced (``EpisodeRunner.play``).
+
+    Attributes:
+        targets: commands sent, (T, n_joints) rad. measured: joints read at the end of each
+        tick, (T, n_joints) rad. end_effector: tool tip at each tick, (T, 3) m (NaN: unknown).
+        start_positions: joints read before the first command, (n_joints,) rad. frames: the
+        camera at the start of each tick, (T, side, side, 3) BGR uint8, or None.
+    """
+
+    targets: np.ndarray
+    measured: np.ndarray
+    end_effector: np.ndarray
+    start_positions: np.ndarray
+    frames: np.ndarray | None = None
+
 
 MOVED_THRESHOLD = 0.01  # m: a ball displacement under 1 cm is not "moved" (guess: tracker noise)
 
@@ -89,26 +110,29 @@ class EpisodeRunner:
         twin = self.rig.twin
         return twin.distractor_position()[:2] if twin is not None else np.full(2, np.nan)
 
-    def play(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Play the motor primitive of ``theta`` (n_params,) at the control rate.
-
-        Returns:
-            targets (T, n_joints) rad, measured (T, n_joints) rad, end-effector (T, 3) m.
-        """
+    def play(self, theta: np.ndarray) -> Movement:
+        """Play the motor primitive of ``theta`` (n_params,) at the control rate: at each tick
+        the camera frame (with the rig's ``video_frame``), the command, the clock, the reading."""
         traj = self.motor.trajectory(theta)
         arm, clock, twin = self.rig.arm, self.rig.clock, self.rig.twin
+        capture = self.rig.video_frame
         t = len(traj)
         n = arm.spec.n
         sent = np.empty((t, n))
         measured = np.empty((t, n))
         ee = np.full((t, 3), np.nan)
+        frames = [] if capture is not None else None
+        start = arm.read().positions
         for i, q in enumerate(traj):
+            if frames is not None:
+                frames.append(capture())
             sent[i] = arm.command(q)
             clock.advance(self.dt)
             measured[i] = arm.read().positions
             if twin is not None:
                 ee[i] = twin.end_effector_position()
-        return sent, measured, ee
+        video = np.stack(frames) if frames else None
+        return Movement(sent, measured, ee, np.asarray(start, dtype=float), video)
 
     def settle(self) -> float:
         """Wait until the ball is still and the arm has stopped at rest; returns the time
@@ -162,7 +186,7 @@ class EpisodeRunner:
     def run(self, theta: np.ndarray, context: Observation) -> EpisodeResult:
         """Play ``theta`` from the rest pose (``context`` seen there), go back to rest, wait for the
         ball to settle, then observe the outcome."""
-        targets, measured, ee = self.play(theta)
+        move = self.play(theta)
         self.go_rest()
         settle_s = self.settle()
         outcome = self.observe(render=True)
@@ -171,4 +195,7 @@ class EpisodeRunner:
             and np.all(np.isfinite(outcome.ball))
             and np.linalg.norm(outcome.ball - context.ball) > MOVED_THRESHOLD
         )
-        return EpisodeResult(targets, measured, ee, outcome, settle_s, moved)
+        return EpisodeResult(
+            move.targets, move.measured, move.end_effector, outcome, settle_s, moved,
+            start_positions=move.start_positions, frames=move.frames,
+        )  # fmt: skip

@@ -13,6 +13,7 @@ fault-injecting arm, an emulator) passes it; everything else comes from the conf
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 from contextlib import AbstractContextManager, ExitStack
 from dataclasses import dataclass, field
@@ -20,13 +21,14 @@ from pathlib import Path
 from typing import Any, Literal
 
 from explore.learner.strategies import Strategy, make_strategy
-from explore.rigs.rig import Rig, make_rig
+from explore.rigs.rig import Rig, RigError, is_physical, make_rig
 from explore.runs.config import RunConfig
 from explore.runs.explorer import Explorer, Progress
 from explore.runs.record import EpisodeRecord
-from explore.runs.store import RunStore, RunStoreError
+from explore.runs.store import RunStore, RunStoreError, writer_lock
 
 Mode = Literal["new", "resume", "auto"]
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -85,6 +87,25 @@ class OpenRun:
         self.close()
 
 
+def _check_sees_ball(config: RunConfig, rig: Rig, strategy: Strategy) -> None:
+    """A rig that cannot locate the ball (a physical rig without an arena calibration) records
+    no ball for the whole run: a ``RigError`` for a strategy that needs it (goal exploration),
+    else one warning. A rig with nothing physical attached (the twin, ArmBalls) knows where
+    its ball is."""
+    if rig.ball_locator is not None or not is_physical(config.rig.name):
+        return
+    rig_id = config.rig.rig_id
+    calibrate = f"ergo calibrate arena --rig-id {rig_id} --camera ..."
+    why = rig.ball_locator_error or "no ball locator"
+    if strategy.needs_ball:
+        raise RigError(
+            f"rig {config.rig.name!r} cannot locate the ball that {strategy.name} sets its goals "
+            f"on ({why}): run '{calibrate}' first (docs/calibration.md), or give "
+            "--rig-option arena_calibration=FILE"
+        )
+    log.warning("no ball tracking for rig %r (%s): run '%s'", rig_id, why, calibrate)
+
+
 def open_run(
     path: str | Path,
     config: RunConfig | None = None,
@@ -111,6 +132,8 @@ def open_run(
         rig, strategy: use these instead of building them from the config.
         hold: a context manager factory entered with the folder before an existing run is
             opened, or just after a new one is made (an exclusive lock), left on ``close``.
+            ``RUN/writer.lock`` is always held the same way (``store.writer_lock``): a second
+            writer of the same run is refused in one line.
 
     Raises:
         RunStoreError (a ``RunConfigError`` for a bad config), RigError, StrategyError: one
@@ -126,6 +149,8 @@ def open_run(
         if resume:
             if hold is not None:
                 held.enter_context(hold(path))
+            RunStore.read_meta(path)  # a folder that is not a run: its one-line error first
+            held.enter_context(writer_lock(path))  # before a torn tail is cut
             store = RunStore.open(path)
             held.callback(store.close)
             run_config = RunConfig.from_dict(store.config, where=path / "run.json")
@@ -141,10 +166,12 @@ def open_run(
         the_rig = rig if rig is not None else make_rig(run_config.rig)
         if strategy is None:
             strategy = strategy_for(run_config, the_rig)
+        _check_sees_ball(run_config, the_rig, strategy)
         if store is None:
             store = RunStore.create(path, run_config.to_dict())
             if hold is not None:
                 held.enter_context(hold(path))
+            held.enter_context(writer_lock(path))
             held.callback(store.close)  # unwinds first: the history closes before the hold
         store.sync_interval_s = the_rig.sync_interval_s
         return OpenRun(run_config, store, the_rig, strategy, len(store), held)

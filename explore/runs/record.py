@@ -5,9 +5,11 @@ ArmBalls): theta (n_params,) in [-1, 1] (48 DMP parameters on the Ergo Jr, 49 on
 (g,) in the strategy's goal space (g may be 0); context_ball, ball (2,) (NaN when not seen);
 context_distractor, distractor (2,), the second ball of a scene with a distractor (NaN without
 one: then they are not stored, and records written before they existed read as NaN); targets,
-measured (T, n_joints) rad; end_effector (T, 3); image (64, 64, 3) BGR uint8; sim_state (k,)
-the twin's integration state after the episode (empty on hardware and on ArmBalls); settle_s,
-duration_s seconds.
+measured (T, n_joints) rad (the command sent at each tick of the movement, and the joints read at
+the end of that tick); start_positions (n_joints,) rad, the joints read just before the first
+command (empty in records written before it existed, and on ArmBalls); end_effector (T, 3);
+image (64, 64, 3) BGR uint8; sim_state (k,) the twin's integration state after the episode
+(empty on hardware and on ArmBalls); settle_s, duration_s seconds.
 
 Stored form (``to_bytes``, "packed"): ``b"ERP1"``, the length of a JSON header (u32, little
 endian), the header (the scalar fields, and each array's name, dtype and shape in order), then
@@ -34,8 +36,8 @@ _ARRAY_FIELDS = (
     "theta", "goal", "context_ball", "ball", "targets", "measured", "end_effector", "image",
     "sim_state",
 )  # fmt: skip
-# stored only when known (finite somewhere); NaN (2,) when absent
-_OPTIONAL_FIELDS = ("context_distractor", "distractor")
+# stored only when known (finite somewhere); their defaults when absent
+_OPTIONAL_FIELDS = ("context_distractor", "distractor", "start_positions")
 _SCALAR_FIELDS = {
     "episode": int, "module": int, "kind": str, "ball_moved": bool, "settle_s": float,
     "duration_s": float,
@@ -72,6 +74,7 @@ class EpisodeRecord:
     duration_s: float
     context_distractor: np.ndarray = field(default_factory=lambda: np.full(2, np.nan))
     distractor: np.ndarray = field(default_factory=lambda: np.full(2, np.nan))
+    start_positions: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def final_end_effector(self) -> np.ndarray:

@@ -12,6 +12,12 @@ Layout of ``RUN/``:
   fsync takes (ArmBalls) syncs at most every ``sync_interval_s`` seconds
   (``Rig.sync_interval_s``) and on close: a machine crash can then cost it the episodes of
   those last seconds, which it replays in as long.
+- ``frames/episode-NNNNNN.npz`` (with the rig option ``record_video``): the overhead camera at
+  every control tick of episode N, ``frames`` (T, side, side, 3) BGR uint8, written atomically
+  (fsync'ed) before the episode's record is appended; a file past the last record is what a
+  crash left of the episode in flight, replaced when that episode is run again.
+- ``writer.lock``: held (an exclusive ``flock``) by the one process writing the run
+  (``writer_lock``); readers that need a finished history check it (``is_being_written``).
 - ``metrics.csv``: cells reached after every episode (derived; rebuilt from the history on
   resume).
 - ``coverage.png`` and whatever later stages write (models, figures, recordings).
@@ -22,14 +28,20 @@ is corruption and raises ``RunStoreError`` naming the offset, without touching t
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
+import io
 import json
 import os
 import struct
 import time
 import zlib
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from explore.runs.record import EpisodeRecord, RecordError
 
@@ -37,6 +49,8 @@ RUN_FORMAT = 1
 APP = "ergo-explore"
 MAGIC = b"EREC"
 HEADER = struct.Struct("<4sII")
+FRAMES_DIR = "frames"
+WRITER_LOCK = "writer.lock"
 
 
 class RunStoreError(RuntimeError):
@@ -175,19 +189,7 @@ class RunStore:
         if not self.history_path.exists():
             return
         data = self.history_path.read_bytes()
-        spans, good_end = _scan(data)
-        records = []
-        for i, (a, b) in enumerate(spans):
-            try:
-                rec = EpisodeRecord.from_bytes(data[a:b])
-            except RecordError as exc:
-                raise RunStoreError(f"history.bin record {i}: {exc}") from exc
-            if rec.episode != i:
-                raise RunStoreError(
-                    f"history.bin record {i} is episode {rec.episode}: missing or duplicated"
-                )
-            records.append(rec)
-        self.records = records
+        self.records, good_end = _decode(data)
         if good_end < len(data):
             # a crash during the last append: drop the torn bytes (the episode in flight)
             self.truncated_bytes = len(data) - good_end
@@ -213,6 +215,21 @@ class RunStore:
             self._synced = now
         self.records.append(record)
 
+    def write_frames(self, episode: int, frames: np.ndarray) -> Path:
+        """Keep episode ``episode``'s camera frames (T, side, side, 3) uint8 durably (temporary
+        file, fsync, rename): call it before appending the episode's record."""
+        path = frames_path(self.path, episode)
+        path.parent.mkdir(exist_ok=True)
+        buf = io.BytesIO()
+        np.savez_compressed(buf, frames=np.asarray(frames, dtype=np.uint8))
+        tmp = path.with_name(path.name + ".tmp")
+        with open(tmp, "wb") as f:
+            f.write(buf.getvalue())
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+        return path
+
     def close(self) -> None:
         if self._fh is not None:
             self._fh.flush()
@@ -225,6 +242,109 @@ class RunStore:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _decode(data: bytes) -> tuple[list[EpisodeRecord], int]:
+    """The records of a history's bytes, in order, and where a torn tail starts; a
+    ``RunStoreError`` naming the record for corruption, an unreadable or out-of-order one."""
+    spans, good_end = _scan(data)
+    records = []
+    for i, (a, b) in enumerate(spans):
+        try:
+            rec = EpisodeRecord.from_bytes(data[a:b])
+        except RecordError as exc:
+            raise RunStoreError(f"history.bin record {i}: {exc}") from exc
+        if rec.episode != i:
+            raise RunStoreError(
+                f"history.bin record {i} is episode {rec.episode}: missing or duplicated"
+            )
+        records.append(rec)
+    return records, good_end
+
+
+@dataclass(frozen=True)
+class History:
+    """A run's stored episodes as read by ``read_history``.
+
+    Attributes:
+        meta: ``run.json`` (checked as ``RunStore.read_meta`` checks it).
+        records: the complete records, in order.
+        torn_bytes: bytes of a torn last record after them (a crash mid-append; 0 if none),
+            left in the file (``RunStore.open`` cuts them when the run is resumed).
+    """
+
+    meta: dict[str, Any]
+    records: list[EpisodeRecord]
+    torn_bytes: int
+
+
+def read_history(run: str | Path) -> History:
+    """A run's history, checked as ``RunStore.open`` checks it, without modifying the folder:
+    a ``RunStoreError`` (one line) for a folder that is not a run, or a corrupt history."""
+    run = Path(run)
+    meta = RunStore.read_meta(run)
+    path = run / "history.bin"
+    if not path.exists():
+        return History(meta, [], 0)
+    data = path.read_bytes()
+    records, good_end = _decode(data)
+    return History(meta, records, len(data) - good_end)
+
+
+def frames_path(run: str | Path, episode: int) -> Path:
+    """Where episode ``episode``'s camera frames are kept (``RunStore.write_frames``)."""
+    return Path(run) / FRAMES_DIR / f"episode-{episode:06d}.npz"
+
+
+def read_frames(run: str | Path, episode: int) -> np.ndarray | None:
+    """Episode ``episode``'s camera frames (T, side, side, 3) BGR uint8, or None when the run
+    kept none for it; a ``RunStoreError`` for a file that is not readable."""
+    path = frames_path(run, episode)
+    if not path.exists():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            frames = z["frames"]
+    except (OSError, ValueError, KeyError, zlib.error) as exc:
+        raise RunStoreError(f"{path} is not readable: {exc}") from exc
+    if frames.ndim != 4 or frames.shape[-1] != 3 or frames.dtype != np.uint8:
+        raise RunStoreError(f"{path} holds frames of shape {frames.shape}, not (T, S, S, 3) uint8")
+    return frames
+
+
+@contextlib.contextmanager
+def writer_lock(run: str | Path) -> Iterator[None]:
+    """Hold ``RUN/writer.lock`` exclusively while writing the run, or fail at once (one line)
+    when another process holds it: two writers would interleave their episodes."""
+    fd = os.open(Path(run) / WRITER_LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise RunStoreError(
+                f"{run} is being written by another process (it holds {WRITER_LOCK}): wait for "
+                "it to stop, or stop it"
+            ) from None
+        yield
+    finally:
+        os.close(fd)  # releases the lock
+
+
+def is_being_written(run: str | Path) -> bool:
+    """Whether a process holds ``RUN/writer.lock`` (an ``ergo explore`` or a campaign trial
+    writing the run) now."""
+    path = Path(run) / WRITER_LOCK
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except FileNotFoundError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    finally:
+        os.close(fd)
+    return False
 
 
 def iter_history(run: Path) -> Iterator[EpisodeRecord]:
