@@ -45,8 +45,9 @@ PHYSICAL = False  # nothing physical attached: any host can run it
 ENVIRONMENTS = {"armballs": ARM_BALLS, "arm2balls": ARM_2_BALLS}
 # History fsyncs at most once a second (``Rig.sync_interval_s``): an fsync takes about 2 ms on
 # the development machine (measured: 300 appends of 5 kB, 2.07 ms each), an ArmBalls episode
-# about 0.3 ms of computing (docs/armballs.md); a machine crash then costs at most the last
-# second of episodes, which the run redoes on resume in about a second. A guess.
+# about 0.3 ms of computing (docs/armballs.md); a SIGKILL loses nothing (the records are in the
+# page cache), a power cut at most the last second of episodes, which the resume detects
+# (``history.synced``, explore/runs/store.py) and redoes in about a second. The interval: a guess.
 SYNC_INTERVAL_S = 1.0
 NO_POSITION = np.full(2, np.nan)
 

@@ -109,3 +109,79 @@ def test_create_refuses_a_non_empty_folder(tmp_path):
     with pytest.raises(RunStoreError, match="not empty"):
         RunStore.create(tmp_path / "x", {})
     assert (tmp_path / "x" / "keep.txt").read_text() == "mine"
+
+
+def _unsynced_run(path, monkeypatch, n=6, synced_after=2):
+    """A run with a 1 s sync interval whose clock stands still after the ``synced_after``-th
+    append: the history holds ``n`` records, ``history.synced`` the length of the first
+    ``synced_after``. Returns (history bytes, synced length)."""
+    from explore.runs import store as store_module
+
+    now = [0.0]
+    monkeypatch.setattr(store_module.time, "monotonic", lambda: now[0])
+    s = RunStore.create(path, {})
+    s.sync_interval_s = 1.0
+    for k in range(n):
+        s.append(make_record(k))
+        now[0] += 1.0 if k + 1 < synced_after else 0.0
+    s._fh.close()  # a crash: no close(), no final sync
+    return (path / "history.bin").read_bytes(), store_module.read_synced(path)
+
+
+def test_with_a_sync_interval_the_synced_length_follows_each_fsync_and_close(tmp_path, monkeypatch):
+    from explore.runs import store as store_module
+
+    data, synced = _unsynced_run(tmp_path / "run", monkeypatch)
+    first_two = sum(len(make_record(k).to_bytes()) + 12 for k in range(2))
+    assert synced == first_two < len(data)  # the two timed syncs, none for the still clock
+    with RunStore.open(tmp_path / "run") as s:
+        assert len(s) == 6  # a killed process loses nothing: every record was flushed
+    assert store_module.read_synced(tmp_path / "run") == len(data)  # close syncs
+
+
+def _record_spans(data):
+    from explore.runs.store import _scan
+
+    return [(a - 12, b) for a, b in _scan(data)[0]]  # each record's frame, header included
+
+
+@pytest.mark.parametrize("damage", ["lost", "zeros", "prefix", "hole"])
+def test_a_power_cut_tail_past_the_synced_length_is_cut_and_resumes(tmp_path, monkeypatch, damage):
+    """What a power cut may leave of the bytes written after the last fsync: nothing, zeros,
+    a prefix, or later records on disk with an earlier one missing (writeback in any order).
+    Everything from the first bad record on is cut; the records before stay."""
+    data, synced = _unsynced_run(tmp_path / "run", monkeypatch)
+    spans = _record_spans(data)
+    assert spans[2][0] == synced
+    disk = bytearray(data)
+    if damage == "lost":
+        disk = disk[:synced]
+    elif damage == "zeros":
+        disk[synced:] = bytes(len(disk) - synced)
+    elif damage == "prefix":
+        disk = disk[: spans[3][0] + 100]
+    else:  # record 3 never reached the disk, records 4 and 5 did
+        a, b = spans[3]
+        disk[a:b] = bytes(b - a)
+    (tmp_path / "run" / "history.bin").write_bytes(bytes(disk))
+    keep = {"lost": 2, "zeros": 2, "prefix": 3, "hole": 3}[damage]
+    s = RunStore.open(tmp_path / "run")
+    assert len(s) == keep and s.truncated_bytes == len(disk) - spans[keep][0]
+    for k in range(keep, 6):  # the resume runs the cut episodes again
+        s.append(make_record(k))
+    s.close()
+    again = RunStore.open(tmp_path / "run")
+    assert all(a.equals(make_record(k)) for k, a in enumerate(again)) and len(again) == 6
+    assert (tmp_path / "run" / "history.bin").read_bytes() == data
+
+
+def test_damage_before_the_synced_length_is_still_refused_as_corruption(tmp_path, monkeypatch):
+    data, synced = _unsynced_run(tmp_path / "run", monkeypatch)
+    a, b = _record_spans(data)[1]
+    assert b <= synced  # synced: a power cut cannot have touched it
+    disk = bytearray(data)
+    disk[a:b] = bytes(b - a)
+    (tmp_path / "run" / "history.bin").write_bytes(bytes(disk))
+    with pytest.raises(RunStoreError, match=f"corrupt at byte {a}"):
+        RunStore.open(tmp_path / "run")
+    assert (tmp_path / "run" / "history.bin").read_bytes() == bytes(disk)
