@@ -115,7 +115,8 @@ def table(ratios: dict[str, np.ndarray]) -> str:
 
 def curves_figure(ratios: dict[str, np.ndarray], out: Path) -> Path:
     """Exploration ratio against iterations: ours (solid, +-1 sd shaded) beside the published
-    (dashed, +-1 sd dotted), one panel for the engineered strategies, one for the learned."""
+    (dashed, +-1 sd dotted, drawn whether or not the campaign ran the strategy), one panel for
+    the engineered strategies, one for the learned."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -128,12 +129,13 @@ def curves_figure(ratios: dict[str, np.ndarray], out: Path) -> Path:
                                        "rge-sae", "mge-sae")))  # fmt: skip
     fig, axes = plt.subplots(1, 2, figsize=(13, 5), sharey=True)
     for ax, (title, names) in zip(axes, panels, strict=True):
-        for k, name in enumerate(n for n in names if n in ratios):
+        for k, name in enumerate(n for n in names if n in ratios or NAMES.get(n) in pub):
             color = f"C{k}"
-            r = ratios[name]
-            mean, s = r.mean(axis=0), r.std(axis=0, ddof=1) if len(r) > 1 else 0 * r[0]
-            ax.plot(x, mean, color=color, lw=2, label=f"{name} (ours, {len(r)} seeds)")
-            ax.fill_between(x, mean - s, mean + s, color=color, alpha=0.15)
+            if name in ratios:
+                r = ratios[name]
+                mean, s = r.mean(axis=0), r.std(axis=0, ddof=1) if len(r) > 1 else 0 * r[0]
+                ax.plot(x, mean, color=color, lw=2, label=f"{name} (ours, {len(r)} seeds)")
+                ax.fill_between(x, mean - s, mean + s, color=color, alpha=0.15)
             alg = NAMES.get(name)
             if alg in pub:
                 pm = np.array([pub[alg][n][1] for n in x])
@@ -142,6 +144,8 @@ def curves_figure(ratios: dict[str, np.ndarray], out: Path) -> Path:
                 ax.plot(x, pm, color=color, ls="--", lw=1.5, label=f"{alg} (published, {runs})")
                 ax.plot(x, pm - ps, color=color, ls=":", lw=0.8)
                 ax.plot(x, pm + ps, color=color, ls=":", lw=0.8)
+        if not any(n in ratios for n in names):
+            title += " (published only: not run here)"
         ax.set_title(f"Arm-2-Balls, {title}")
         ax.set_xlabel("iterations (episodes, bootstrap included)")
         ax.grid(alpha=0.3)
@@ -189,9 +193,10 @@ def interest_figure(campaign: Path, out: Path) -> Path | None:
     return out
 
 
-def scatter_figure(campaign: Path, out: Path, seed: int = 0) -> Path:
+def scatter_figure(campaign: Path, out: Path, seed: int | None = None) -> Path:
     """Final ball positions of one seed's run per strategy (the published appendix's
-    scatter plots), with the number of episodes that caught the ball."""
+    scatter plots), with the number of episodes that caught the ball; ``seed``: the campaign's
+    lowest seed when None."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -199,6 +204,8 @@ def scatter_figure(campaign: Path, out: Path, seed: int = 0) -> Path:
 
     from explore.runs.store import iter_history
 
+    if seed is None:
+        seed = min(int(p.name.split("-")[1]) for p in campaign.glob("*/seed-*"))
     names = [s for s in ORDER if (campaign / s / f"seed-{seed}").is_dir()]
     fig, axes = plt.subplots(2, (len(names) + 1) // 2, figsize=(3.3 * ((len(names) + 1) // 2),
                              6.8), squeeze=False)  # fmt: skip
@@ -215,7 +222,7 @@ def scatter_figure(campaign: Path, out: Path, seed: int = 0) -> Path:
         ax.set_ylim(-1, 1)
         ax.set_aspect("equal")
         ax.tick_params(labelsize=7)
-    fig.suptitle(f"Final ball positions, seed {seed}, {len(recs)} episodes: exploration ratio "
+    fig.suptitle(f"Final ball positions, seed {seed}, {len(recs)} episodes:\nexploration ratio "
                  "and episodes that caught the ball", fontsize=10)  # fmt: skip
     fig.tight_layout()
     fig.savefig(out, dpi=110)
