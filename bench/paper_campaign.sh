@@ -13,9 +13,9 @@
 # uses is the one that best explains held-out images (selection.json), a criterion that never
 # looks at the ball's position.
 #
-# Order: the engineered and spatial-autoencoder comparisons first, then the VAE baselines; the
-# distractor's campaign runs to 2000 episodes first and is extended to 5000 later (a run
-# extended is the run it would have been: the twin is deterministic).
+# Order: the engineered and spatial-autoencoder comparisons first, then the VAE baselines. The
+# distractor's runs and the VAE baselines run to 2000 episodes first and are extended to 5000
+# at the end (a run extended is the run it would have been: the twin is deterministic).
 set -euo pipefail
 OUT=${1:-runs/paper}
 JOBS=${2:-2}
@@ -61,26 +61,26 @@ model sae "$OUT/models/sae_distractor" "$OUT/data/outcomes_distractor.npz" 4-7
 campaign "$OUT/distractor" 2000 "${DISTRACTOR[@]}"
 report "$OUT/distractor"
 
-# ---- the paper's VAE baselines, the ball left in place ------------------------------------------
+# ---- the paper's VAE baselines, the ball left in place: 2000 episodes first --------------------
 model vae "$OUT/models/vae" "$OUT/data/outcomes.npz" 0-3 "${VAE_RECIPE[@]}"
 model vae "$OUT/models/betavae" "$OUT/data/outcomes.npz" 0-3 "${BETAVAE_RECIPE[@]}"
 LEARNED=(--sae "$OUT/models/sae" --vae "$OUT/models/vae" --betavae "$OUT/models/betavae")
-campaign "$OUT/stay" "$EPISODES" rge-vae,rge-betavae "${LEARNED[@]}"
-report "$OUT/stay"
+campaign "$OUT/stay" 2000 rge-vae,rge-betavae "${LEARNED[@]}"
 
-# ---- the beta-VAE with the distractor; then every distractor run to the full length -----------
+# ---- the beta-VAE with the distractor, 2000 episodes first -------------------------------------
 model vae "$OUT/models/betavae_distractor" "$OUT/data/outcomes_distractor.npz" 0-3 \
     "${BETAVAE_RECIPE[@]}"
 DISTRACTOR_BVAE=(rge-betavae,mge-betavae --betavae "$OUT/models/betavae_distractor" "${WALK[@]}")
 campaign "$OUT/distractor" 2000 "${DISTRACTOR_BVAE[@]}"
 report "$OUT/distractor"
+
+# ---- everything to the full length, and the rest of the paper's strategies ---------------------
+campaign "$OUT/stay" "$EPISODES" rge-vae,rge-betavae "${LEARNED[@]}"
 campaign "$OUT/distractor" "$EPISODES" "${DISTRACTOR[@]}"
 campaign "$OUT/distractor" "$EPISODES" "${DISTRACTOR_BVAE[@]}"
-report "$OUT/distractor"
-
-# ---- the rest of the paper's strategies, the ball left in place ---------------------------------
 campaign "$OUT/stay" "$EPISODES" mge-vae,rge-online "${LEARNED[@]}"
 report "$OUT/stay"
+report "$OUT/distractor"
 
 # ---- the exploration each training seed's model gives (the representation table) ---------------
 for kind in sae vae; do
