@@ -13,7 +13,8 @@ its own strategy (``bench/distractor_figures.py``), and each module named by wha
 
 Prints the Markdown table (mean +- sd over seeds, ddof 1; the published mean +- sd over its
 runs; |ours - published| in published sd; Welch's p) and the campaign's wall time from the runs'
-trial.json, and writes PREFIX_curves.png, PREFIX_interest.png and PREFIX_scatter.png.
+trial.json, and writes PREFIX_curves.png, PREFIX_interest.png and PREFIX_scatter.png; with the
+interest, the share of MGE-EFR's goals in the distractor's module per 1000 episodes.
 """
 
 from __future__ import annotations
@@ -193,6 +194,34 @@ def interest_figure(campaign: Path, out: Path) -> Path | None:
     return out
 
 
+def distractor_goal_share(campaign: Path, window: int = 1000) -> str:
+    """The share of MGE-EFR's episodes whose goal was in the distractor's module (module 1:
+    ``EngineeredGoalSpace`` puts the ball's module first), per ``window`` episodes, mean over
+    the runs, as a Markdown table; then each run's row."""
+    from explore.runs.store import iter_history
+
+    rows, names = [], []
+    for run in sorted((campaign / "mge-efr").glob("seed-*")):
+        episode, module = np.array([(r.episode, r.module) for r in iter_history(run)]).T
+        row = []
+        for a in range(0, int(episode.max()) + 1, window):
+            chosen = module[(episode >= a) & (episode < a + window) & (module >= 0)]
+            row.append(float(np.mean(chosen == 1)) if len(chosen) else np.nan)
+        rows.append(row)
+        names.append(run.name)
+    if not rows:
+        return ""
+    n = min(len(r) for r in rows)
+    table = np.array([r[:n] for r in rows])
+    head = "| episodes | " + " | ".join(f"{k * window}-{(k + 1) * window - 1}" for k in range(n))
+    lines = [head + " |", "|---" * (n + 1) + "|"]
+    lines.append("| goals in the distractor's module (mean) | "
+                 + " | ".join(f"{v:.3f}" for v in np.nanmean(table, axis=0)) + " |")  # fmt: skip
+    lines += [f"| {name} | " + " | ".join(f"{v:.2f}" for v in row) + " |"
+              for name, row in zip(names, table, strict=True)]  # fmt: skip
+    return "\n".join(lines)
+
+
 def scatter_figure(campaign: Path, out: Path, seed: int | None = None) -> Path:
     """Final ball positions of one seed's run per strategy (the published appendix's
     scatter plots), with the number of episodes that caught the ball; ``seed``: the campaign's
@@ -261,6 +290,7 @@ def main() -> None:
                scatter_figure(args.campaign, args.out / f"{args.prefix}_scatter.png")]  # fmt: skip
     if not args.no_interest:
         written.append(interest_figure(args.campaign, args.out / f"{args.prefix}_interest.png"))
+        print(distractor_goal_share(args.campaign))
     print("wrote", " ".join(str(p) for p in written if p))
 
 
