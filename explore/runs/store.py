@@ -126,6 +126,7 @@ class RunStore:
         self.sync_interval_s = 0.0
         self._synced = -math.inf  # the first append syncs (and starts ``history.synced``)
         self._size = 0  # bytes of history.bin written through this store
+        self._synced_length: int | None = None  # what history.synced holds (None: no file)
 
     # ---- construction ----------------------------------------------------------------------
     @classmethod
@@ -206,7 +207,8 @@ class RunStore:
         if not self.history_path.exists():
             return
         data = self.history_path.read_bytes()
-        self.records, good_end = _decode(data, read_synced(self.path))
+        self._synced_length = read_synced(self.path)
+        self.records, good_end = _decode(data, self._synced_length)
         if good_end < len(data):
             # a crash during the last append (the episode in flight), or a power cut's unsynced
             # tail: drop the bytes from the first bad record on, the episodes are run again
@@ -214,7 +216,7 @@ class RunStore:
             with open(self.history_path, "r+b") as f:
                 f.truncate(good_end)
                 os.fsync(f.fileno())
-            if (self.path / SYNCED).exists():
+            if self._synced_length is not None:
                 self._write_synced(good_end)
 
     def _open_for_append(self) -> None:
@@ -225,10 +227,13 @@ class RunStore:
         """fsync the history, then record (durably) how much of it is on disk."""
         os.fsync(self._fh.fileno())
         self._synced = time.monotonic()
-        if self.sync_interval_s > 0 or (self.path / SYNCED).exists():
+        if (self.sync_interval_s > 0 or self._synced_length is not None) and (
+            self._size != self._synced_length
+        ):  # a run that appended nothing writes nothing
             self._write_synced(self._size)
 
     def _write_synced(self, length: int) -> None:
+        self._synced_length = length
         path = self.path / SYNCED
         new = not path.exists()
         fd = os.open(path, os.O_WRONLY | os.O_CREAT, 0o644)
@@ -245,7 +250,8 @@ class RunStore:
                 os.close(dir_fd)
 
     def append(self, record: EpisodeRecord) -> None:
-        """Append one episode durably (flush + fsync) before returning."""
+        """Append one episode: flushed (a killed process loses nothing of it) and fsync'ed, after
+        every append or at most every ``sync_interval_s`` seconds (module doc)."""
         if record.episode != len(self.records):
             raise RunStoreError(
                 f"episode {record.episode} appended after {len(self.records)} episodes"

@@ -185,3 +185,16 @@ def test_damage_before_the_synced_length_is_still_refused_as_corruption(tmp_path
     with pytest.raises(RunStoreError, match=f"corrupt at byte {a}"):
         RunStore.open(tmp_path / "run")
     assert (tmp_path / "run" / "history.bin").read_bytes() == bytes(disk)
+
+
+def test_a_store_with_a_sync_interval_opened_and_closed_without_appending_writes_nothing(tmp_path):
+    with RunStore.create(tmp_path / "run", {}) as s:
+        s.sync_interval_s = 1.0
+        for k in range(3):
+            s.append(make_record(k))
+    before = {p.name: (p.stat().st_mtime_ns, p.read_bytes()) for p in (tmp_path / "run").iterdir()}
+    assert "history.synced" in before
+    with RunStore.open(tmp_path / "run") as s:
+        s.sync_interval_s = 1.0
+    after = {p.name: (p.stat().st_mtime_ns, p.read_bytes()) for p in (tmp_path / "run").iterdir()}
+    assert after == before
