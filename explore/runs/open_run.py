@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from explore.learner.strategies import Strategy, make_strategy
-from explore.rigs.rig import Rig, RigError, make_rig
+from explore.rigs.rig import Rig, RigError, is_physical, make_rig
 from explore.runs.config import RunConfig
 from explore.runs.explorer import Explorer, Progress
 from explore.runs.record import EpisodeRecord
@@ -90,8 +90,9 @@ class OpenRun:
 def _check_sees_ball(config: RunConfig, rig: Rig, strategy: Strategy) -> None:
     """A rig that cannot locate the ball (a physical rig without an arena calibration) records
     no ball for the whole run: a ``RigError`` for a strategy that needs it (goal exploration),
-    else one warning."""
-    if rig.twin is not None or rig.ball_locator is not None:
+    else one warning. A rig with nothing physical attached (the twin, ArmBalls) knows where
+    its ball is."""
+    if rig.ball_locator is not None or not is_physical(config.rig.name):
         return
     rig_id = config.rig.rig_id
     calibrate = f"ergo calibrate arena --rig-id {rig_id} --camera ..."
@@ -164,8 +165,7 @@ def open_run(
         # rig and strategy before a new run folder exists: a bad name leaves nothing
         the_rig = rig if rig is not None else make_rig(run_config.rig)
         if strategy is None:
-            s = run_config.strategy
-            strategy = make_strategy(s.name, n_params=the_rig.motor.n_params, **s.options)
+            strategy = strategy_for(run_config, the_rig)
         _check_sees_ball(run_config, the_rig, strategy)
         if store is None:
             store = RunStore.create(path, run_config.to_dict())
@@ -173,7 +173,17 @@ def open_run(
                 held.enter_context(hold(path))
             held.enter_context(writer_lock(path))
             held.callback(store.close)  # unwinds first: the history closes before the hold
+        store.sync_interval_s = the_rig.sync_interval_s
         return OpenRun(run_config, store, the_rig, strategy, len(store), held)
     except BaseException:
         held.close()
         raise
+
+
+def strategy_for(config: RunConfig, rig: Rig | None = None) -> Strategy:
+    """The strategy ``config`` describes, for its rig (``rig``, or the one the config names,
+    built but not connected): its motor primitive's ``n_params`` and its ``scene``; not yet
+    replayed (feed it the run's records with ``update`` to rebuild its state)."""
+    rig = rig if rig is not None else make_rig(config.rig)
+    s = config.strategy
+    return make_strategy(s.name, n_params=rig.motor.n_params, scene=rig.scene, **s.options)

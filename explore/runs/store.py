@@ -5,8 +5,18 @@ Layout of ``RUN/``:
   time. Written once, atomically (temporary file + rename).
 - ``history.bin``: append-only episode records. Each is framed as
   ``b"EREC" | u32 length | u32 CRC-32 of the payload | payload`` (little endian), the payload
-  an ``EpisodeRecord`` as compressed npz. Each append is flushed and fsync'ed before the
-  episode counts as done, so a SIGKILL loses at most the episode in flight.
+  an ``EpisodeRecord`` (``explore.runs.record``: packed, or npz before 2026-12-02). Each append
+  is flushed before the episode counts as done, so a SIGKILL loses at most the episode in
+  flight (the rest is in the kernel's page cache), and fsync'ed (by default after every
+  episode: ``sync_interval_s`` = 0), so that a crash of the machine loses no more either. A rig
+  whose episodes cost well under the 2 ms an fsync takes (ArmBalls) syncs at most every
+  ``sync_interval_s`` seconds (``Rig.sync_interval_s``) and on close: a power cut can then cost
+  it the episodes of the last interval, which a resume detects and runs again (below).
+- ``history.synced`` (only with ``sync_interval_s`` > 0): a length of ``history.bin`` known to
+  be on disk, u64 little endian, written and fsync'ed after each fsync of the history returned
+  (so it may lag the history, never lead it). After a power cut, whatever the disk kept of the
+  bytes past it (nothing, zeros, a prefix, records with holes) is the unsynced tail and is cut;
+  damage before it is corruption.
 - ``frames/episode-NNNNNN.npz`` (with the rig option ``record_video``): the overhead camera at
   every control tick of episode N, ``frames`` (T, side, side, 3) BGR uint8, written atomically
   (fsync'ed) before the episode's record is appended; a file past the last record is what a
@@ -17,8 +27,10 @@ Layout of ``RUN/``:
   resume).
 - ``coverage.png`` and whatever later stages write (models, figures, recordings).
 
-On open, a torn last record (a crash mid-write) is cut off; a bad record followed by good ones
-is corruption and raises ``RunStoreError`` naming the offset, without touching the file.
+On open, a torn last record (a crash mid-write) is cut off, and so is everything from the first
+bad record on when it lies past ``history.synced`` (a power cut's unsynced tail); any other bad
+record followed by more data is corruption and raises ``RunStoreError`` naming the offset,
+without touching the file.
 """
 
 from __future__ import annotations
@@ -27,6 +39,7 @@ import contextlib
 import fcntl
 import io
 import json
+import math
 import os
 import struct
 import time
@@ -46,6 +59,8 @@ MAGIC = b"EREC"
 HEADER = struct.Struct("<4sII")
 FRAMES_DIR = "frames"
 WRITER_LOCK = "writer.lock"
+SYNCED = "history.synced"
+_SYNCED = struct.Struct("<Q")
 
 
 class RunStoreError(RuntimeError):
@@ -62,8 +77,11 @@ def atomic_write_text(path: Path, text: str) -> None:
     os.replace(tmp, path)
 
 
-def _scan(data: bytes) -> tuple[list[tuple[int, int]], int]:
+def _scan(data: bytes, durable: int | None = None) -> tuple[list[tuple[int, int]], int]:
     """Find record payload spans in ``data``.
+
+    ``durable``: the length known to be on disk (``history.synced``; None: all of it): a bad
+    record starting at or past it is an unsynced tail that a power cut damaged.
 
     Returns:
         spans: (start, end) of each valid payload, in order.
@@ -74,11 +92,14 @@ def _scan(data: bytes) -> tuple[list[tuple[int, int]], int]:
     spans: list[tuple[int, int]] = []
     pos = 0
     n = len(data)
+    durable = n if durable is None else durable
     while pos < n:
         if n - pos < HEADER.size:
             break  # torn header
         magic, length, crc = HEADER.unpack_from(data, pos)
         start, end = pos + HEADER.size, pos + HEADER.size + length
+        if pos >= durable and (magic != MAGIC or end > n or zlib.crc32(data[start:end]) != crc):
+            break  # past what was synced: what a power cut left of the unsynced tail
         if magic != MAGIC:
             raise RunStoreError(f"history.bin is corrupt at byte {pos}: bad record marker")
         if end > n:
@@ -101,6 +122,11 @@ class RunStore:
         self.records: list[EpisodeRecord] = []
         self._fh: Any = None
         self.truncated_bytes = 0
+        #: seconds between two fsyncs of the history (0: every append)
+        self.sync_interval_s = 0.0
+        self._synced = -math.inf  # the first append syncs (and starts ``history.synced``)
+        self._size = 0  # bytes of history.bin written through this store
+        self._synced_length: int | None = None  # what history.synced holds (None: no file)
 
     # ---- construction ----------------------------------------------------------------------
     @classmethod
@@ -181,27 +207,62 @@ class RunStore:
         if not self.history_path.exists():
             return
         data = self.history_path.read_bytes()
-        self.records, good_end = _decode(data)
+        self._synced_length = read_synced(self.path)
+        self.records, good_end = _decode(data, self._synced_length)
         if good_end < len(data):
-            # a crash during the last append: drop the torn bytes (the episode in flight)
+            # a crash during the last append (the episode in flight), or a power cut's unsynced
+            # tail: drop the bytes from the first bad record on, the episodes are run again
             self.truncated_bytes = len(data) - good_end
             with open(self.history_path, "r+b") as f:
                 f.truncate(good_end)
                 os.fsync(f.fileno())
+            if self._synced_length is not None:
+                self._write_synced(good_end)
 
     def _open_for_append(self) -> None:
         self._fh = open(self.history_path, "ab")  # noqa: SIM115 - held open for appends
+        self._size = self._fh.tell()
+
+    def _sync(self) -> None:
+        """fsync the history, then record (durably) how much of it is on disk."""
+        os.fsync(self._fh.fileno())
+        self._synced = time.monotonic()
+        if (self.sync_interval_s > 0 or self._synced_length is not None) and (
+            self._size != self._synced_length
+        ):  # a run that appended nothing writes nothing
+            self._write_synced(self._size)
+
+    def _write_synced(self, length: int) -> None:
+        self._synced_length = length
+        path = self.path / SYNCED
+        new = not path.exists()
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT, 0o644)
+        try:
+            os.pwrite(fd, _SYNCED.pack(length), 0)
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        if new:  # its directory entry on disk too
+            dir_fd = os.open(self.path, os.O_RDONLY)
+            try:
+                os.fsync(dir_fd)
+            finally:
+                os.close(dir_fd)
 
     def append(self, record: EpisodeRecord) -> None:
-        """Append one episode durably (flush + fsync) before returning."""
+        """Append one episode: flushed (a killed process loses nothing of it) and fsync'ed, after
+        every append or at most every ``sync_interval_s`` seconds (module doc)."""
         if record.episode != len(self.records):
             raise RunStoreError(
                 f"episode {record.episode} appended after {len(self.records)} episodes"
             )
         payload = record.to_bytes()
-        self._fh.write(HEADER.pack(MAGIC, len(payload), zlib.crc32(payload)) + payload)
-        self._fh.flush()
-        os.fsync(self._fh.fileno())
+        frame = HEADER.pack(MAGIC, len(payload), zlib.crc32(payload)) + payload
+        self._fh.write(frame)
+        self._fh.flush()  # in the page cache: a killed process loses nothing of it
+        self._size += len(frame)
+        if time.monotonic() - self._synced >= self.sync_interval_s:
+            self._sync()
         self.records.append(record)
 
     def write_frames(self, episode: int, frames: np.ndarray) -> Path:
@@ -221,6 +282,8 @@ class RunStore:
 
     def close(self) -> None:
         if self._fh is not None:
+            self._fh.flush()
+            self._sync()
             self._fh.close()
             self._fh = None
 
@@ -231,10 +294,20 @@ class RunStore:
         self.close()
 
 
-def _decode(data: bytes) -> tuple[list[EpisodeRecord], int]:
-    """The records of a history's bytes, in order, and where a torn tail starts; a
+def read_synced(run: str | Path) -> int | None:
+    """The length of ``RUN/history.bin`` known to be on disk (``history.synced``), or None
+    when the run keeps none (it fsyncs every append)."""
+    try:
+        raw = (Path(run) / SYNCED).read_bytes()
+    except FileNotFoundError:
+        return None
+    return _SYNCED.unpack(raw[: _SYNCED.size])[0] if len(raw) >= _SYNCED.size else None
+
+
+def _decode(data: bytes, durable: int | None = None) -> tuple[list[EpisodeRecord], int]:
+    """The records of a history's bytes, in order, and where a torn tail starts (``_scan``); a
     ``RunStoreError`` naming the record for corruption, an unreadable or out-of-order one."""
-    spans, good_end = _scan(data)
+    spans, good_end = _scan(data, durable)
     records = []
     for i, (a, b) in enumerate(spans):
         try:
@@ -256,8 +329,9 @@ class History:
     Attributes:
         meta: ``run.json`` (checked as ``RunStore.read_meta`` checks it).
         records: the complete records, in order.
-        torn_bytes: bytes of a torn last record after them (a crash mid-append; 0 if none),
-            left in the file (``RunStore.open`` cuts them when the run is resumed).
+        torn_bytes: bytes of a torn last record after them (a crash mid-append, or a power
+            cut's unsynced tail; 0 if none), left in the file (``RunStore.open`` cuts them when
+            the run is resumed).
     """
 
     meta: dict[str, Any]
@@ -274,7 +348,7 @@ def read_history(run: str | Path) -> History:
     if not path.exists():
         return History(meta, [], 0)
     data = path.read_bytes()
-    records, good_end = _decode(data)
+    records, good_end = _decode(data, read_synced(run))
     return History(meta, records, len(data) - good_end)
 
 
@@ -341,6 +415,6 @@ def iter_history(run: Path) -> Iterator[EpisodeRecord]:
     if not path.exists():
         return
     data = path.read_bytes()
-    spans, _ = _scan(data)
+    spans, _ = _scan(data, read_synced(run))
     for a, b in spans:
         yield EpisodeRecord.from_bytes(data[a:b])
