@@ -1,0 +1,62 @@
+"""RGE-Online's slope after its switch against RPE's, per seed, from a campaign folder.
+
+    .venv/bin/python bench/online_slope.py runs/paper/stay [--switch 2000] [--end 5000]
+
+The slope is the ball cells gained per 1000 episodes from the switch (rge-online's bootstrap
+length, 2000 by default: its first episodes are RPE's with the same seed) to ``--end``, read
+from each run's ``metrics.csv`` (``ball_cells`` after each episode, the project's metric).
+Prints one line per strategy (per-seed slopes, mean ± sd) and Welch's t-test of rge-online's
+slopes against RPE's (one-sided: rge-online's larger).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+from pathlib import Path
+
+import numpy as np
+from scipy import stats
+
+
+def cells_at(metrics: Path, episodes: int) -> int | None:
+    """Ball cells after the first ``episodes`` episodes, or None when the run is shorter."""
+    with metrics.open() as f:
+        for row in csv.DictReader(f):
+            if int(row["episode"]) == episodes - 1:
+                return int(row["ball_cells"])
+    return None
+
+
+def slopes(strategy_dir: Path, switch: int, end: int) -> dict[str, float]:
+    """seed folder name -> cells gained per 1000 episodes over [switch, end)."""
+    out = {}
+    for run in sorted(strategy_dir.glob("seed-*")):
+        a, b = cells_at(run / "metrics.csv", switch), cells_at(run / "metrics.csv", end)
+        if a is not None and b is not None:
+            out[run.name] = (b - a) * 1000.0 / (end - switch)
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("campaign", type=Path)
+    ap.add_argument("--switch", type=int, default=2000, help="rge-online's bootstrap length")
+    ap.add_argument("--end", type=int, default=5000, help="the last episode counted")
+    args = ap.parse_args()
+    found = {}
+    for name in ("rpe", "rge-online"):
+        s = slopes(args.campaign / name, args.switch, args.end)
+        if not s:
+            raise SystemExit(f"{args.campaign / name}: no run reaches {args.end} episodes")
+        v = np.array(list(s.values()))
+        found[name] = v
+        per = " ".join(f"{x:.1f}" for x in v)
+        print(f"{name:11s} {len(v)} seeds: {v.mean():.1f} ± {v.std(ddof=1):.1f} cells/1000 ({per})")
+    t = stats.ttest_ind(found["rge-online"], found["rpe"], equal_var=False, alternative="greater")
+    ratio = found["rge-online"].mean() / found["rpe"].mean()
+    print(f"rge-online / rpe: {ratio:.2f}x, Welch one-sided p = {t.pvalue:.2g}")
+
+
+if __name__ == "__main__":
+    main()
