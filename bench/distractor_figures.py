@@ -26,7 +26,7 @@ from explore.runs.store import RunStore
 
 def interests_over_time(run: Path) -> tuple[np.ndarray, list[str]]:
     """(interest after each episode (n, modules), module names) of an MGE run."""
-    store = RunStore.open(run)
+    store = RunStore.read(run)
     cfg = store.config["strategy"]
     strategy = make_strategy(cfg["name"], **cfg.get("options", {}))
     rows = []
@@ -99,7 +99,7 @@ def main() -> None:
                              squeeze=False)  # fmt: skip
     for ax, name in zip(axes[0], strategies, strict=True):
         run = sorted((args.campaign / name).glob("seed-*"))[0]
-        store = RunStore.open(run)
+        store = RunStore.read(run)
         ball = np.stack([r.ball for r in store])
         dis = np.stack([r.distractor for r in store])
         store.close()

@@ -17,6 +17,7 @@ is corruption and raises ``RunStoreError`` naming the offset, without touching t
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import struct
@@ -32,6 +33,7 @@ RUN_FORMAT = 1
 APP = "ergo-explore"
 MAGIC = b"EREC"
 HEADER = struct.Struct("<4sII")
+WRITER_LOCK_FILE = "writer.lock"  # the writer's lock (explore/runs/lock.py), not run data
 
 
 class RunStoreError(RuntimeError):
@@ -48,7 +50,24 @@ def atomic_write_text(path: Path, text: str) -> None:
     os.replace(tmp, path)
 
 
-def _scan(data: bytes) -> tuple[list[tuple[int, int]], int]:
+def make_run_dir(path: Path) -> None:
+    """Create the run folder ``path`` (and its parents); one line when that cannot be done
+    (a parent is a regular file, no permission, a full disk)."""
+    for parent in (path, *path.parents):
+        if parent.exists() and not parent.is_dir():
+            raise RunStoreError(f"cannot make the run folder {path}: {parent} is a file")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise RunStoreError(f"cannot make the run folder {path}: {exc.strerror or exc}") from exc
+
+
+def salvage_hint(run: Path) -> str:
+    """What to do about a damaged history, for the end of an error line."""
+    return f"`ergo runs check {run}` says what can be kept, `ergo runs salvage {run}` keeps it"
+
+
+def _scan(data: bytes, hint: str = "") -> tuple[list[tuple[int, int]], int]:
     """Find record payload spans in ``data``.
 
     Returns:
@@ -66,16 +85,30 @@ def _scan(data: bytes) -> tuple[list[tuple[int, int]], int]:
         magic, length, crc = HEADER.unpack_from(data, pos)
         start, end = pos + HEADER.size, pos + HEADER.size + length
         if magic != MAGIC:
-            raise RunStoreError(f"history.bin is corrupt at byte {pos}: bad record marker")
+            raise RunStoreError(f"history.bin is corrupt at byte {pos}: bad record marker{hint}")
         if end > n:
             break  # torn payload
         if zlib.crc32(data[start:end]) != crc:
             if end == n:
                 break  # last record incomplete on disk
-            raise RunStoreError(f"history.bin is corrupt at byte {pos}: checksum mismatch")
+            raise RunStoreError(f"history.bin is corrupt at byte {pos}: checksum mismatch{hint}")
         spans.append((start, end))
         pos = end
     return spans, pos
+
+
+def _decode(data: bytes, spans: list[tuple[int, int]], hint: str) -> Iterator[EpisodeRecord]:
+    """The records of ``spans``, each checked to be the next episode (0, 1, 2...)."""
+    for i, (a, b) in enumerate(spans):
+        try:
+            rec = EpisodeRecord.from_bytes(data[a:b])
+        except RecordError as exc:
+            raise RunStoreError(f"history.bin record {i}: {exc}{hint}") from exc
+        if rec.episode != i:
+            raise RunStoreError(
+                f"history.bin record {i} is episode {rec.episode}: missing or duplicated{hint}"
+            )
+        yield rec
 
 
 class RunStore:
@@ -85,22 +118,25 @@ class RunStore:
         self.path = path
         self.meta = meta
         self.records: list[EpisodeRecord] = []
-        self._fh: Any = None
+        self._fd: int | None = None  # history.bin, O_APPEND, unbuffered
         self.truncated_bytes = 0
 
     # ---- construction ----------------------------------------------------------------------
     @classmethod
     def create(cls, path: str | Path, config: dict[str, Any]) -> RunStore:
-        """Make a new run folder; refuses a non-empty existing folder."""
+        """Make a new run folder; refuses a non-empty existing folder (its writer's lock file,
+        ``explore/runs/lock.py``, aside)."""
         path = Path(path)
+        make_run_dir(path)
         stale = path / "run.json.tmp"
-        if path.is_dir() and [p.name for p in path.iterdir()] == [stale.name]:
+        found = sorted(p.name for p in path.iterdir() if p.name != WRITER_LOCK_FILE)
+        if found == [stale.name]:
             stale.unlink()  # a kill during a previous create's atomic write: nothing was made
-        if path.exists() and any(path.iterdir()):
+            found = []
+        if found:
             raise RunStoreError(
                 f"{path} exists and is not empty: use --resume {path} or a new --out"
             )
-        path.mkdir(parents=True, exist_ok=True)
         meta = {
             "app": APP,
             "format": RUN_FORMAT,
@@ -114,12 +150,24 @@ class RunStore:
 
     @classmethod
     def open(cls, path: str | Path) -> RunStore:
-        """Open an existing run, verifying its history and cutting a torn last record."""
+        """Open an existing run for appending, verifying its history and cutting a torn last
+        record. Only its writer may do this (``open_run``, under the run's lock): a reader
+        uses ``read``."""
         path = Path(path)
         meta = cls.read_meta(path)
         store = cls(path, meta)
         store._load()
         store._open_for_append()
+        return store
+
+    @classmethod
+    def read(cls, path: str | Path) -> RunStore:
+        """Open an existing run for reading only: its history verified as by ``open``, but a
+        torn last record (perhaps an append in progress in another process) is left alone,
+        and nothing can be appended."""
+        path = Path(path)
+        store = cls(path, cls.read_meta(path))
+        store._load(repair=False)
         return store
 
     @staticmethod
@@ -163,24 +211,14 @@ class RunStore:
     def __iter__(self) -> Iterator[EpisodeRecord]:
         return iter(self.records)
 
-    def _load(self) -> None:
+    def _load(self, repair: bool = True) -> None:
         if not self.history_path.exists():
             return
         data = self.history_path.read_bytes()
-        spans, good_end = _scan(data)
-        records = []
-        for i, (a, b) in enumerate(spans):
-            try:
-                rec = EpisodeRecord.from_bytes(data[a:b])
-            except RecordError as exc:
-                raise RunStoreError(f"history.bin record {i}: {exc}") from exc
-            if rec.episode != i:
-                raise RunStoreError(
-                    f"history.bin record {i} is episode {rec.episode}: missing or duplicated"
-                )
-            records.append(rec)
-        self.records = records
-        if good_end < len(data):
+        hint = f" in {self.path}: {salvage_hint(self.path)}"
+        spans, good_end = _scan(data, hint)
+        self.records = list(_decode(data, spans, hint))
+        if good_end < len(data) and repair:
             # a crash during the last append: drop the torn bytes (the episode in flight)
             self.truncated_bytes = len(data) - good_end
             with open(self.history_path, "r+b") as f:
@@ -188,24 +226,41 @@ class RunStore:
                 os.fsync(f.fileno())
 
     def _open_for_append(self) -> None:
-        self._fh = open(self.history_path, "ab")  # noqa: SIM115 - held open for appends
+        flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_CLOEXEC
+        self._fd = os.open(self.history_path, flags, 0o644)
 
     def append(self, record: EpisodeRecord) -> None:
-        """Append one episode durably (flush + fsync) before returning."""
+        """Append one episode durably (written and fsync'ed) before returning.
+
+        A write that fails (a full disk, a quota, an I/O error) is undone: the file is cut back
+        to the episodes before it, and ``RunStoreError`` says so in one line."""
+        if self._fd is None:
+            raise RunStoreError(f"{self.path} is not open for appending")
         if record.episode != len(self.records):
             raise RunStoreError(
                 f"episode {record.episode} appended after {len(self.records)} episodes"
             )
         payload = record.to_bytes()
-        self._fh.write(HEADER.pack(MAGIC, len(payload), zlib.crc32(payload)) + payload)
-        self._fh.flush()
-        os.fsync(self._fh.fileno())
+        frame = memoryview(HEADER.pack(MAGIC, len(payload), zlib.crc32(payload)) + payload)
+        size = os.fstat(self._fd).st_size
+        try:
+            while frame:  # unbuffered: nothing is left in a buffer to land later
+                frame = frame[os.write(self._fd, frame) :]
+            os.fsync(self._fd)
+        except OSError as exc:
+            with contextlib.suppress(OSError):  # cutting frees space: it works on a full disk
+                os.ftruncate(self._fd, size)
+                os.fsync(self._fd)
+            raise RunStoreError(
+                f"cannot store episode {record.episode} in {self.history_path}: "
+                f"{exc.strerror or exc}; the {len(self.records)} episode(s) before it are kept"
+            ) from exc
         self.records.append(record)
 
     def close(self) -> None:
-        if self._fh is not None:
-            self._fh.close()
-            self._fh = None
+        if self._fd is not None:
+            fd, self._fd = self._fd, None
+            os.close(fd)
 
     def __enter__(self) -> RunStore:
         return self
@@ -221,6 +276,6 @@ def iter_history(run: Path) -> Iterator[EpisodeRecord]:
     if not path.exists():
         return
     data = path.read_bytes()
-    spans, _ = _scan(data)
-    for a, b in spans:
-        yield EpisodeRecord.from_bytes(data[a:b])
+    hint = f" in {run}: {salvage_hint(Path(run))}"
+    spans, _ = _scan(data, hint)
+    yield from _decode(data, spans, hint)
