@@ -1,6 +1,7 @@
 """Why does goal exploration reach fewer or more ball cells than RPE? The inverse model of
-finished runs, engineered (rge-efr, mge-efr) or learned (rge-vae, mge-vae): what each goal
-episode's nearest neighbour was and did (explore/report/inverse_model.py says what is measured).
+finished runs, engineered (rge-efr, mge-efr) or learned (the VAEs', the spatial autoencoder's):
+what each goal episode's nearest neighbour was and did (explore/report/inverse_model.py says
+what is measured).
 
     .venv/bin/python bench/diagnose_inverse_model.py RUN [RUN ...] [--vae DIR] [--figure PNG]
 
@@ -23,7 +24,10 @@ from explore.report.inverse_model import DiagnosisError, diagnose, figure
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", type=Path, nargs="+")
-    ap.add_argument("--vae", type=Path, help="VAE folder for latent runs (default: the run's)")
+    ap.add_argument(
+        "--vae", type=Path, help="model folder (VAE, or SAE for *-sae runs) of latent runs "
+        "(default: the run's)",
+    )  # fmt: skip
     ap.add_argument("--figure", type=Path, help="write the two-panel figure (PNG) here")
     args = ap.parse_args()
     results: dict[str, dict[str, np.ndarray]] = {}

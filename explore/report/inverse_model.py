@@ -37,7 +37,7 @@ from explore.runs.metrics import ARENA_HALF_WIDTH, CellCounter
 from explore.runs.store import RunStore
 
 ENGINEERED = ("rge-efr", "mge-efr")
-LEARNED = ("rge-vae", "mge-vae", "rge-betavae")
+LEARNED = ("rge-vae", "mge-vae", "rge-betavae", "mge-betavae", "rge-sae", "mge-sae")
 PAIRS = 20000  # random outcome pairs for the distance profile of the figure
 
 
@@ -88,7 +88,7 @@ def goal_space_vectors(
     if name not in ENGINEERED + LEARNED:
         raise DiagnosisError(f"{run}: strategy {name!r} has no inverse model to diagnose")
     if vae_dir is not None and name in LEARNED:
-        options["vae"] = str(vae_dir)
+        options["sae" if name.endswith("-sae") else "vae"] = str(vae_dir)
     try:
         space = make_strategy(name, **options).space
     except StrategyError as exc:

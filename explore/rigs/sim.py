@@ -12,6 +12,7 @@ from explore.options import BadOption
 from explore.rigs.ball import tracker_locator, twin_arena_model
 from explore.rigs.clock import TwinClock
 from explore.rigs.rig import Rig, RigConfig
+from robot.watchdog import Watchdog
 from sim import RENDER_QUALITIES
 from sim.arm import SimArm
 from sim.camera import SimCamera
@@ -30,6 +31,15 @@ RENDER_SIZE = f"[height, width], integers in [{RENDER_SIDE[0]}, {RENDER_SIDE[1]}
 DISTRACTOR_STEP = 0.5  # rad
 DISTRACTOR_RADIUS_STEP = 0.01  # m
 PHYSICAL = False  # nothing physical attached: any host can run it
+# The twin's load watchdog holds 5 s at over 0.9 of the maximum torque before it stops the run
+# (a real arm's: 2 s, robot/watchdog.py). The twin's invisible guard above the wall keeps the
+# ball in where the real ball would leave the arena (sim/models/make_scene.py), and a ball
+# wedged between the arm and the guard held the arm at full load for 2.5 s before it slid up
+# and free (measured 2026-12-01: rge-sae, seed 100, episode 152, joints 3 and 5; the 2 s
+# watchdog stopped that run, and its resume replayed the same episode into the same stop). The
+# twin's servos do not heat; 5 s is longer than an episode's return and settle cap (1 + 3 s),
+# so a wedge the twin frees by itself passes and an arm that stays stuck is still stopped.
+TWIN_WATCHDOG_HOLD_S = 5.0
 
 
 @dataclass(frozen=True)
@@ -52,6 +62,8 @@ class Options:
             (``distractor_walk``).
         distractor_step: the standard deviation of the walk's angle step, rad, in [0, pi]
             (default ``DISTRACTOR_STEP``).
+        watchdog_hold_s: how long a joint may stay over the watchdog's load limit before the
+            run stops, s (default ``TWIN_WATCHDOG_HOLD_S``).
     """
 
     render_size: tuple[int, int] = field(default=(240, 240), metadata={"expected": RENDER_SIZE})
@@ -62,11 +74,16 @@ class Options:
     distractor_step: float = field(
         default=DISTRACTOR_STEP, metadata={"expected": "radians in [0, pi]"}
     )
+    watchdog_hold_s: float = field(
+        default=TWIN_WATCHDOG_HOLD_S, metadata={"expected": "seconds > 0"}
+    )
 
     def __post_init__(self) -> None:
         lo, hi = RENDER_SIDE
         if not all(lo <= side <= hi for side in self.render_size):
             raise BadOption("render_size", f"must be {RENDER_SIZE}, got {list(self.render_size)}")
+        if not self.watchdog_hold_s > 0:
+            raise BadOption("watchdog_hold_s", f"must be seconds > 0, got {self.watchdog_hold_s}")
         if not 0 <= self.distractor_step <= math.pi:
             raise BadOption(
                 "distractor_step", f"must be radians in [0, pi], got {self.distractor_step}"
@@ -95,7 +112,8 @@ def make_rig(config: RigConfig, options: Options) -> Rig:
             twin.place_distractor(distractor_walk(xy, options.distractor_step, rng))
 
     return Rig(
-        arm=SimArm(twin), camera=camera, clock=TwinClock(twin), config=config, twin=twin,
+        arm=SimArm(twin, watchdog=Watchdog(hold_s=options.watchdog_hold_s)), camera=camera,
+        clock=TwinClock(twin), config=config, twin=twin,
         ball_locator=locator,
         before_episode=before_episode if reset or walk else None,
         # with the ground truth, the outcome image is all a frame is for: render it at its size

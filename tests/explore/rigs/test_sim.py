@@ -31,3 +31,32 @@ def test_tracked_ball_positions_match_the_twin_or_are_reported_unseen(tmp_path):
 def test_an_unknown_ball_source_is_refused():
     with pytest.raises(RigError, match="option ball must be one of 'truth', 'tracker', got 'gps'"):
         make_rig(RigConfig(options={"ball": "gps"}))
+
+
+def test_the_twin_s_watchdog_lets_a_passing_wedge_through_and_stops_a_stuck_arm():
+    """Pressing the tool into the floor holds joints at full load. For 3 s (the longest a
+    wedge against the twin's guard was measured to last, 2.5 s, is under it) the run goes on;
+    held there past the twin's 5 s, the watchdog stops it, torque off."""
+    import numpy as np
+    import pytest
+
+    from explore.rigs.rig import RigConfig, make_rig
+    from explore.rigs.sim import TWIN_WATCHDOG_HOLD_S
+    from robot.errors import SafetyStop
+
+    into_floor = np.array([0.0, 1.9, 1.4, 0.0, 1.2, 0.0])  # m2..m5 bent down past the floor
+    with make_rig(RigConfig()) as rig:
+        assert rig.arm.watchdog.hold_s == TWIN_WATCHDOG_HOLD_S == 5.0
+        for q in np.linspace(rig.arm.spec.rest, into_floor, 40):
+            rig.arm.command(q)
+            rig.clock.advance(0.025)
+        loads = []
+        for _ in range(30):  # 3 s at full load: reads every 0.1 s, as the settle does
+            rig.clock.advance(0.1)
+            loads.append(np.abs(rig.arm.read().loads).max())
+        assert min(loads) > 0.9  # it was pressing all along
+        with pytest.raises(SafetyStop, match="load"):
+            for _ in range(40):
+                rig.clock.advance(0.1)
+                rig.arm.read()
+        assert not rig.twin.torque_enabled()
