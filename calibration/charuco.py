@@ -1,5 +1,7 @@
 """Camera intrinsics from ChArUco board views (OpenCV 5: ``CharucoBoard``,
-``CharucoDetector.detectBoard``, ``board.matchImagePoints``, ``calibrateCamera``).
+``CharucoDetector.detectBoard``, ``board.matchImagePoints``, ``calibrateCamera``), or from a
+plain chessboard's (``calibration.chessboard``): a board spec has ``detect``, ``image``,
+``describe`` and ``to_dict``; the views, the solver and its gates are the same.
 
 Quality gates (before and after solving) refuse a calibration that would be poorly
 conditioned, with a one-line reason:
@@ -46,6 +48,21 @@ class BoardSpec:
     square_m: float = 0.030
     marker_m: float = 0.022
     dictionary: str = "DICT_5X5_100"
+    kind = "charuco"
+
+    def describe(self) -> str:
+        """Which board this is, how to print one, and the other kind (for messages)."""
+        c, r = self.squares
+        return (
+            f"a ChArUco board of {c} x {r} squares of {self.square_m * 1000:g} mm with "
+            f"{self.marker_m * 1000:g} mm {self.dictionary} markers; print one with: ergo "
+            f"calibrate camera --squares {c} {r} --print-board board.png (a plain chessboard "
+            "instead: --board chessboard --squares COLS ROWS --square-m S)"
+        )
+
+    def detect(self, image: np.ndarray, name: str = "") -> BoardView | None:
+        """The board in one image: ``detect_view``."""
+        return detect_view(image, self, name)
 
     def board(self):
         import cv2
@@ -66,6 +83,7 @@ class BoardSpec:
 
     def to_dict(self) -> dict[str, Any]:
         return {
+            "kind": self.kind,
             "squares": list(self.squares),
             "square_m": self.square_m,
             "marker_m": self.marker_m,
@@ -167,13 +185,14 @@ def coverage_cells(views: list[BoardView], image_size: tuple[int, int]) -> int:
 
 
 def calibrate(
-    views: list[BoardView], image_size: tuple[int, int], fit_k3: bool = False
+    views: list[BoardView], image_size: tuple[int, int], fit_k3: bool = False, board: Any = None
 ) -> Intrinsics:
     """Solve for the intrinsics; refuses too few or poorly spread views.
 
     Args:
-        views: detected views (from ``detect_view``).
+        views: detected views (from a board spec's ``detect``).
         image_size: (width, height), pixels.
+        board: the board looked for (its ``describe()`` goes into the too-few-views message).
         fit_k3: also fit the sixth-order radial term k3. Off by default: for webcam lenses it
             trades off against k2 and extrapolates badly towards the image corners unless the
             views cover them well (seen on synthetic views: up to 5 px at the corners).
@@ -184,9 +203,10 @@ def calibrate(
     import cv2
 
     if len(views) < MIN_VIEWS:
+        looked = f"; looked for {board.describe()}" if board is not None else ""
         raise CalibrationError(
             f"only {len(views)} usable board views (need >= {MIN_VIEWS}, 10-15 is better): "
-            "show the whole board at several places and tilts"
+            f"show the whole board at several places and tilts{looked}"
         )
     cells = coverage_cells(views, image_size)
     if cells < MIN_COVERED_CELLS:
@@ -235,7 +255,7 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 
 
 def views_from_folder(
-    folder: str | Path, spec: BoardSpec
+    folder: str | Path, spec: Any
 ) -> tuple[list[BoardView], tuple[int, int], list[str]]:
     """Detect the board in every image of a folder.
 
@@ -258,7 +278,7 @@ def views_from_folder(
         if size is not None and this != size:
             raise CalibrationError(f"{f.name} is {this[0]}x{this[1]}, others {size[0]}x{size[1]}")
         size = this
-        view = detect_view(image, spec, f.name)
+        view = spec.detect(image, f.name)
         (views.append(view) if view is not None else missed.append(f.name))
     assert size is not None or not views
     return views, size or (0, 0), missed

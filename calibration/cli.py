@@ -23,8 +23,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     def common(q: argparse.ArgumentParser) -> None:
         q.add_argument(
-            "--rig", "--rig-id", dest="rig", default="default", help="rig id (a folder per rig)"
+            "--rig-id", dest="rig_id", default="default", help="rig id (a folder per rig)"
         )
+        # ``--rig`` is the rig type in ``ergo explore`` (sim, dynamixel, canopen): here it is
+        # refused with a line naming --rig-id, not taken as an abbreviation of it
+        q.add_argument("--rig", dest="rig_type", default=None, help=argparse.SUPPRESS)
         q.add_argument(
             "--dir",
             type=Path,
@@ -33,17 +36,26 @@ def register(sub: argparse._SubParsersAction) -> None:
             "~/.config/ergo-explore/calibration)",
         )
 
-    cam = cal.add_parser("camera", help="intrinsics from ChArUco board views")
+    cam = cal.add_parser("camera", help="intrinsics from ChArUco or chessboard views")
     common(cam)
     src = cam.add_mutually_exclusive_group()
     src.add_argument("--images", type=Path, help="folder of board images")
     src.add_argument("--camera", help="live camera (device index or URL) or a recorded video")
     cam.add_argument("--views", type=int, default=DEFAULT_VIEWS, help="live views to collect")
     cam.add_argument("--max-frames", type=int, default=3000, help="live frames to look at")
-    cam.add_argument("--squares", type=int, nargs=2, default=(7, 5), metavar=("COLS", "ROWS"))
+    cam.add_argument(
+        "--board", choices=("charuco", "chessboard"), default="charuco",
+        help="the target: a ChArUco board (default) or a plain chessboard",
+    )  # fmt: skip
+    cam.add_argument(
+        "--squares", type=int, nargs=2, default=(7, 5), metavar=("COLS", "ROWS"),
+        help="squares of the board (a chessboard of 9 x 6 inner corners has 10 x 7)",
+    )  # fmt: skip
     cam.add_argument("--square-m", type=float, default=0.030, help="measured square side, m")
-    cam.add_argument("--marker-m", type=float, default=0.022, help="measured marker side, m")
-    cam.add_argument("--dictionary", default="DICT_5X5_100", help="cv2.aruco dictionary")
+    cam.add_argument(
+        "--marker-m", type=float, default=0.022, help="ChArUco: measured marker side, m"
+    )
+    cam.add_argument("--dictionary", default="DICT_5X5_100", help="ChArUco: cv2.aruco dictionary")
     cam.add_argument("--fit-k3", action="store_true", help="also fit the k3 radial term")
     cam.add_argument("--print-board", type=Path, metavar="OUT.png", help="write the board")
     cam.add_argument("--dpi", type=float, default=300.0, help="--print-board resolution")
@@ -123,6 +135,11 @@ def _run(func, args: argparse.Namespace) -> int:
     from calibration.store import CalibrationError
     from vision.camera import CameraError
 
+    if args.rig_type is not None:
+        return _error(
+            f"--rig {args.rig_type}: ergo calibrate takes the rig id as --rig-id ID "
+            "(--rig is the rig type of ergo explore)"
+        )
     try:
         return int(func(args) or 0)
     except (CalibrationError, CameraError) as exc:
@@ -138,8 +155,12 @@ def _camera_impl(args: argparse.Namespace) -> int:
     import cv2
 
     from calibration import charuco, store
+    from calibration.chessboard import ChessboardSpec
 
-    spec = charuco.BoardSpec(tuple(args.squares), args.square_m, args.marker_m, args.dictionary)
+    if args.board == "chessboard":
+        spec: Any = ChessboardSpec(tuple(args.squares), args.square_m)
+    else:
+        spec = charuco.BoardSpec(tuple(args.squares), args.square_m, args.marker_m, args.dictionary)
     if args.print_board is not None:
         px_per_m = args.dpi / 0.0254
         image = spec.image(px_per_m, margin_px=round(spec.square_m * px_per_m))
@@ -162,8 +183,8 @@ def _camera_impl(args: argparse.Namespace) -> int:
         views, size = _live_views(args, spec)
     else:
         raise store.CalibrationError("give --images FOLDER or --camera SOURCE (or --print-board)")
-    result = charuco.calibrate(views, size, fit_k3=args.fit_k3)
-    path = store.save("camera", args.rig, result.to_dict(spec), args.dir)
+    result = charuco.calibrate(views, size, fit_k3=args.fit_k3, board=spec)
+    path = store.save("camera", args.rig_id, result.to_dict(spec), args.dir)
     k = result.camera_matrix
     print(
         f"camera: {result.n_views} views, RMS reprojection error {result.rms_px:.3f} px; "
@@ -179,7 +200,6 @@ def _camera_impl(args: argparse.Namespace) -> int:
 def _live_views(args: argparse.Namespace, spec) -> tuple[list, tuple[int, int]]:
     import numpy as np
 
-    from calibration import charuco
     from vision.camera import CameraError, make_camera
 
     views: list = []
@@ -197,7 +217,7 @@ def _live_views(args: argparse.Namespace, spec) -> tuple[list, tuple[int, int]]:
                     break
                 raise
             size = (image.shape[1], image.shape[0])
-            view = charuco.detect_view(image, spec, f"frame{n}")
+            view = spec.detect(image, f"frame{n}")
             if view is None:
                 continue
             centre = view.image_points.mean(axis=0)
@@ -238,11 +258,11 @@ def _intrinsics(args: argparse.Namespace, size: tuple[int, int]):
     from calibration import store
 
     try:
-        data = store.load("camera", args.rig, args.dir)
+        data = store.load("camera", args.rig_id, args.dir)
     except store.CalibrationError as exc:
         if args.fovy is None:
             raise store.CalibrationError(
-                f"{exc}: run `ergo calibrate camera --rig {args.rig}` first, or pass --fovy "
+                f"{exc}: run `ergo calibrate camera --rig-id {args.rig_id}` first, or pass --fovy "
                 "for an ideal pinhole camera"
             ) from None
         w, h = size
@@ -306,7 +326,7 @@ def _arena_impl(args: argparse.Namespace) -> int:
             + " + ".join(f"{r.lower}-{r.upper}" for r in ranges)
         )
     payload = ar.arena_payload(fit, ranges, args.ball_radius, f"{source}; {k_source}", layout)
-    path = store.save("arena", args.rig, payload, args.dir)
+    path = store.save("arena", args.rig_id, payload, args.dir)
     pos = fit.model.camera_position
     height = f"camera {pos[2] * 1000:.0f} mm above the floor" if pos is not None else ""
     print(
@@ -334,12 +354,12 @@ def _joints_impl(args: argparse.Namespace) -> int:
     from calibration import store
     from calibration.joints import calibrate_joints, interactive_prompt
 
-    store.check_rig_id(args.rig)
+    store.check_rig_id(args.rig_id)
     arm = _make_arm(args)
     print("torque goes off: hold the arm. Move each joint as asked, then press Enter.")
     with arm:
         result = calibrate_joints(arm, interactive_prompt, joints=args.joints)
-    path = store.save("joints", args.rig, result.to_dict(), args.dir)
+    path = store.save("joints", args.rig_id, result.to_dict(), args.dir)
     for i, name in enumerate(result.names):
         print(
             f"{name}: offset {math.degrees(result.offsets[i]):+.1f} deg, direction "
@@ -376,7 +396,7 @@ def _show_impl(args: argparse.Namespace) -> int:
 
     bad = 0
     for kind in store.KINDS:
-        path = store.calibration_path(kind, args.rig, args.dir)
+        path = store.calibration_path(kind, args.rig_id, args.dir)
         if not path.exists():
             print(f"{kind}: none ({path})")
             continue

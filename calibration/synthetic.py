@@ -10,6 +10,8 @@ is OpenCV's ChArUco object-point convention.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from vision.rectify import undistort_points
@@ -166,3 +168,40 @@ def random_views(
         )
         poses.append(look_at_pose(aim, aim + offset, roll=rng.uniform(-0.5, 0.5)))
     return poses
+
+
+def board_images(
+    spec: Any,
+    camera_matrix: np.ndarray,
+    dist_coeffs: np.ndarray,
+    size: tuple[int, int],
+    n: int,
+    seed: int = 0,
+    px_per_m: float = 4000.0,
+    margin_squares: float = 1.0,
+    noise: float = 2.0,
+    distance: tuple[float, float] = (0.25, 0.40),
+    aim_spread: float = 0.5,
+) -> list[np.ndarray]:
+    """``n`` grey views (H, W) uint8 of a printed board (``spec``: a ChArUco ``BoardSpec`` or a
+    ``ChessboardSpec``, whose ``image`` is the print) through a known camera, at
+    ``random_views`` poses (seeded), with Gaussian pixel noise of ``noise`` grey levels.
+
+    Args:
+        size: (height, width) of the views, pixels.
+        px_per_m: the print's texture resolution (4000: 0.25 mm a texel).
+        margin_squares: white paper around the board, in squares.
+        distance, aim_spread: as ``random_views`` (a chessboard must be seen whole: farther,
+            aimed closer to its centre).
+    """
+    margin = round(margin_squares * spec.square_m * px_per_m)
+    target = spec.image(px_per_m, margin_px=margin)
+    rng = np.random.default_rng(seed + 1)
+    out = []
+    for rvec, tvec in random_views(spec.size_m, n, seed, distance, aim_spread=aim_spread):
+        img = render_plane_view(
+            target, px_per_m, camera_matrix, dist_coeffs, rvec, tvec, size,
+            origin_px=(margin, margin),
+        )  # fmt: skip
+        out.append(np.clip(img + rng.normal(0.0, noise, img.shape), 0, 255).astype(np.uint8))
+    return out

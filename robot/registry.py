@@ -30,6 +30,9 @@ INSTALL: dict[str, str] = {
     "matplotlib": "pip install matplotlib",
     "scipy": "pip install scipy",
     "tqdm": "pip install tqdm",
+    "pyarrow": "pip install 'ergo-explore[export]'",
+    "av": "pip install 'ergo-explore[export]'",
+    "gymnasium": "pip install 'ergo-explore[gym]'",
 }
 
 

@@ -10,6 +10,11 @@ screenshot (PNG, 1600 x 1000 px; ``--width`` scales it down, ``--colors N`` redu
 N-colour palette; a median-cut palette loses the few pixels of small coloured points).
 
 Usage: python docs/img/rerun_screenshot.py --out docs/img/rerun_view.png RUN/recording.rrd ...
+       python docs/img/rerun_screenshot.py --out docs/img/rerun_lerobot.png DATASET \
+           --timeline frame_index --recording episode_3      # an exported LeRobot dataset
+
+Any path the viewer opens will do: a LeRobot dataset folder is read by rerun's own LeRobot
+loader, one recording per episode (``--recording`` picks the one shown).
 """
 
 from __future__ import annotations
@@ -27,9 +32,10 @@ from typing import Any
 VIEWER_SIZE = "1600x1000"  # logical points (1 px each at scale 1)
 
 
-def connect_loaded(url: str, timeout_s: float) -> Any:
+def connect_loaded(url: str, timeout_s: float, recording: str | None = None) -> Any:
     """Connect to the viewer at ``url`` once it answers, then wait until a recording with
-    timelines is open and nothing is loading; returns the ``ViewerClient``."""
+    timelines (``recording``: that one) is open and nothing is loading; returns the
+    ``ViewerClient``."""
     from rerun.experimental import ViewerClient
 
     deadline = time.monotonic() + timeout_s
@@ -38,7 +44,10 @@ def connect_loaded(url: str, timeout_s: float) -> Any:
         try:
             client = client or ViewerClient(url)
             state = client.get_state()
-            if state.recordings and state.recordings[0].timelines and not state.loading:
+            ready = [r for r in state.recordings if r.timelines]
+            if recording is not None:
+                ready = [r for r in ready if recording in str(r)]
+            if ready and not state.loading:
                 return client
         except ConnectionError as exc:  # the viewer is still starting: no server yet
             last = exc
@@ -54,6 +63,8 @@ def screenshot(
     port: int,
     timeout_s: float,
     colors: int = 0,
+    timeline: str = "time",
+    recording: str | None = None,
 ) -> Path:
     """Open ``files`` in a headless viewer and save its screenshot to ``out`` (PNG)."""
     from PIL import Image
@@ -70,11 +81,18 @@ def screenshot(
     with open(log_path, "w") as log_file:
         viewer = subprocess.Popen(cmd, env=env, stdout=log_file, stderr=subprocess.STDOUT)
     try:
-        client = connect_loaded(f"rerun+http://127.0.0.1:{port}/proxy", timeout_s)
+        client = connect_loaded(f"rerun+http://127.0.0.1:{port}/proxy", timeout_s, recording)
         state = client.get_state()
-        timelines = {t.name: t for t in state.recordings[0].timelines}
-        end_ns = timelines["time"].end
-        client.set_time("time", duration=end_ns / 1e9, play_state="paused")
+        shown = state.recordings[0]
+        if recording is not None:
+            shown = next(r for r in state.recordings if recording in str(r))
+            client.set_location(shown.location)
+        timelines = {t.name: t for t in shown.timelines}
+        end = timelines[timeline].end
+        if timeline == "time":  # a duration timeline, ns
+            client.set_time(timeline, duration=end / 1e9, play_state="paused")
+        else:  # a sequence (frame_index of a LeRobot dataset)
+            client.set_time(timeline, sequence=int(end), play_state="paused")
         time.sleep(settle_s)  # the views fetch their chunks and repaint
         png = client.take_screenshot()
         for view in client.get_state().views:
@@ -101,17 +119,22 @@ def screenshot(
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("files", nargs="+", type=Path, help=".rrd recordings (one run's files)")
+    p.add_argument(
+        "files", nargs="+", type=Path, help=".rrd recordings (one run's files) or a dataset"
+    )
     p.add_argument("--out", type=Path, required=True, help="PNG to write")
     p.add_argument("--width", type=int, default=1600, help="at most this wide, px")
     p.add_argument("--settle", type=float, default=15.0, help="s to let the views paint")
     p.add_argument("--port", type=int, default=9877, help="viewer port on 127.0.0.1")
     p.add_argument("--timeout", type=float, default=120.0, help="s to wait for the load")
     p.add_argument("--colors", type=int, default=0, help="palette size (0: full RGB)")
+    p.add_argument("--timeline", default="time", help="timeline to put the cursor at the end of")
+    p.add_argument("--recording", default=None, help="show the recording whose id has this")
     args = p.parse_args(argv)
     out = screenshot(
-        args.files, args.out, args.width, args.settle, args.port, args.timeout, args.colors
-    )
+        args.files, args.out, args.width, args.settle, args.port, args.timeout, args.colors,
+        args.timeline, args.recording,
+    )  # fmt: skip
     print(f"{out}: {out.stat().st_size // 1024} kB")
     return 0
 

@@ -22,6 +22,7 @@ COMMAND_MODULES = LazyTable(
         "experiment": "explore.cli.experiment:register",
         "report": "explore.cli.report:register",
         "runs": "explore.cli.runs:register",
+        "export": "explore.cli.export:register",
     },
 )
 
@@ -45,12 +46,25 @@ def _user_errors() -> tuple[type[BaseException], ...]:
     return (CliError, RegistryError, RobotError, CameraError, FileNotFoundError, PermissionError)
 
 
+def version() -> str:
+    """The installed version of ergo-explore (its package metadata), or "unknown" when the
+    source runs without being installed."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as package_version
+
+    try:
+        return package_version("ergo-explore")
+    except PackageNotFoundError:
+        return "unknown"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = OneLineParser(
         prog="ergo",
         description="Intrinsically motivated goal exploration on a Poppy Ergo Jr and its twin.",
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    parser.add_argument("--version", action="version", version=f"ergo-explore {version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in COMMAND_MODULES:

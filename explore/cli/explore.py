@@ -57,14 +57,28 @@ def parse_key_values(items: list[str], flag: str) -> dict[str, Any]:
     return out
 
 
+def strategies_help() -> str:
+    """The strategies and what each is, one line each (the epilog of ``ergo explore --help``)."""
+    from explore.learner.strategies import STRATEGIES, STRATEGY_SUMMARIES
+
+    width = max(len(name) for name in STRATEGIES)
+    lines = [f"  {name:<{width}}  {STRATEGY_SUMMARIES.get(name, '')}" for name in STRATEGIES]
+    return "strategies (--strategy NAME):\n" + "\n".join(lines)
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "explore",
         help="run an exploration (or resume one) on the twin or a physical arm",
         description="Explore with a strategy; every episode is stored durably in the run folder.",
+        epilog=strategies_help(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_rig_arguments(p)
-    p.add_argument("--strategy", default=None, help="exploration strategy (default rpe)")
+    p.add_argument(
+        "--strategy", default=None, metavar="NAME",
+        help="exploration strategy (default rpe; the strategies are listed below)",
+    )  # fmt: skip
     p.add_argument(
         "--strategy-option", action="append", default=[], metavar="KEY=JSON",
         help="strategy option, repeatable (JSON or a string): bootstrap=100, vae=models/vae",
@@ -159,6 +173,13 @@ def run_explore(args: argparse.Namespace) -> int:
     from explore.cli.rerun_flags import make_recorder
 
     store = run.store
+    if len(store) >= run.config.episodes:  # nothing to do: no recording, no rig connected
+        run.close()
+        print(
+            f"{store.path}: already {len(store)} episodes (asked for {run.config.episodes}); "
+            f"extend it with --episodes N"
+        )
+        return 0
     bar = _progress_bar(run.config.episodes, len(store), disabled=args.no_progress)
     recorder = make_recorder(
         args, store.path, records=store.records, config=run.config, strategy=run.strategy

@@ -36,7 +36,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run_check(args: argparse.Namespace) -> int:
-    from explore.runs.lock import holder_of
+    from explore.runs.lock import describe_holder, holder_of
     from explore.runs.repair import describe, survey
     from explore.runs.store import RunStoreError
 
@@ -47,7 +47,7 @@ def run_check(args: argparse.Namespace) -> int:
     print(f"{args.run}:")
     holder = holder_of(args.run)
     if holder is not None:
-        print(f"being written now by pid {holder.get('pid', '?')} on {holder.get('host', '?')}")
+        print(f"being written now by {describe_holder(holder)}")
     for line in describe(args.run, s):
         print(f"  {line}")
     return 1 if s.needs_salvage else 0

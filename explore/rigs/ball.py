@@ -70,12 +70,11 @@ def locator_from_calibration(data: dict[str, Any]) -> BallLocator:
     return tracker_locator(ArenaModel.from_dict(data), tracker_config_from_arena(data))
 
 
-def rig_ball_locator(config: Any) -> BallLocator | None:
+def rig_ball_locator(config: Any) -> tuple[BallLocator | None, str | None]:
     """The tracker for a physical rig from its arena calibration (found by ``rig_id``, or the
-    file named by the rig option ``arena_calibration``). Without one, warns once and returns
-    None: ball positions are then recorded as unknown (NaN), never guessed."""
-    import logging
-
+    file named by the rig option ``arena_calibration``), and None; without one, (None, why):
+    ball positions are then recorded as unknown (NaN), never guessed, and ``open_run`` warns
+    once, or refuses a run whose strategy needs the ball."""
     from calibration.store import CalibrationError
 
     try:
@@ -83,11 +82,7 @@ def rig_ball_locator(config: Any) -> BallLocator | None:
         if path:
             from calibration.store import load_file
 
-            return locator_from_calibration(load_file(path, "arena"))
-        return calibrated_locator(config.rig_id)
+            return locator_from_calibration(load_file(path, "arena")), None
+        return calibrated_locator(config.rig_id), None
     except (CalibrationError, FileNotFoundError) as exc:
-        logging.getLogger(__name__).warning(
-            "no ball tracking for rig %r (%s): run 'ergo calibrate arena --rig-id %s'",
-            config.rig_id, exc, config.rig_id,
-        )  # fmt: skip
-        return None
+        return None, str(exc)

@@ -10,6 +10,7 @@ from explore.rigs.ball import rig_ball_locator
 from explore.rigs.clock import RealClock
 from explore.rigs.hardware import HardwareOptions, per_joint, rig_camera
 from explore.rigs.rig import Rig, RigConfig, RigError
+from explore.rigs.video import camera_video_frame
 
 # Heartbeat time for the emulator on a pty, ms: its heartbeats cross several Python threads on
 # a shared machine, and gaps over 150 ms were seen with the camera rendering under load (a
@@ -73,7 +74,9 @@ def make_rig(config: RigConfig, options: Options) -> Rig:
         arm = CanArm(spec, config=CanArmConfig(**given))
     except (CanBusError, ValueError) as exc:
         raise RigError(f"rig 'canopen': {exc}") from exc
+    locator, why = rig_ball_locator(config)
     return Rig(
         arm=arm, camera=camera, clock=RealClock(), config=config,
-        ball_locator=rig_ball_locator(config),
+        ball_locator=locator, ball_locator_error=why,
+        video_frame=camera_video_frame(camera, options.record_video),
     )  # fmt: skip

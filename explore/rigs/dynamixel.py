@@ -10,6 +10,7 @@ from explore.rigs.ball import rig_ball_locator
 from explore.rigs.clock import RealClock
 from explore.rigs.hardware import HardwareOptions, per_joint, rig_camera
 from explore.rigs.rig import Rig, RigConfig, RigError
+from explore.rigs.video import camera_video_frame
 from robot.bus_flags import DEFAULT_BAUD
 
 POSITIVE = "a positive integer"
@@ -70,7 +71,10 @@ def make_rig(config: RigConfig, options: Options) -> Rig:
         )
     except (ValueError, KeyError, TypeError, BusError) as exc:
         raise RigError(f"dynamixel rig: {exc}") from exc
+    locator, why = rig_ball_locator(config)
+    camera = rig_camera(options, config.name)
     return Rig(
-        arm=arm, camera=rig_camera(options, config.name), clock=RealClock(), config=config,
-        ball_locator=rig_ball_locator(config),
+        arm=arm, camera=camera, clock=RealClock(), config=config,
+        ball_locator=locator, ball_locator_error=why,
+        video_frame=camera_video_frame(camera, options.record_video),
     )  # fmt: skip

@@ -8,14 +8,15 @@ from typing import Any
 
 from explore.options import BadOption
 from explore.rigs.rig import RigError
+from explore.rigs.video import VideoOptions
 from vision.camera import Camera, CameraError, make_camera
 
 CAMERA = "a device index, video path or URL"
 
 
 @dataclass(frozen=True)
-class HardwareOptions:
-    """Options every physical rig takes.
+class HardwareOptions(VideoOptions):
+    """Options every physical rig takes (and ``record_video``: ``explore.rigs.video``).
 
     Attributes:
         camera: device index (``0``), video path or URL (``http://127.0.0.1:PORT/stream.mjpg``
@@ -36,6 +37,7 @@ class HardwareOptions:
     offsets: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         if isinstance(self.camera, int) and self.camera < 0:
             raise BadOption("camera", f"must be {CAMERA}, got {self.camera!r}")
 

@@ -82,6 +82,11 @@ class Rig:
     square_view: Callable[[int], np.ndarray] | None = None
     #: motor parameters (n_params,) -> joint trajectory (T, n_joints) rad
     motor: MotorPrimitive = field(default_factory=Dmp)
+    #: why a physical rig has no ``ball_locator`` (its arena calibration's error), else None
+    ball_locator_error: str | None = None
+    #: the rig option ``record_video``: () -> the overhead camera now, a square (side, side, 3)
+    #: BGR uint8 frame, taken at every control tick of a movement (``RUN/frames/``); else None
+    video_frame: Callable[[], np.ndarray] | None = None
 
     def connect(self) -> None:
         self.camera.connect()

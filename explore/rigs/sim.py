@@ -12,6 +12,7 @@ from explore.options import BadOption
 from explore.rigs.ball import tracker_locator, twin_arena_model
 from explore.rigs.clock import TwinClock
 from explore.rigs.rig import Rig, RigConfig
+from explore.rigs.video import VideoOptions
 from robot.watchdog import Watchdog
 from sim import RENDER_QUALITIES
 from sim.arm import SimArm
@@ -43,8 +44,8 @@ TWIN_WATCHDOG_HOLD_S = 5.0
 
 
 @dataclass(frozen=True)
-class Options:
-    """Options of the twin rig.
+class Options(VideoOptions):
+    """Options of the twin rig (and ``record_video``: ``explore.rigs.video``).
 
     Attributes:
         render_size: [height, width] of the overhead frame, pixels (default 240 x 240; with the
@@ -79,6 +80,7 @@ class Options:
     )
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         lo, hi = RENDER_SIDE
         if not all(lo <= side <= hi for side in self.render_size):
             raise BadOption("render_size", f"must be {RENDER_SIZE}, got {list(self.render_size)}")
@@ -121,6 +123,11 @@ def make_rig(config: RigConfig, options: Options) -> Rig:
             (lambda side: camera.read_square(side).image)
             if locator is None and options.render_quality == "chosen"
             else None  # legacy: reduced from the full frame, as those images were made
+        ),
+        video_frame=(
+            (lambda: camera.read_square(options.record_video).image)
+            if options.record_video
+            else None
         ),
     )  # fmt: skip
 

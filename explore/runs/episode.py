@@ -29,11 +29,15 @@ class EpisodeResult:
 
     Attributes:
         targets: commands actually sent during the movement, shape (T, n_joints), rad.
-        measured: joint positions read at each tick, shape (T, n_joints), rad.
+        measured: joint positions read at the end of each tick, shape (T, n_joints), rad.
         end_effector: tool tip at each tick, shape (T, 3), m (NaN where unknown).
         outcome: the observation after the ball settled.
         settle_s: how long the ball took to settle (or the cap).
         ball_moved: whether the ball moved by more than ``moved_threshold`` m.
+        start_positions: joint positions read just before the first command, (n_joints,) rad.
+        frames: with the rig's ``video_frame``, the overhead camera at the start of each tick
+            (before its command, when ``start_positions``/``measured[i - 1]`` were read), shape
+            (T, side, side, 3) BGR uint8; else None.
     """
 
     targets: np.ndarray
@@ -43,6 +47,26 @@ class EpisodeResult:
     settle_s: float
     ball_moved: bool
     extras: dict[str, float] = field(default_factory=dict)
+    start_positions: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    frames: np.ndarray | None = None
+
+
+@dataclass
+class Movement:
+    """What playing a motor primitive produced (``EpisodeRunner.play``).
+
+    Attributes:
+        targets: commands sent, (T, n_joints) rad. measured: joints read at the end of each
+        tick, (T, n_joints) rad. end_effector: tool tip at each tick, (T, 3) m (NaN: unknown).
+        start_positions: joints read before the first command, (n_joints,) rad. frames: the
+        camera at the start of each tick, (T, side, side, 3) BGR uint8, or None.
+    """
+
+    targets: np.ndarray
+    measured: np.ndarray
+    end_effector: np.ndarray
+    start_positions: np.ndarray
+    frames: np.ndarray | None = None
 
 
 MOVED_THRESHOLD = 0.01  # m: a ball displacement under 1 cm is not "moved" (guess: tracker noise)
@@ -109,26 +133,29 @@ class EpisodeRunner:
         twin = self.rig.twin
         return twin.distractor_position()[:2] if twin is not None else np.full(2, np.nan)
 
-    def play(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Play the motor primitive of ``theta`` (n_params,) at the control rate.
-
-        Returns:
-            targets (T, n_joints) rad, measured (T, n_joints) rad, end-effector (T, 3) m.
-        """
+    def play(self, theta: np.ndarray) -> Movement:
+        """Play the motor primitive of ``theta`` (n_params,) at the control rate: at each tick
+        the camera frame (with the rig's ``video_frame``), the command, the clock, the reading."""
         traj = self.motor.trajectory(theta)
         arm, clock, twin = self.rig.arm, self.rig.clock, self.rig.twin
+        capture = self.rig.video_frame
         t = len(traj)
         n = arm.spec.n
         sent = np.empty((t, n))
         measured = np.empty((t, n))
         ee = np.full((t, 3), np.nan)
+        frames = [] if capture is not None else None
+        start = arm.read().positions
         for i, q in enumerate(traj):
+            if frames is not None:
+                frames.append(capture())
             sent[i] = arm.command(q)
             clock.advance(self.dt)
             measured[i] = arm.read().positions
             if twin is not None:
                 ee[i] = twin.end_effector_position()
-        return sent, measured, ee
+        video = np.stack(frames) if frames else None
+        return Movement(sent, measured, ee, np.asarray(start, dtype=float), video)
 
     def settle(self) -> float:
         """Wait until the ball is still and the arm has stopped at rest; returns the time
@@ -174,7 +201,7 @@ class EpisodeRunner:
     def run(self, theta: np.ndarray, context: Observation) -> EpisodeResult:
         """Play ``theta`` from the rest pose (``context`` seen there), go back to rest, wait for the
         ball to settle, then observe the outcome."""
-        targets, measured, ee = self.play(theta)
+        move = self.play(theta)
         self.go_rest()
         settle_s = self.settle()
         outcome = self.observe(render=True)
@@ -183,4 +210,7 @@ class EpisodeRunner:
             and np.all(np.isfinite(outcome.ball))
             and np.linalg.norm(outcome.ball - context.ball) > MOVED_THRESHOLD
         )
-        return EpisodeResult(targets, measured, ee, outcome, settle_s, moved)
+        return EpisodeResult(
+            move.targets, move.measured, move.end_effector, outcome, settle_s, moved,
+            start_positions=move.start_positions, frames=move.frames,
+        )  # fmt: skip

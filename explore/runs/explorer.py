@@ -186,7 +186,9 @@ class Explorer:
         return row
 
     def episode(self, k: int) -> EpisodeRecord:
-        """Run episode ``k``: rest pose, context, proposal, movement, outcome."""
+        """Run episode ``k``: rest pose, context, proposal, movement, outcome. Its camera frames
+        (the rig option ``record_video``) are in the run folder when it returns, before its
+        record is appended."""
         t0 = time.perf_counter()
         rng = episode_rng(self.seed, k)
         self.runner.go_rest()
@@ -195,6 +197,8 @@ class Explorer:
         context = self.runner.observe(render=self.strategy.needs_context_image)
         proposal = self.strategy.propose(context, rng)
         result = self.runner.run(proposal.theta, context)
+        if result.frames is not None:
+            self.store.write_frames(k, result.frames)
         twin = self.rig.twin
         return EpisodeRecord(
             episode=k,
@@ -210,6 +214,7 @@ class Explorer:
             targets=result.targets,
             measured=result.measured,
             end_effector=result.end_effector,
+            start_positions=result.start_positions,
             image=result.outcome.image,  # type: ignore[arg-type]
             sim_state=twin.get_state() if twin is not None else np.zeros(0),
             settle_s=result.settle_s,

@@ -32,8 +32,9 @@ from typing import Any
 from explore.runs.store import WRITER_LOCK_FILE, RunStoreError
 
 LOCK_FILE = WRITER_LOCK_FILE
-# How long a refused writer waits for the holder's name to appear in the file (the holder
-# writes it just after taking the lock), s. A bound, not an expectation: guess.
+# How long a writer that finds the lock taken, by nobody alive the file names, tries again
+# before it is refused, s: the holder writes its name just after taking the lock, a reader's
+# look (``holder_of``) lasts microseconds. A bound, not an expectation: guess.
 HOLDER_WAIT_S = 1.0
 
 
@@ -55,11 +56,14 @@ class RunLock:
             return None
         return (
             f"{self.path.parent}: took over the lock of a writer that ended without releasing "
-            f"it ({_holder(self.took_over)})"
+            f"it ({describe_holder(self.took_over)})"
         )
 
 
-def _holder(info: dict[str, Any]) -> str:
+def describe_holder(info: dict[str, Any]) -> str:
+    """The writer a lock file names, in words (pid, host, since when, command)."""
+    if not info:
+        return "a process that has not said who it is"
     pid, host = info.get("pid", "?"), info.get("host", "?")
     since = info.get("since")
     when = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(since)) if since else "?"
@@ -82,27 +86,48 @@ def _command() -> str:
     return " ".join(argv)[:300]
 
 
+def _alive(info: dict[str, Any]) -> bool:
+    """Whether the writer ``info`` names may still run: a live process of this host, or one
+    of another host (not knowable from here)."""
+    pid = info.get("pid")
+    if info.get("host") != socket.gethostname():
+        return True
+    if not isinstance(pid, int) or pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True  # it exists, under another user
+    return True
+
+
 @contextlib.contextmanager
 def run_lock(run: str | os.PathLike[str]) -> Iterator[RunLock]:
     """Hold ``RUN/writer.lock`` (the folder must exist) for the block, or raise
-    ``RunLockedError`` at once naming the holder."""
+    ``RunLockedError`` at once naming the holder.
+
+    A reader asking ``holder_of`` holds the lock shared for a few microseconds: a writer that
+    finds it taken while the file names nobody alive tries again (for up to
+    ``HOLDER_WAIT_S``) rather than refusing itself on a reader's look."""
     run = Path(run)
     path = run / LOCK_FILE
     fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
     try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            deadline = time.monotonic() + HOLDER_WAIT_S
-            holder = _read(fd)
-            while not holder and time.monotonic() < deadline:  # it has just taken the lock
-                time.sleep(0.02)
+        deadline = time.monotonic() + HOLDER_WAIT_S
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
                 holder = _read(fd)
-            who = _holder(holder) if holder else "a process that has not said who it is"
-            raise RunLockedError(
-                f"{run} is being written by another process ({who}): wait for it to end or "
-                "stop it; two writers would duplicate episodes"
-            ) from None
+                if (holder and _alive(holder)) or time.monotonic() >= deadline:
+                    raise RunLockedError(
+                        f"{run} is being written by another process ({describe_holder(holder)}): "
+                        "wait for it to end or stop it; two writers would duplicate episodes"
+                    ) from None
+                time.sleep(0.02)  # it has just taken the lock, or a reader is looking
         previous = _read(fd)
         info = {"pid": os.getpid(), "host": socket.gethostname(), "since": time.time(),
                 "command": _command()}  # fmt: skip
@@ -140,9 +165,16 @@ def _try_lock(run: str | os.PathLike[str], exclusive: bool) -> Iterator[tuple[in
 
 
 def holder_of(run: str | os.PathLike[str]) -> dict[str, Any] | None:
-    """Who holds the run's lock now (what the file says), or None when nobody does."""
+    """Who holds the run's lock now (what the file says: empty when its holder has not
+    written it yet), or None when nobody does."""
     with _try_lock(run, exclusive=False) as (fd, free):
         return None if free else _read(fd)
+
+
+def is_being_written(run: str | os.PathLike[str]) -> bool:
+    """Whether a writer (an ``ergo explore``, a campaign trial) holds the run's lock now:
+    readers that need a finished history ask this, and never take the lock themselves."""
+    return holder_of(run) is not None
 
 
 def remove_lock_if_free(run: str | os.PathLike[str]) -> bool:

@@ -16,6 +16,7 @@ comes from the config.
 from __future__ import annotations
 
 import functools
+import logging
 from collections.abc import Callable
 from contextlib import ExitStack
 from dataclasses import dataclass, field
@@ -23,7 +24,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from explore.learner.strategies import Strategy, make_strategy
-from explore.rigs.rig import Rig, make_rig
+from explore.rigs.rig import Rig, RigError, make_rig
 from explore.runs.config import RunConfig
 from explore.runs.explorer import Explorer, Progress
 from explore.runs.lock import LOCK_FILE, RunLock, remove_lock_if_free, run_lock
@@ -32,6 +33,7 @@ from explore.runs.record import EpisodeRecord
 from explore.runs.store import RunStore, RunStoreError, make_run_dir
 
 Mode = Literal["new", "resume", "auto"]
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -118,6 +120,24 @@ class OpenRun:
         self.close()
 
 
+def _check_sees_ball(config: RunConfig, rig: Rig, strategy: Strategy) -> None:
+    """A rig that cannot locate the ball (a physical rig without an arena calibration) records
+    no ball for the whole run: a ``RigError`` for a strategy that needs it (goal exploration),
+    else one warning."""
+    if rig.twin is not None or rig.ball_locator is not None:
+        return
+    rig_id = config.rig.rig_id
+    calibrate = f"ergo calibrate arena --rig-id {rig_id} --camera ..."
+    why = rig.ball_locator_error or "no ball locator"
+    if strategy.needs_ball:
+        raise RigError(
+            f"rig {config.rig.name!r} cannot locate the ball that {strategy.name} sets its goals "
+            f"on ({why}): run '{calibrate}' first (docs/calibration.md), or give "
+            "--rig-option arena_calibration=FILE"
+        )
+    log.warning("no ball tracking for rig %r (%s): run '%s'", rig_id, why, calibrate)
+
+
 def open_run(
     path: str | Path,
     config: RunConfig | None = None,
@@ -181,6 +201,7 @@ def open_run(
         if the_strategy is None:
             s = run_config.strategy
             the_strategy = make_strategy(s.name, n_params=the_rig.motor.n_params, **s.options)
+        _check_sees_ball(run_config, the_rig, the_strategy)
         if store is None:
             make_run_dir(path)
             lock = held.enter_context(run_lock(path))

@@ -3,9 +3,11 @@
 Shapes and units: theta (48,) in [-1, 1]; goal (g,) in the strategy's goal space (g may be 0);
 context_ball, ball (2,) m (NaN when not seen); context_distractor, distractor (2,) m, the
 second ball of a scene with a distractor (NaN without one: then they are not stored, and
-records written before they existed read as NaN); targets, measured (T, 6) rad; end_effector
-(T, 3) m; image (64, 64, 3) BGR uint8; sim_state (k,) the twin's integration state after the
-episode (empty on hardware); settle_s, duration_s seconds.
+records written before they existed read as NaN); targets, measured (T, 6) rad (the command sent
+at each tick of the movement, and the joints read at the end of that tick); start_positions (6,)
+rad, the joints read just before the first command (empty in records written before it existed);
+end_effector (T, 3) m; image (64, 64, 3) BGR uint8; sim_state (k,) the twin's integration state
+after the episode (empty on hardware); settle_s, duration_s seconds.
 """
 
 from __future__ import annotations
@@ -20,8 +22,8 @@ _ARRAY_FIELDS = (
     "theta", "goal", "context_ball", "ball", "targets", "measured", "end_effector", "image",
     "sim_state",
 )  # fmt: skip
-# stored only when known (finite somewhere); NaN (2,) when absent
-_OPTIONAL_FIELDS = ("context_distractor", "distractor")
+# stored only when known (finite somewhere); their defaults when absent
+_OPTIONAL_FIELDS = ("context_distractor", "distractor", "start_positions")
 _SCALAR_FIELDS = {
     "episode": int, "module": int, "kind": str, "ball_moved": bool, "settle_s": float,
     "duration_s": float,
@@ -56,6 +58,7 @@ class EpisodeRecord:
     duration_s: float
     context_distractor: np.ndarray = field(default_factory=lambda: np.full(2, np.nan))
     distractor: np.ndarray = field(default_factory=lambda: np.full(2, np.nan))
+    start_positions: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def final_end_effector(self) -> np.ndarray:

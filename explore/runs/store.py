@@ -7,6 +7,13 @@ Layout of ``RUN/``:
   ``b"EREC" | u32 length | u32 CRC-32 of the payload | payload`` (little endian), the payload
   an ``EpisodeRecord`` as compressed npz. Each append is flushed and fsync'ed before the
   episode counts as done, so a SIGKILL loses at most the episode in flight.
+- ``frames/episode-NNNNNN.npz`` (with the rig option ``record_video``): the overhead camera at
+  every control tick of episode N, ``frames`` (T, side, side, 3) BGR uint8, written atomically
+  (fsync'ed) before the episode's record is appended; a file past the last record is what a
+  crash left of the episode in flight, replaced when that episode is run again.
+- ``writer.lock``: held (an exclusive ``flock``) by the one process writing the run, and
+  naming it (``explore/runs/lock.py``: ``run_lock``); readers never take it, those that need a
+  finished history ask whether it is held (``lock.is_being_written``).
 - ``metrics.csv``: cells reached after every episode (derived; rebuilt from the history on
   resume).
 - ``coverage.png`` and whatever later stages write (models, figures, recordings).
@@ -18,14 +25,18 @@ is corruption and raises ``RunStoreError`` naming the offset, without touching t
 from __future__ import annotations
 
 import contextlib
+import io
 import json
 import os
 import struct
 import time
 import zlib
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from explore.runs.record import EpisodeRecord, RecordError
 
@@ -33,6 +44,7 @@ RUN_FORMAT = 1
 APP = "ergo-explore"
 MAGIC = b"EREC"
 HEADER = struct.Struct("<4sII")
+FRAMES_DIR = "frames"
 WRITER_LOCK_FILE = "writer.lock"  # the writer's lock (explore/runs/lock.py), not run data
 
 
@@ -119,7 +131,8 @@ class RunStore:
         self.meta = meta
         self.records: list[EpisodeRecord] = []
         self._fd: int | None = None  # history.bin, O_APPEND, unbuffered
-        self.truncated_bytes = 0
+        self.truncated_bytes = 0  # torn bytes cut by ``open``
+        self.torn_bytes = 0  # torn bytes found after the last record (cut by ``open`` only)
 
     # ---- construction ----------------------------------------------------------------------
     @classmethod
@@ -218,9 +231,10 @@ class RunStore:
         hint = f" in {self.path}: {salvage_hint(self.path)}"
         spans, good_end = _scan(data, hint)
         self.records = list(_decode(data, spans, hint))
-        if good_end < len(data) and repair:
+        self.torn_bytes = len(data) - good_end
+        if self.torn_bytes and repair:
             # a crash during the last append: drop the torn bytes (the episode in flight)
-            self.truncated_bytes = len(data) - good_end
+            self.truncated_bytes = self.torn_bytes
             with open(self.history_path, "r+b") as f:
                 f.truncate(good_end)
                 os.fsync(f.fileno())
@@ -257,6 +271,21 @@ class RunStore:
             ) from exc
         self.records.append(record)
 
+    def write_frames(self, episode: int, frames: np.ndarray) -> Path:
+        """Keep episode ``episode``'s camera frames (T, side, side, 3) uint8 durably (temporary
+        file, fsync, rename): call it before appending the episode's record."""
+        path = frames_path(self.path, episode)
+        path.parent.mkdir(exist_ok=True)
+        buf = io.BytesIO()
+        np.savez_compressed(buf, frames=np.asarray(frames, dtype=np.uint8))
+        tmp = path.with_name(path.name + ".tmp")
+        with open(tmp, "wb") as f:
+            f.write(buf.getvalue())
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+        return path
+
     def close(self) -> None:
         if self._fd is not None:
             fd, self._fd = self._fd, None
@@ -267,6 +296,50 @@ class RunStore:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+@dataclass(frozen=True)
+class History:
+    """A run's stored episodes as read by ``read_history``.
+
+    Attributes:
+        meta: ``run.json`` (checked as ``RunStore.read_meta`` checks it).
+        records: the complete records, in order.
+        torn_bytes: bytes of a torn last record after them (a crash mid-append; 0 if none),
+            left in the file (``RunStore.open`` cuts them when the run is resumed).
+    """
+
+    meta: dict[str, Any]
+    records: list[EpisodeRecord]
+    torn_bytes: int
+
+
+def read_history(run: str | Path) -> History:
+    """A run's history, checked as ``RunStore.open`` checks it, without modifying the folder:
+    a ``RunStoreError`` (one line) for a folder that is not a run, or a corrupt history."""
+    store = RunStore.read(run)
+    return History(store.meta, store.records, store.torn_bytes)
+
+
+def frames_path(run: str | Path, episode: int) -> Path:
+    """Where episode ``episode``'s camera frames are kept (``RunStore.write_frames``)."""
+    return Path(run) / FRAMES_DIR / f"episode-{episode:06d}.npz"
+
+
+def read_frames(run: str | Path, episode: int) -> np.ndarray | None:
+    """Episode ``episode``'s camera frames (T, side, side, 3) BGR uint8, or None when the run
+    kept none for it; a ``RunStoreError`` for a file that is not readable."""
+    path = frames_path(run, episode)
+    if not path.exists():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            frames = z["frames"]
+    except (OSError, ValueError, KeyError, zlib.error) as exc:
+        raise RunStoreError(f"{path} is not readable: {exc}") from exc
+    if frames.ndim != 4 or frames.shape[-1] != 3 or frames.dtype != np.uint8:
+        raise RunStoreError(f"{path} holds frames of shape {frames.shape}, not (T, S, S, 3) uint8")
+    return frames
 
 
 def iter_history(run: Path) -> Iterator[EpisodeRecord]:

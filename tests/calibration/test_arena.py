@@ -100,6 +100,32 @@ def test_markers_distorted_noisy_camera(marker_twin):
     assert err[:, 0].max() < 5.0 and err[:, 1].max() < 5.0
 
 
+def test_markers_near_the_edge_of_a_distorted_view_are_found_in_the_raw_frame(tmp_path):
+    """Markers 21 cm out in each direction, seen through barrel distortion from the twin's
+    camera height: undistorting the whole frame cuts marker 2 out of it (measured: 3 of 4
+    found there); looked for in the raw frame too, all four are, and the calibration holds."""
+    r = 0.21
+    layout = MarkerLayout({0: (-r, r), 1: (r, r), 2: (r, -r), 3: (-r, -r)})
+    size = (480, 480)
+    twin = Twin(scene=write_marker_scene(tmp_path, layout.markers, layout.size_m), render_size=size)
+    try:
+        cam = SimCamera(twin, size=size, dist_coeffs=DIST)
+        cam.connect()
+        twin.reset()
+        k, d = cam.intrinsics()
+        image = cam.read().image
+        und = cv2.undistort(image, k, np.asarray(d))
+        seen_undistorted = cv2.aruco.ArucoDetector(
+            cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50)
+        ).detectMarkers(cv2.cvtColor(und, cv2.COLOR_BGR2GRAY))[1]
+        assert len(seen_undistorted) < 4  # the failure this guards against
+        fit = arena_from_markers(image, layout, k, d)
+        assert fit.points_used == 16 and fit.residuals_mm.max() < 1.0
+        assert fit.model.camera_position == pytest.approx([0.0, 0.0, 0.55], abs=0.005)
+    finally:
+        twin.close()
+
+
 def test_clicked_points(marker_twin):
     """Four pixels given by hand (here: the marker centres, read off the frame) and their
     positions on the floor."""
@@ -151,7 +177,7 @@ def test_cli_arena_then_track(marker_twin, tmp_path, capsys):
         [
             "calibrate",
             "arena",
-            "--rig",
+            "--rig-id",
             "twin",
             "--dir",
             str(caldir),
@@ -168,7 +194,9 @@ def test_cli_arena_then_track(marker_twin, tmp_path, capsys):
     assert data["ball_hsv_ranges"] and data["camera_position"][2] == pytest.approx(0.55, abs=0.01)
 
     # Without intrinsics or --fovy: a one-line error.
-    rc = main(["calibrate", "arena", "--rig", "other", "--dir", str(caldir), "--image", str(frame)])
+    rc = main(
+        ["calibrate", "arena", "--rig-id", "other", "--dir", str(caldir), "--image", str(frame)]
+    )
     err = capsys.readouterr().err
     assert rc == 2 and "ergo calibrate camera" in err and err.count("\n") == 1
 
@@ -196,7 +224,7 @@ def test_cli_arena_then_track(marker_twin, tmp_path, capsys):
         [
             "calibrate",
             "arena",
-            "--rig",
+            "--rig-id",
             "clicked",
             "--dir",
             str(caldir),
@@ -215,7 +243,7 @@ def test_cli_arena_then_track(marker_twin, tmp_path, capsys):
     assert "from clicked points (4 points)" in out.out
     assert "ball_hsv_ranges" not in store.load("arena", "clicked", caldir)
 
-    rc = main(["calibrate", "show", "--rig", "twin", "--dir", str(caldir)])
+    rc = main(["calibrate", "show", "--rig-id", "twin", "--dir", str(caldir)])
     out = capsys.readouterr().out
     assert rc == 0 and "arena: centre" in out and "camera: none" in out
     assert math.isfinite(data["residual_max_mm"])

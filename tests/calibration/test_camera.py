@@ -119,7 +119,7 @@ def test_cli_from_folder_and_print_board(views, tmp_path, capsys):
         [
             "calibrate",
             "camera",
-            "--rig",
+            "--rig-id",
             "bench",
             "--dir",
             str(tmp_path / "cal"),
@@ -147,7 +147,7 @@ def test_cli_from_folder_and_print_board(views, tmp_path, capsys):
         [
             "calibrate",
             "camera",
-            "--rig",
+            "--rig-id",
             "bench",
             "--dir",
             str(tmp_path / "cal"),
@@ -175,7 +175,7 @@ def test_cli_from_recorded_video(views, tmp_path, capsys):
         [
             "calibrate",
             "camera",
-            "--rig",
+            "--rig-id",
             "vid",
             "--dir",
             str(tmp_path),

@@ -151,7 +151,8 @@ def test_distinct_features_keep_one_feature_per_moving_thing():
     ball, other = rng.uniform(-0.5, 0.5, (500, 2)), rng.uniform(-0.5, 0.5, (500, 2))
     still = np.full((500, 2), 0.3) + rng.normal(0, 0.01, (500, 2))
     rotated = ball @ np.array([[0.6, -0.8], [0.8, 0.6]]) * 0.9 + 0.05  # the ball again
-    code = np.hstack([still, rotated, other, ball])  # features 0..3
+    drifting = 0.4 * ball + rng.normal(0, 0.1, (500, 2))  # spread 0.16: drifts, follows little
+    code = np.hstack([still, rotated, other, ball, drifting])  # features 0..4
     std, corr = code.std(axis=0), np.corrcoef(code.T)
     assert distinct_features(std, corr) == [2, 3]  # the ball's widest copy and the other
     assert distinct_features(std) == [1, 2, 3]  # without correlations: every moving one

@@ -3,10 +3,21 @@
 from explore.learner.strategies.base import (
     MAKE_VAE,
     STRATEGIES,
+    STRATEGY_SUMMARIES,
+    Description,
     Proposal,
     Strategy,
     StrategyError,
     make_strategy,
 )
 
-__all__ = ["MAKE_VAE", "STRATEGIES", "Proposal", "Strategy", "StrategyError", "make_strategy"]
+__all__ = [
+    "MAKE_VAE",
+    "STRATEGIES",
+    "STRATEGY_SUMMARIES",
+    "Description",
+    "Proposal",
+    "Strategy",
+    "StrategyError",
+    "make_strategy",
+]

@@ -64,6 +64,10 @@ class Strategy(ABC):
     Options: type = NoOptions
     #: whether ``propose`` needs ``context.image`` (a render/frame at the rest pose)
     needs_context_image: bool = False
+    #: whether the run is worth starting only where the ball is located (goal exploration: its
+    #: goals and its measure are ball positions); a physical rig without an arena calibration
+    #: sees none, and ``open_run`` refuses such a run
+    needs_ball: bool = False
 
     def __init__(self, n_params: int = N_PARAMS, **options: Any) -> None:
         self.options = dict(options)
@@ -83,6 +87,28 @@ class Strategy(ABC):
     def phase(self) -> str:
         """A short label of what the strategy is doing now (for progress displays)."""
         return self.name
+
+    def describe(self, record: Experience) -> Description | None:
+        """A finished episode in this strategy's goal space, as ``update`` is about to learn
+        from it (call it just before ``update(record)``); None while the strategy has no goal
+        space (RPE, an online representation before its training)."""
+        return None
+
+
+@dataclass
+class Description:
+    """An episode in a goal space (``Strategy.describe``).
+
+    Attributes:
+        context: the scene before the move, shape (context_dim,).
+        outcome: what the move produced, shape (dim,); NaN where not seen.
+        goal: the episode's goal in the whole space, shape (dim,): NaN outside the module it
+            was sampled in, all NaN for an episode without a goal (motor babbling).
+    """
+
+    context: np.ndarray
+    outcome: np.ndarray
+    goal: np.ndarray
 
 
 # How to make the model a latent strategy needs (option ``vae``; the campaign's ``--vae`` or
@@ -117,6 +143,22 @@ STRATEGIES = LazyTable(
     },
     error=StrategyError,
 )
+
+
+# name -> what it is, in one line (``ergo explore --help``); a test checks that every strategy
+# of STRATEGIES has one.
+STRATEGY_SUMMARIES = {
+    "rpe": "random motor parameters every episode (motor babbling): the baseline",
+    "rge-efr": "random goals in the engineered goal space: the ball's polar coordinates",
+    "mge-efr": "modular goals by learning progress: ball, and the tool tip as a module",
+    "rge-vae": "random goals in a VAE's latent space (strategy option vae=MODEL)",
+    "rge-betavae": "rge-vae with a beta-VAE (vae=MODEL)",
+    "mge-vae": "modular goals over pairs of a VAE's latents, by learning progress (vae=MODEL)",
+    "mge-betavae": "mge-vae with a beta-VAE (vae=MODEL)",
+    "rge-online": "2000 random episodes, then random goals in a VAE trained on their images",
+    "rge-sae": "random goals in a spatial autoencoder's feature positions (sae=MODEL)",
+    "mge-sae": "modular goals, one module per spatial-autoencoder feature (sae=MODEL)",
+}
 
 
 def make_strategy(name: str, n_params: int = N_PARAMS, **options: Any) -> Strategy:

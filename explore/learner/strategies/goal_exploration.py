@@ -29,7 +29,13 @@ from explore.learner.goal_spaces import (
 )
 from explore.learner.interest import RANDOM_CHOICE, WINDOW, ModuleInterest
 from explore.learner.meta_policy import MetaPolicy
-from explore.learner.strategies.base import MAKE_VAE, Proposal, Strategy, StrategyError
+from explore.learner.strategies.base import (
+    MAKE_VAE,
+    Description,
+    Proposal,
+    Strategy,
+    StrategyError,
+)
 from explore.options import BadOption
 
 BOOTSTRAP = 100  # paper: 100-400 random episodes in the simulations
@@ -110,6 +116,7 @@ class GoalExploration(Strategy):
     name = "goal-exploration"
     Options: type = GoalExplorationOptions
     modular_default = False
+    needs_ball = True
 
     def __init__(self, n_params: int = N_PARAMS, **options: Any) -> None:
         super().__init__(n_params, **options)
@@ -229,6 +236,22 @@ class GoalExploration(Strategy):
         if self.space is None or self.n_seen < self.bootstrap:
             return "bootstrap"
         return "mge" if self.modular else "rge"
+
+    def describe(self, record: Experience) -> Description | None:
+        space = self.space
+        if space is None:
+            return None
+        outcome = space.outcome(record)
+        full = np.full(space.dim, np.nan)
+        goal = full.copy()
+        k = record.module
+        if 0 <= k < len(space.modules) and len(record.goal) == len(space.modules[k]):
+            goal[space.modules[k]] = record.goal
+        return Description(
+            context=np.asarray(self._record_context(record), dtype=float),
+            outcome=full if outcome is None else np.asarray(outcome, dtype=float),
+            goal=goal,
+        )
 
 
 class EngineeredGoalExploration(GoalExploration):

@@ -16,7 +16,7 @@ import pytest
 
 from explore.campaigns.trial import CampaignError, Trial, run_trial
 from explore.runs.config import RunConfig
-from explore.runs.lock import LOCK_FILE, RunLockedError, holder_of, run_lock
+from explore.runs.lock import LOCK_FILE, RunLockedError, holder_of, is_being_written, run_lock
 from explore.runs.open_run import open_run
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -83,3 +83,33 @@ def test_every_writer_holds_the_lock_campaign_trials_and_open_run(tmp_path):
     assert holder_of(run) is None
     with open_run(run, mode="resume") as again:  # released on close
         assert not again.created and again.lock.took_over is None
+
+
+LOOK = textwrap.dedent(
+    """
+    import sys, time
+    from explore.runs.lock import holder_of
+    print("looking", flush=True)
+    end = time.monotonic() + 30
+    while time.monotonic() < end:
+        holder_of(sys.argv[1])
+    """
+)
+
+
+def test_a_reader_looking_never_blocks_nor_refuses_a_writer(tmp_path):
+    """``holder_of`` (``ergo runs check``, ``ergo export``) holds the lock shared for a few
+    microseconds: a writer arriving then waits for it instead of refusing itself."""
+    with run_lock(tmp_path):
+        pass  # the lock file exists: the reader's looks take the shared lock
+    proc = subprocess.Popen([sys.executable, "-c", LOOK, str(tmp_path)], cwd=ROOT, text=True,
+                            stdout=subprocess.PIPE)  # fmt: skip
+    try:
+        assert proc.stdout.readline().strip() == "looking"
+        for _ in range(300):
+            with run_lock(tmp_path):
+                assert is_being_written(tmp_path)
+            assert not is_being_written(tmp_path)
+    finally:
+        proc.kill()
+        proc.wait()

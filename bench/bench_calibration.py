@@ -1,0 +1,62 @@
+"""Camera intrinsics recovered from synthetic views of a ChArUco board and of a plain chessboard
+through a known camera (calibration/synthetic.py ray-casts the print; the camera's matrix and
+distortion are those of tests/calibration: made up, webcam-like).
+
+Prints, per board and seed, fx, fy, cx, cy (px), the RMS reprojection error (px) and the views
+the board was found in, then the largest error on each against the known camera.
+
+    .venv/bin/python bench/bench_calibration.py [--views 15] [--seeds 0 1 2]
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from calibration.charuco import BoardSpec, calibrate
+from calibration.chessboard import ChessboardSpec
+from calibration.synthetic import board_images
+
+SIZE = (480, 640)  # (height, width)
+K_TRUE = np.array([[610.0, 0.0, 322.0], [0.0, 605.0, 236.0], [0.0, 0.0, 1.0]])
+D_TRUE = np.array([-0.21, 0.09, 0.0012, -0.0009, 0.0])
+BOARDS = {
+    # (spec, poses): a chessboard is found only when all of it is in view
+    "charuco 7x5 30 mm": (BoardSpec(), {}),
+    "chessboard 10x7 squares (9x6 inner) 25 mm": (
+        ChessboardSpec((10, 7), 0.025),
+        {"distance": (0.35, 0.55), "aim_spread": 0.3},
+    ),
+}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--views", type=int, default=15)
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    args = ap.parse_args()
+    truth = (K_TRUE[0, 0], K_TRUE[1, 1], K_TRUE[0, 2], K_TRUE[1, 2])
+    print(f"known camera: fx {truth[0]:g} fy {truth[1]:g} cx {truth[2]:g} cy {truth[3]:g} px, "
+          f"{SIZE[1]}x{SIZE[0]}, k1 {D_TRUE[0]:g}")  # fmt: skip
+    print("| board | seed | views found | fx | fy | cx | cy | RMS px |")
+    print("|---|---|---|---|---|---|---|---|")
+    worst: dict[str, np.ndarray] = {}
+    for name, (spec, poses) in BOARDS.items():
+        for seed in args.seeds:
+            images = board_images(spec, K_TRUE, D_TRUE, SIZE, args.views, seed=seed, **poses)
+            views = [v for img in images if (v := spec.detect(img))]
+            result = calibrate(views, (SIZE[1], SIZE[0]), board=spec)
+            k = result.camera_matrix
+            got = np.array([k[0, 0], k[1, 1], k[0, 2], k[1, 2]])
+            err = np.abs(got - truth)
+            worst[name] = np.maximum(worst.get(name, err), err)
+            print(f"| {name} | {seed} | {len(views)}/{args.views} | "
+                  + " | ".join(f"{g:.2f}" for g in got) + f" | {result.rms_px:.3f} |")  # fmt: skip
+    for name, err in worst.items():
+        print(f"{name}: largest error fx {err[0]:.2f} ({100 * err[0] / truth[0]:.2f}%), "
+              f"fy {err[1]:.2f}, cx {err[2]:.2f}, cy {err[3]:.2f} px")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,106 @@
+"""What a new user meets first: ``ergo --version``, the strategies in ``ergo explore --help``,
+one name per meaning for ``--rig`` (the type) and ``--rig-id`` (the id), a goal-exploration
+run refused on a rig that cannot see the ball, and a resume with nothing to do that leaves the
+run folder as it was."""
+
+from __future__ import annotations
+
+import logging
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from explore.cli import main, version
+from explore.learner.strategies import STRATEGIES, STRATEGY_SUMMARIES
+from explore.rigs.rig import RigConfig, RigError
+from explore.runs.config import RunConfig, StrategyConfig
+from explore.runs.lock import LOCK_FILE
+from explore.runs.open_run import open_run
+
+ERGO = [sys.executable, "-m", "explore.cli"]
+
+
+def _cli(args: list[str], capsys) -> tuple[int | str | None, str, str]:
+    try:
+        code = main(args)
+    except SystemExit as exc:  # argparse's own exits (--help, --version, bad flags)
+        code = exc.code
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err.strip()
+
+
+def test_ergo_version_prints_the_installed_version(capsys):
+    code, out, _ = _cli(["--version"], capsys)
+    assert code == 0 and out.strip() == f"ergo-explore {version()}"
+    assert version() != "unknown"  # installed by `make install` (pip install -e)
+
+
+def test_explore_help_lists_every_strategy_with_what_it_is(capsys):
+    code, out, _ = _cli(["explore", "--help"], capsys)
+    assert code == 0
+    listed = out[out.index("strategies (--strategy NAME):") :]
+    for name in STRATEGIES:
+        summary = STRATEGY_SUMMARIES[name]
+        assert summary and f"{name}" in listed and summary in " ".join(listed.split()), name
+
+
+def test_calibrate_takes_the_rig_id_as_rig_id_and_refuses_rig_in_one_line(tmp_path, capsys):
+    code, _, err = _cli(["calibrate", "show", "--rig", "bench", "--dir", str(tmp_path)], capsys)
+    assert code == 2 and len(err.splitlines()) == 1
+    assert "--rig-id" in err and "rig type" in err
+    # the id goes where --rig-id says (show reports the files it looks for under that id)
+    code, out, err = _cli(
+        ["calibrate", "show", "--rig-id", "bench", "--dir", str(tmp_path)], capsys
+    )
+    assert str(tmp_path / "bench") in out + err
+
+
+def _hardware_config(strategy: str) -> RunConfig:
+    # a port that is never opened: open_run builds the rig, it does not connect it
+    rig = RigConfig("dynamixel", "nocal", {"port": "/dev/null-ergo-test"})
+    return RunConfig(rig=rig, strategy=StrategyConfig(strategy), episodes=2)
+
+
+def test_goal_exploration_on_a_rig_without_arena_calibration_is_refused_with_the_command(
+    tmp_path, monkeypatch
+):
+    monkeypatch.setenv("ERGO_CALIBRATION_DIR", str(tmp_path / "calibration"))
+    out = tmp_path / "run"
+    with pytest.raises(RigError) as caught:
+        open_run(out, _hardware_config("rge-efr"), mode="new")
+    message = str(caught.value)
+    assert "\n" not in message and "cannot locate the ball" in message
+    assert "ergo calibrate arena --rig-id nocal" in message
+    assert not out.exists()  # nothing made
+
+
+def test_random_exploration_on_that_rig_starts_with_one_warning(tmp_path, monkeypatch, caplog):
+    monkeypatch.setenv("ERGO_CALIBRATION_DIR", str(tmp_path / "calibration"))
+    with caplog.at_level(logging.WARNING), open_run(tmp_path / "run", _hardware_config("rpe")):
+        pass
+    warnings = [r for r in caplog.records if "no ball tracking" in r.getMessage()]
+    assert len(warnings) == 1 and "ergo calibrate arena --rig-id nocal" in warnings[0].getMessage()
+
+
+def test_a_resume_with_nothing_to_do_writes_no_new_recording(tmp_path):
+    run = tmp_path / "run"
+    base = ["explore", "--no-progress", "--rig-option", "render_size=[64,64]"]
+    assert main([*base, "--episodes", "2", "--out", str(run)]) == 0
+    # the writer lock names whoever opens the run (explore/runs/lock.py): not the run's data
+    before = {p.name: p.stat().st_mtime_ns for p in run.iterdir() if p.name != LOCK_FILE}
+    assert "recording.rrd" in before
+    result = subprocess.run(
+        [*ERGO, "explore", "--resume", str(run), "--no-progress"],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert "already 2 episodes" in result.stdout
+    after = {p.name: p.stat().st_mtime_ns for p in run.iterdir() if p.name != LOCK_FILE}
+    assert after == before  # nothing written
+
+
+def test_the_readme_says_how_to_reach_ergo_after_make_run():
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    assert "source .venv/bin/activate" in readme and ".venv/bin/ergo" in readme
