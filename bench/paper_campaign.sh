@@ -13,7 +13,9 @@
 # uses is the one that best explains held-out images (selection.json), a criterion that never
 # looks at the ball's position.
 #
-# Order: the engineered and spatial-autoencoder comparisons first, then the VAE baselines.
+# Order: the engineered and spatial-autoencoder comparisons first, then the VAE baselines. The
+# distractor's runs and the VAE baselines run to 2000 episodes first and are extended to 5000
+# at the end (a run extended is the run it would have been: the twin is deterministic).
 set -euo pipefail
 OUT=${1:-runs/paper}
 JOBS=${2:-2}
@@ -32,33 +34,53 @@ model() {  # model KIND FOLDER DATA SEEDS [recipe...]: trains and selects, unles
     [ -f "$2/selection.json" ] || "$ERGO" "$1" train --data "$3" --out "$2" --seeds "$4" \
         "${@:5}" --no-progress --device cpu
 }
-campaign() {  # campaign FOLDER STRATEGIES [options...]
-    "$ERGO" experiment --out "$1" --strategies "$2" --seeds "$SEEDS" --episodes "$EPISODES" \
-        --jobs "$JOBS" --no-progress "${@:3}"
+campaign() {  # campaign FOLDER EPISODES STRATEGIES [options...]: runs or resumes, no report
+    "$ERGO" experiment --out "$1" --episodes "$2" --strategies "$3" --seeds "$SEEDS" \
+        --jobs "$JOBS" --no-progress --no-report "${@:4}"
+}
+report() {  # report CAMPAIGN: curves, scatter plots, summary with Welch p; unless up to date
+    if [ -f "$1/report/summary.md" ] && \
+        [ -z "$(find "$1" -name metrics.csv -newer "$1/report/summary.md" | head -1)" ]; then
+        return
+    fi
+    "$ERGO" report "$1"
 }
 
 # ---- stay: engineered and spatial autoencoder -------------------------------------------------
 dataset "$OUT/data/outcomes.npz" 1000
 model sae "$OUT/models/sae" "$OUT/data/outcomes.npz" 0-7
-campaign "$OUT/stay" rpe,rge-efr,rge-sae --sae "$OUT/models/sae"
+campaign "$OUT/stay" "$EPISODES" rpe,rge-efr,rge-sae --sae "$OUT/models/sae"
+report "$OUT/stay"
 
-# ---- distractor: engineered and spatial autoencoder, flat and modular -------------------------
+# ---- distractor: engineered and spatial autoencoder, flat and modular; 2000 episodes first ----
 WALK=(--rig-option distractor=walk --option rge-efr:distractor=true
       --option mge-efr:distractor=true)
+DISTRACTOR=(rpe,rge-efr,mge-efr,rge-sae,mge-sae --sae "$OUT/models/sae_distractor" "${WALK[@]}")
 dataset "$OUT/data/outcomes_distractor.npz" 1001 --distractor
 model sae "$OUT/models/sae_distractor" "$OUT/data/outcomes_distractor.npz" 4-7
-campaign "$OUT/distractor" rpe,rge-efr,mge-efr,rge-sae,mge-sae \
-    --sae "$OUT/models/sae_distractor" "${WALK[@]}"
+campaign "$OUT/distractor" 2000 "${DISTRACTOR[@]}"
+report "$OUT/distractor"
 
-# ---- the paper's VAE baselines ------------------------------------------------------------------
+# ---- the paper's VAE baselines, the ball left in place: 2000 episodes first --------------------
 model vae "$OUT/models/vae" "$OUT/data/outcomes.npz" 0-3 "${VAE_RECIPE[@]}"
 model vae "$OUT/models/betavae" "$OUT/data/outcomes.npz" 0-3 "${BETAVAE_RECIPE[@]}"
-campaign "$OUT/stay" rpe,rge-efr,rge-sae,rge-vae,rge-betavae,mge-vae,rge-online \
-    --sae "$OUT/models/sae" --vae "$OUT/models/vae" --betavae "$OUT/models/betavae"
+LEARNED=(--sae "$OUT/models/sae" --vae "$OUT/models/vae" --betavae "$OUT/models/betavae")
+campaign "$OUT/stay" 2000 rge-vae,rge-betavae "${LEARNED[@]}"
+
+# ---- the beta-VAE with the distractor, 2000 episodes first -------------------------------------
 model vae "$OUT/models/betavae_distractor" "$OUT/data/outcomes_distractor.npz" 0-3 \
     "${BETAVAE_RECIPE[@]}"
-campaign "$OUT/distractor" rpe,rge-efr,mge-efr,rge-sae,mge-sae,rge-betavae,mge-betavae \
-    --sae "$OUT/models/sae_distractor" --betavae "$OUT/models/betavae_distractor" "${WALK[@]}"
+DISTRACTOR_BVAE=(rge-betavae,mge-betavae --betavae "$OUT/models/betavae_distractor" "${WALK[@]}")
+campaign "$OUT/distractor" 2000 "${DISTRACTOR_BVAE[@]}"
+report "$OUT/distractor"
+
+# ---- everything to the full length, and the rest of the paper's strategies ---------------------
+campaign "$OUT/stay" "$EPISODES" rge-vae,rge-betavae "${LEARNED[@]}"
+campaign "$OUT/distractor" "$EPISODES" "${DISTRACTOR[@]}"
+campaign "$OUT/distractor" "$EPISODES" "${DISTRACTOR_BVAE[@]}"
+campaign "$OUT/stay" "$EPISODES" mge-vae,rge-online "${LEARNED[@]}"
+report "$OUT/stay"
+report "$OUT/distractor"
 
 # ---- the exploration each training seed's model gives (the representation table) ---------------
 for kind in sae vae; do
@@ -70,4 +92,4 @@ for kind in sae vae; do
     done
     wait
 done
-.venv/bin/python bench/representation_table.py "$OUT"
+"${PYTHON:-.venv/bin/python}" bench/representation_table.py "$OUT"
