@@ -36,6 +36,10 @@ class CalibrationError(ValueError):
     """A calibration could not be made, read or written; the message is one line."""
 
 
+class CalibrationMissing(CalibrationError):
+    """There is no calibration file where one was looked for (never made: not a bad file)."""
+
+
 # ---- where files live --------------------------------------------------------------------
 def calibration_root(directory: str | Path | None = None) -> Path:
     """The folder holding one subfolder per rig id (see the module docstring)."""
@@ -250,9 +254,14 @@ def load_file(path: str | Path, kind: str | None = None) -> dict[str, Any]:
     try:
         text = path.read_text()
     except FileNotFoundError:
-        raise CalibrationError(f"no calibration file {path}") from None
+        raise CalibrationMissing(f"no calibration file {path}") from None
     except OSError as exc:
         raise CalibrationError(f"cannot read {path}: {exc.strerror}") from None
+    except UnicodeDecodeError as exc:
+        raise CalibrationError(
+            f"{path}: not a calibration file (binary data at byte {exc.start}, not UTF-8 JSON): "
+            "restore it or calibrate again"
+        ) from None
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:

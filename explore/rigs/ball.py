@@ -75,7 +75,8 @@ def rig_ball_locator(config: Any) -> tuple[BallLocator | None, str | None]:
     file named by the rig option ``arena_calibration``), and None; without one, (None, why):
     ball positions are then recorded as unknown (NaN), never guessed, and ``open_run`` warns
     once, or refuses a run whose strategy needs the ball."""
-    from calibration.store import CalibrationError
+    from calibration.store import CalibrationError, CalibrationMissing
+    from explore.rigs.rig import RigError
 
     try:
         path = config.options.get("arena_calibration")
@@ -84,5 +85,7 @@ def rig_ball_locator(config: Any) -> tuple[BallLocator | None, str | None]:
 
             return locator_from_calibration(load_file(path, "arena")), None
         return calibrated_locator(config.rig_id), None
-    except (CalibrationError, FileNotFoundError) as exc:
+    except (CalibrationMissing, FileNotFoundError) as exc:
         return None, str(exc)
+    except CalibrationError as exc:  # a file that is there but wrong: never run without it
+        raise RigError(f"{exc} (a damaged or foreign arena calibration is not ignored)") from exc

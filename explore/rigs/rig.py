@@ -89,9 +89,15 @@ class Rig:
     video_frame: Callable[[], np.ndarray] | None = None
 
     def connect(self) -> None:
-        self.camera.connect()
+        """The arm first (a port that is missing or busy is the error to name, before any
+        camera thread runs), then the camera, then torque on."""
         self.arm.connect()
-        self.arm.set_torque(True)
+        try:
+            self.camera.connect()
+            self.arm.set_torque(True)
+        except BaseException:
+            self.arm.disconnect(torque_off=True)
+            raise
         self.clock.restart()
 
     def disconnect(self) -> None:

@@ -224,7 +224,9 @@ def open_run(
 
 # What a new run writes before its first episode is stored (``discard_empty_run`` removes
 # only these, and only from a run that holds no episode).
-_NEW_RUN_FILES = ("history.bin", "metrics.csv", "faults.json", "trial.json", "run.json")
+_NEW_RUN_FILES = (
+    "history.bin", "metrics.csv", "faults.json", "trial.json", "recording.rrd", "run.json",
+)  # fmt: skip
 
 
 def discard_empty_run(run: Path) -> None:
