@@ -12,6 +12,7 @@ import numpy as np
 
 from explore.learner.goal_outcomes import goal_outcome_of
 from explore.report.recorder import recording_paths
+from explore.runs.config import RunConfig
 from explore.runs.metrics import MetricsLog
 from explore.runs.store import RunStore, iter_history
 
@@ -84,6 +85,7 @@ def load_run(path: Path, goal_outcomes: bool = True) -> RunData:
     """
     path = Path(path)
     meta = RunStore.read_meta(path)
+    RunConfig.from_dict(meta["config"], where=path / "run.json")  # one line naming a bad field
     metrics = MetricsLog(path / "metrics.csv")  # never written here
     cols: dict[str, list[Any]] = {k: [] for k in ("ball", "context_ball", "ee_final", "goals")}
     module, reached = [], []

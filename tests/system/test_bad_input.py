@@ -327,3 +327,19 @@ def test_a_second_run_on_a_busy_port_with_a_url_camera_is_refused_in_one_line(tm
     assert done.returncode == 2, done.stderr
     assert "port busy" in last and server.path in last, done.stderr
     assert not (tmp_path / "run").exists()
+
+
+def test_report_on_a_run_json_with_a_null_seed_gets_one_line(good_run, tmp_path, capsys):
+    run = _edited(good_run, tmp_path, lambda m: m["config"].update(seed=None))
+    before = _bytes_of(run)
+    code, err = _run_cli(["report", str(run)], capsys)
+    assert code == 2 and "config.seed" in err and len(err.splitlines()) == 1, err
+    assert _bytes_of(run) == before
+
+
+def test_out_under_a_regular_file_gets_one_line(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "afile").write_text("mine")
+    code, err = _run_cli(["explore", "--episodes", "1", "--out", "afile/run"], capsys)
+    assert code == 2 and "afile is a file" in err and len(err.splitlines()) == 1, err
+    assert (tmp_path / "afile").read_text() == "mine"
