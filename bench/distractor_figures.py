@@ -20,15 +20,15 @@ from pathlib import Path
 import numpy as np
 
 from explore.learner.goal_spaces import EngineeredGoalSpace
-from explore.learner.strategies import make_strategy
+from explore.runs.config import RunConfig
+from explore.runs.open_run import strategy_for
 from explore.runs.store import RunStore
 
 
 def interests_over_time(run: Path) -> tuple[np.ndarray, list[str]]:
     """(interest after each episode (n, modules), module names) of an MGE run."""
-    store = RunStore.read(run)
-    cfg = store.config["strategy"]
-    strategy = make_strategy(cfg["name"], **cfg.get("options", {}))
+    store = RunStore.read(run)  # a reader: cuts nothing
+    strategy = strategy_for(RunConfig.from_dict(store.config, run / "run.json"))
     rows = []
     for rec in store:
         strategy.update(rec)

@@ -70,7 +70,8 @@ campaign "$OUT/stay" 2000 rge-vae,rge-betavae "${LEARNED[@]}"
 # ---- the beta-VAE with the distractor, 2000 episodes first -------------------------------------
 model vae "$OUT/models/betavae_distractor" "$OUT/data/outcomes_distractor.npz" 0-3 \
     "${BETAVAE_RECIPE[@]}"
-DISTRACTOR_BVAE=(rge-betavae,mge-betavae --betavae "$OUT/models/betavae_distractor" "${WALK[@]}")
+DISTRACTOR_BVAE=(rge-betavae,mge-betavae --betavae "$OUT/models/betavae_distractor"
+                 --rig-option distractor=walk)  # the engineered options name no strategy here
 campaign "$OUT/distractor" 2000 "${DISTRACTOR_BVAE[@]}"
 report "$OUT/distractor"
 

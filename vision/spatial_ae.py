@@ -195,13 +195,15 @@ class SpatialAutoencoder(nn.Module):
     def encode_bgr(self, images: np.ndarray, batch: int = 256) -> np.ndarray:
         """Codes of BGR uint8 images (n, 64, 64, 3) -> (n, 2 * features) float64."""
         was = self.training
-        self.eval()
+        if was:  # eval()/train() walk every module (vision/vae.py Vae.encode_bgr)
+            self.eval()
         with few_threads_for(len(images)):
             out = [
                 self.encode(to_tensor(images[i : i + batch])).double().numpy()
                 for i in range(0, len(images), batch)
             ]
-        self.train(was)
+        if was:
+            self.train(True)
         return np.concatenate(out) if out else np.zeros((0, self.config.code_dim))
 
     @torch.no_grad()

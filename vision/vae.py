@@ -186,13 +186,15 @@ class Vae(nn.Module):
     def encode_bgr(self, images: np.ndarray, batch: int = 256) -> np.ndarray:
         """Latent means of BGR uint8 images (n, 64, 64, 3) -> (n, latent_dim) float64."""
         was = self.training
-        self.eval()
+        if was:  # eval()/train() walk every module: 0.4 ms, a fifth of one image's encoding
+            self.eval()
         with few_threads_for(len(images)):
             out = [
                 self.encode(to_tensor(images[i : i + batch]))[0].double().numpy()
                 for i in range(0, len(images), batch)
             ]
-        self.train(was)
+        if was:
+            self.train(True)
         return np.concatenate(out) if out else np.zeros((0, self.config.latent_dim))
 
     @torch.no_grad()

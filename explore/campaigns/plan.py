@@ -46,13 +46,22 @@ def option_target(key: str) -> tuple[str | None, str]:
 
 
 def strategy_options(
-    name: str, models: dict[str, Path | None], common: dict[str, Any]
+    name: str, models: dict[str, Path | None], common: dict[str, Any], preset: str | None = None
 ) -> dict[str, Any]:
-    """Options of one strategy in a campaign: every plain ``KEY`` of ``common`` (goal-exploration
+    """Options of one strategy in a campaign: the ``preset``'s for it
+    (``explore.learner.presets``), then every plain ``KEY`` of ``common`` (goal-exploration
     strategies, not rpe), every ``NAME:KEY`` for this strategy (e.g. ``rge-vae:latents``) and
     its model from ``models`` (flag -> path, ``MODEL_FLAGS``); raises CampaignError naming the
-    command that makes a missing model."""
+    command that makes a missing model, or an unknown preset."""
     opts: dict[str, Any] = {}
+    if preset is not None:
+        from explore.learner.presets import preset_options
+        from explore.learner.strategies import StrategyError
+
+        try:
+            opts.update(preset_options(preset, name))
+        except StrategyError as exc:
+            raise CampaignError(str(exc)) from None
     for key, value in common.items():
         target, option = option_target(key)
         if target == name or (target is None and name != "rpe"):
@@ -133,10 +142,13 @@ def run_campaign(
     ray_address: str | None = None,
     rig: dict[str, Any] | None = None,
     retries: int = DEFAULT_RETRIES,
+    preset: str | None = None,
 ) -> list[dict[str, Any]]:
     """Run every (strategy, seed) not finished yet on ``backend``; returns the summary rows
     (and writes ``out/summary.csv``). ``models``: representation flag ("vae", "betavae",
-    "sae") -> model path, for the strategies that need one. Raises ``CampaignError``."""
+    "sae") -> model path, for the strategies that need one; ``preset``: a named preset of
+    strategy options (``explore.learner.presets``), under ``options``. Raises
+    ``CampaignError``."""
     from calibration.store import CalibrationError, check_rig_id
     from explore.learner.strategies import STRATEGIES
 
@@ -164,7 +176,7 @@ def run_campaign(
     if ray_address is not None and backend != "ray":
         raise CampaignError("--ray-address goes with --backend ray")
     run = load_backend(backend)
-    opts = {s: strategy_options(s, models or {}, options or {}) for s in strategies}
+    opts = {s: strategy_options(s, models or {}, options or {}, preset) for s in strategies}
     out = out.resolve()  # workers elsewhere see the same absolute path
     todo = plan_trials(out, strategies, seeds, episodes, opts, rig, campaign_id(out))
     if todo:

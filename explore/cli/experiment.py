@@ -19,7 +19,12 @@ from explore.campaigns.backends import BACKENDS, DEFAULT_RETRIES
 from explore.campaigns.trial import CampaignError
 from explore.cli import CliError
 from explore.cli.explore import add_rig_arguments, parse_key_values, rig_of
+from explore.learner.presets import PRESETS
 from sim import RENDER_QUALITIES
+
+# Rigs that can render an outcome database (``--rig``): the twin (explore/rigs/sim_dataset.py)
+# and those whose rig module has an ``outcome_dataset`` (explore/rigs/armballs.py).
+DATASET_RIGS = ("sim", "armballs", "arm2balls")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -63,6 +68,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="strategy option for every goal-exploration run, e.g. bootstrap=100, or for one "
         "strategy: STRATEGY:KEY=JSON, e.g. 'rge-vae:latents=\"zscore\"'",
     )  # fmt: skip
+    p.add_argument(
+        "--preset", choices=PRESETS, default=None,
+        help="a published campaign's strategy settings, under --option: corl2018 (the "
+        "ArmBalls campaign, with --rig arm2balls; docs/results_armballs.md)",
+    )  # fmt: skip
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument(
         "--no-report", action="store_true",
@@ -72,12 +82,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_rig_arguments(p)
     p.set_defaults(func=run_experiment)
 
-    d = sub.add_parser("dataset", help="datasets rendered on the twin")
+    d = sub.add_parser("dataset", help="datasets rendered on a simulated rig")
     dsub = d.add_subparsers(dest="dataset_command", metavar="COMMAND")
     dsub.required = True
     o = dsub.add_parser(
-        "outcomes", help="render ball-on-ring scenes as episodes see them (VAE training data)"
-    )
+        "outcomes", help="render scenes as episodes see them (representation training data)",
+        description="The twin (--rig sim, the default): the ball placed over its ring; "
+        "ArmBalls (--rig armballs or arm2balls): the ball, and the distractor, uniform over "
+        "the square [-1, 1]^2, as in the CoRL 2018 campaign's database.",
+    )  # fmt: skip
+    o.add_argument(
+        "--rig", choices=DATASET_RIGS, default="sim",
+        help="the simulated rig whose scenes to render (default sim: the twin)",
+    )  # fmt: skip
     o.add_argument("--n", type=int, default=10000, help="number of scenes (default 10000)")
     o.add_argument("--out", type=Path, required=True, help="output .npz")
     o.add_argument("--seed", type=int, default=0, help="random seed")
@@ -135,6 +152,7 @@ def run_experiment(args: argparse.Namespace) -> int:
             {"vae": args.vae, "betavae": args.betavae, "sae": args.sae},
             parse_key_values(args.option, "--option"), progress=not args.no_progress,
             backend=args.backend, ray_address=args.ray_address, rig=rig, retries=args.retries,
+            preset=args.preset,
         )  # fmt: skip
     except CampaignError as exc:
         raise CliError(str(exc)) from exc
@@ -161,10 +179,27 @@ def run_dataset_outcomes(args: argparse.Namespace) -> int:
         raise CliError(f"--n must be at least 1, got {args.n}")
     if args.out.suffix != ".npz":
         raise CliError(f"--out {args.out}: expected a .npz file name")
-    data = make_outcome_dataset(
-        args.n, seed=args.seed, progress=not args.no_progress, arm=args.arm,
-        render_quality=args.render_quality, distractor=args.distractor,
-    )  # fmt: skip
+    if args.rig != "sim":
+        twin_only = [
+            flag for flag, given in (
+                ("--arm random", args.arm != "rest"), ("--distractor", args.distractor),
+                ("--render-quality legacy", args.render_quality != "chosen"),
+            ) if given
+        ]  # fmt: skip
+        if twin_only:
+            raise CliError(f"{', '.join(twin_only)}: the twin's (--rig sim) only")
+        from explore.rigs.rig import RIGS, RigConfig, rig_options
+
+        config = RigConfig(args.rig)
+        data = RIGS.load(args.rig).outcome_dataset(
+            config, rig_options(config), args.n, seed=args.seed, progress=not args.no_progress
+        )
+    else:
+        data = make_outcome_dataset(
+            args.n, seed=args.seed, progress=not args.no_progress, arm=args.arm,
+            render_quality=args.render_quality, distractor=args.distractor,
+        )  # fmt: skip
     save_dataset(args.out, data)
-    print(f"{args.out}: {args.n} images {data['images'].shape[1:]} with ball positions")
+    what = "ball and distractor" if "distractor" in data else "ball"
+    print(f"{args.out}: {args.n} images {data['images'].shape[1:]} with {what} positions")
     return 0

@@ -83,6 +83,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--strategy-option", action="append", default=[], metavar="KEY=JSON",
         help="strategy option, repeatable (JSON or a string): bootstrap=100, vae=models/vae",
     )  # fmt: skip
+    p.add_argument(
+        "--preset", default=None, metavar="NAME",
+        help="a published campaign's options for the strategy, under --strategy-option: "
+        "corl2018 (the ArmBalls campaign, with --rig arm2balls)",
+    )  # fmt: skip
     p.add_argument("--episodes", type=int, default=None, help="total episodes (default 300)")
     p.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
     p.add_argument("--out", type=Path, help="new run folder (default runs/STRATEGY-sSEED-TIME)")
@@ -96,16 +101,29 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run_explore)
 
 
+def _strategy_options(args: argparse.Namespace, strategy: str) -> dict[str, Any]:
+    """The strategy options the flags give: the ``--preset``'s, then ``--strategy-option``."""
+    opts: dict[str, Any] = {}
+    if args.preset is not None:
+        from explore.learner.presets import preset_options
+        from explore.learner.strategies import StrategyError
+
+        try:
+            opts.update(preset_options(args.preset, strategy))
+        except StrategyError as exc:
+            raise CliError(str(exc)) from None
+    opts.update(parse_key_values(args.strategy_option, "--strategy-option"))
+    return opts
+
+
 def _new_config(args: argparse.Namespace) -> Any:
     """A new run's ``RunConfig`` from the flags (defaults where none is given)."""
     from explore.runs.config import DEFAULT_EPISODES, DEFAULT_SEED, RunConfig, StrategyConfig
 
+    name = args.strategy or StrategyConfig.name
     return RunConfig(
         rig=rig_of(args),
-        strategy=StrategyConfig(
-            args.strategy or StrategyConfig.name,
-            parse_key_values(args.strategy_option, "--strategy-option"),
-        ),
+        strategy=StrategyConfig(name, _strategy_options(args, name)),
         seed=DEFAULT_SEED if args.seed is None else args.seed,
         episodes=DEFAULT_EPISODES if args.episodes is None else args.episodes,
     )
@@ -124,7 +142,7 @@ def _refuse_changes(args: argparse.Namespace) -> Any:
                 raise CliError(
                     f"{flag} {value} differs from the run's {held!r}: a run keeps its config"
                 )
-        given = parse_key_values(args.strategy_option, "--strategy-option")
+        given = _strategy_options(args, config.strategy.name)
         if given and given != config.strategy.options:
             raise CliError(
                 f"--strategy-option {given} differs from the run's {config.strategy.options}: "

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from explore.learner.experience import Experience
+from explore.learner.scene import Scene
 
 log = logging.getLogger(__name__)
 
@@ -45,9 +46,12 @@ def strategy_outcome_of(strategy: Any) -> OutcomeOf | None:
     return outcome_of
 
 
-def goal_outcome_of(strategy_config: dict[str, Any], load_models: bool = False) -> OutcomeOf | None:
+def goal_outcome_of(
+    strategy_config: dict[str, Any], load_models: bool = False, scene: Scene | None = None
+) -> OutcomeOf | None:
     """``strategy_outcome_of`` for a run's strategy built from its config (``run.json``'s
-    ``config["strategy"]``: name and options), without the running strategy.
+    ``config["strategy"]``: name and options) on its rig's ``scene`` (``explore.rigs.rig.
+    rig_scene``; the twin's arena when None), without the running strategy.
 
     Engineered goal spaces (rge-efr, mge-efr) are functions of the record: always built (cheap).
     Learned ones (VAE latents) are built only with ``load_models`` (loads the model, and every
@@ -69,7 +73,7 @@ def goal_outcome_of(strategy_config: dict[str, Any], load_models: bool = False) 
     if not load_models and not issubclass(target, EngineeredGoalExploration):
         return None
     try:
-        strategy = make_strategy(name, **options)
+        strategy = make_strategy(name, scene=scene, **options)
     except (StrategyError, OSError, ValueError) as exc:
         log.info("no goal-space outcomes for %s: %s", name, exc)
         return None

@@ -5,11 +5,16 @@ A goal space turns a finished episode (an ``experience.Experience``) into
 - an outcome vector o (what the move produced), shape (dim,), or None when not seen;
 and splits the outcome's coordinates into modules (index groups) for modular goal exploration.
 
-Engineered (EFR): the ball's polar coordinates around the arena centre (the arm's base, the
-origin), normalised to about [-1, 1], from ``record.ball``/``context_ball`` (the twin's ground
-truth for now; the tracker provides the same (x, y) on hardware). Two forms:
-- ``"polar"``: (r_n, t / pi), the paper's features, with its discontinuity at t = +-pi;
-- ``"wrap-safe"`` (default): (r_n, cos t, sin t), continuous all around the ring.
+Engineered (EFR): the position (x, y) of each object of the scene (the ball, the distractor) in a
+form defined on the rig's scene (``explore.learner.scene.Scene``), from ``record.ball`` /
+``context_ball`` (the twin's ground truth for now; the tracker provides the same (x, y) on
+hardware; ArmBalls' state):
+- ``"wrap-safe"`` (the twin's default): (r_n, cos t, sin t) around the arena's centre, r_n the
+  radius mapped from the scene's ring onto [-1, 1], continuous all around the ring;
+- ``"polar"``: (r_n, t / pi), the paper's features on the rig, with its discontinuity at t = +-pi;
+- ``"cartesian"`` (the only form of a scene without a ring, ArmBalls): (x / h, y / h), h the
+  half width of the scene's square, in [-1, 1] (ArmBalls' engineered features are the balls'
+  positions, docs/armballs.md).
 
 Learned: the VAE's latent means of ``record.image`` (see ``LatentGoalSpace``), or the image
 positions of a spatial autoencoder's features (``spatial_goal_space``).
@@ -17,40 +22,60 @@ positions of a spatial autoencoder's features (``spatial_goal_space``).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 
-from robot.spec import ERGO_JR_REACH_M
-from sim.models.make_scene import BALL_RADIUS, INNER_RADIUS, OUTER_RADIUS
+from explore.learner.scene import CARTESIAN, FORMS, TWIN_ARENA, Scene
 from vision.spatial_code import distinct_features
 
-# The ball's centre lies between these radii, m (the twin's ring between its kerb and its wall,
-# less the ball's radius: 0.13-0.17 m; sim/models/make_scene.py): r_n = (r - R_MID) / R_HALF maps
-# that band onto [-1, 1].
-R_MIN, R_MAX = INNER_RADIUS + BALL_RADIUS, OUTER_RADIUS - BALL_RADIUS
+# The twin's ring, where the ball's centre lies, m (explore/learner/scene.py TWIN_ARENA): the
+# polar forms map it onto r_n in [-1, 1]. Kept as names for the twin's own modules.
+R_MIN, R_MAX = TWIN_ARENA.ring  # type: ignore[misc]
 R_MID = (R_MIN + R_MAX) / 2
 R_HALF = (R_MAX - R_MIN) / 2
-# End-effector module (MGE-EFR): the arm's horizontal reach, m (robot/spec.py).
-REACH = ERGO_JR_REACH_M
-POLAR_FORMS = ("wrap-safe", "polar")
+# End-effector module of the twin (MGE-EFR): the arm's horizontal reach, m (robot/spec.py).
+REACH = TWIN_ARENA.hand_half_width
+POLAR_FORMS = FORMS  # every engineered form (explore/learner/scene.py)
+Features = Callable[[np.ndarray], np.ndarray]
 
 
-def polar_features(xy: np.ndarray) -> np.ndarray:
-    """Ball (x, y) m, shape (..., 2) -> (r_n, t / pi), shape (..., 2), t = atan2(y, x)."""
+def polar_features(xy: np.ndarray, ring: tuple[float, float] = (R_MIN, R_MAX)) -> np.ndarray:
+    """Ball (x, y), shape (..., 2) -> (r_n, t / pi), shape (..., 2), t = atan2(y, x), r_n the
+    radius mapped from ``ring`` onto [-1, 1] (the twin's ring by default)."""
     xy = np.asarray(xy, dtype=float)
+    mid, half = (ring[0] + ring[1]) / 2, (ring[1] - ring[0]) / 2
     r = np.hypot(xy[..., 0], xy[..., 1])
     t = np.arctan2(xy[..., 1], xy[..., 0])
-    return np.stack([(r - R_MID) / R_HALF, t / np.pi], axis=-1)
+    return np.stack([(r - mid) / half, t / np.pi], axis=-1)
 
 
-def wrap_safe_features(xy: np.ndarray) -> np.ndarray:
-    """Ball (x, y) m, shape (..., 2) -> (r_n, cos t, sin t), shape (..., 3)."""
+def wrap_safe_features(xy: np.ndarray, ring: tuple[float, float] = (R_MIN, R_MAX)) -> np.ndarray:
+    """Ball (x, y), shape (..., 2) -> (r_n, cos t, sin t), shape (..., 3)."""
     xy = np.asarray(xy, dtype=float)
+    mid, half = (ring[0] + ring[1]) / 2, (ring[1] - ring[0]) / 2
     r = np.hypot(xy[..., 0], xy[..., 1])
     t = np.arctan2(xy[..., 1], xy[..., 0])
-    return np.stack([(r - R_MID) / R_HALF, np.cos(t), np.sin(t)], axis=-1)
+    return np.stack([(r - mid) / half, np.cos(t), np.sin(t)], axis=-1)
+
+
+def form_features(form: str, scene: Scene) -> tuple[Features, int]:
+    """The map (x, y) (..., 2) -> features (..., d) of ``form`` on ``scene``, and d. Raises
+    ``ValueError`` (one line) for a form the scene does not define."""
+    if form not in scene.forms:
+        raise ValueError(
+            f"engineered form {form!r} is not defined on {scene.name}; "
+            f"choose one of {', '.join(scene.forms)}"
+        )
+    if form == CARTESIAN:
+        h = scene.ball_half_width
+        return (lambda xy: np.asarray(xy, dtype=float) / h), 2
+    ring = scene.ring
+    assert ring is not None
+    if form == "polar":
+        return (lambda xy: polar_features(xy, ring)), 2
+    return (lambda xy: wrap_safe_features(xy, ring)), 3
 
 
 class GoalSpace:
@@ -81,29 +106,37 @@ class GoalSpace:
 
 
 class EngineeredGoalSpace(GoalSpace):
-    """Ball polar features; optionally the distractor's, and the arm's final tool tip (x, y) /
-    REACH, each as a module of its own.
+    """The ball's engineered features; optionally the distractor's, and the arm's final tool
+    tip (x, y) / the scene's reach, each as a module of its own.
 
     Args:
-        form: ``"wrap-safe"`` (r_n, cos t, sin t) or ``"polar"`` (r_n, t / pi).
+        form: ``"wrap-safe"``, ``"polar"`` or ``"cartesian"`` (module doc); None: the scene's
+            default (the twin's: wrap-safe; ArmBalls': cartesian).
         hand_module: add the end effector as a module (for MGE-EFR: one module per object, as
             the paper's engineered modules). Records without a known tool tip skip it.
         distractor: add the distractor's features (same form) as a module, after the ball's,
             and to the context: the engineered description of a scene with two balls.
             Records without a distractor seen skip that module.
+        scene: the rig's scene (the twin's arena by default).
 
     Outcome: [ball, distractor (if), hand (if)]; context: [ball, distractor (if)] before the
     move.
     """
 
     def __init__(
-        self, form: str = "wrap-safe", hand_module: bool = False, distractor: bool = False
+        self,
+        form: str | None = None,
+        hand_module: bool = False,
+        distractor: bool = False,
+        scene: Scene = TWIN_ARENA,
     ) -> None:
+        form = scene.default_form if form is None else form
         if form not in POLAR_FORMS:
             raise ValueError(f"unknown polar form {form!r}; choose one of {', '.join(POLAR_FORMS)}")
         self.form = form
-        self.features = wrap_safe_features if form == "wrap-safe" else polar_features
-        self.ball_dim = 3 if form == "wrap-safe" else 2
+        self.scene = scene
+        self.features, self.ball_dim = form_features(form, scene)
+        self.hand_scale = scene.hand_half_width
         self.hand_module = hand_module
         self.distractor = distractor
         objects = 2 if distractor else 1
@@ -131,7 +164,7 @@ class EngineeredGoalSpace(GoalSpace):
         # a NaN distractor: its module skips the record
         o = self._objects(ball, getattr(record, "distractor", None))
         if self.hand_module:
-            tip = np.asarray(record.end_effector, dtype=float)[-1, :2] / REACH
+            tip = np.asarray(record.end_effector, dtype=float)[-1, :2] / self.hand_scale
             o = np.concatenate([o, tip])  # NaN tip -> the hand module skips this record
         return o
 

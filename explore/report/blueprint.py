@@ -9,7 +9,7 @@ from explore.runs.metrics import ARENA_HALF_WIDTH
 TIMELINES = ("episode", "time")
 
 
-def default_blueprint(goals: bool = False) -> Any:
+def default_blueprint(goals: bool = False, half_width: float = ARENA_HALF_WIDTH) -> Any:
     """Viewer layout: arena history and camera on the left, this episode's motion and the goal
     space in the middle, cells and joints on the right; the ``time`` timeline selected and
     following the latest data; the blueprint and selection panels collapsed (the views get the
@@ -18,10 +18,11 @@ def default_blueprint(goals: bool = False) -> Any:
     Args:
         goals: show the goal-space tab first (the strategy sets goals and their outcomes are
             logged) instead of the 3-D tool tip.
+        half_width: of the metric's square (the rig's scene's; the twin's arena by default).
     """
     import rerun.blueprint as rrb
 
-    h = ARENA_HALF_WIDTH * 1.1
+    h = half_width * 1.1
     bounds = rrb.VisualBounds2D(x_range=[-h, h], y_range=[-h, h])
     history = [
         rrb.VisibleTimeRange(

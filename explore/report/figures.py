@@ -4,7 +4,8 @@ Every report figure is ``FIG_PX`` = 960 x 640 pixels (9.6 x 6.4 in at 100 dpi), 
 - ``coverage_figure``: distinct ball and end-effector cells reached (of 30 x 30) against
   episodes;
 - ``scatter_figure``: end-effector positions at the end of each movement and ball positions
-  after each episode, seen from above (m), coloured by episode (the paper's appendix style);
+  after each episode, seen from above (in the rig's unit: m, or the arm's reach on ArmBalls),
+  coloured by episode (the paper's appendix style), over the squares of the rig's scene;
 - ``goals_figure``: goals and the outcomes reached (in the same goal-space coordinates) in 2-D
   projections of the goal space: one panel per module and pair of its coordinates (z0,z1),
   (z2,z3)... (up to ``MAX_GOAL_PANELS``);
@@ -25,8 +26,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from explore.learner.scene import Scene
 from explore.report.run_data import RunData
-from explore.runs.metrics import ARENA_HALF_WIDTH, N_BINS, REACH_HALF_WIDTH, read_metrics
+from explore.runs.metrics import N_BINS, read_metrics
 
 FIG_PX = (960, 640)  # width, height of every figure, pixels
 DPI = 100
@@ -46,7 +48,7 @@ def _save(fig: Any, out: Path) -> Path:
     return out
 
 
-def _square(ax: Any, half: float, label: str) -> None:
+def _square(ax: Any, half: float, label: str, unit: str = "m") -> None:
     ax.plot(
         [-half, half, half, -half, -half],
         [-half, -half, half, half, -half],
@@ -57,8 +59,8 @@ def _square(ax: Any, half: float, label: str) -> None:
     ax.set_xlim(-half * 1.05, half * 1.05)
     ax.set_ylim(-half * 1.05, half * 1.05)
     ax.set_aspect("equal")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
+    ax.set_xlabel(f"x ({unit})")
+    ax.set_ylabel(f"y ({unit})")
     ax.grid(alpha=0.25)
 
 
@@ -102,19 +104,27 @@ def coverage_figure(run: RunData, out: Path) -> Path:
 
 
 def _scatter_pair(
-    axes: Any, ee: np.ndarray, ball: np.ndarray, moved: np.ndarray, episode: np.ndarray | None
+    axes: Any,
+    ee: np.ndarray,
+    ball: np.ndarray,
+    moved: np.ndarray,
+    episode: np.ndarray | None,
+    scene: Scene,
 ) -> Any:
-    """End-effector (left) and ball (right) scatter, coloured by ``episode`` (N,) when given,
-    else one colour; returns the end-effector scatter (for a colour bar)."""
+    """End-effector (left) and ball (right) scatter over the squares of ``scene``, coloured by
+    ``episode`` (N,) when given, else one colour; returns the end-effector scatter (for a
+    colour bar)."""
     ax_ee, ax_ball = axes
-    _square(ax_ee, REACH_HALF_WIDTH, f"end-effector grid (+-{REACH_HALF_WIDTH} m)")
+    h, u = scene.hand_half_width, scene.unit
+    _square(ax_ee, h, f"end-effector grid (+-{h} {u})", u)
     colour: dict[str, Any] = {"color": "tab:blue"}
     colour_moved: dict[str, Any] = {"color": "tab:orange"}
     if episode is not None:
         colour = {"c": episode, "cmap": "viridis"}
         colour_moved = {"c": episode[np.all(np.isfinite(ball), axis=1) & moved], "cmap": "viridis"}
     sc = ax_ee.scatter(ee[:, 0], ee[:, 1], s=6, **colour)
-    _square(ax_ball, ARENA_HALF_WIDTH, f"arena square (+-{ARENA_HALF_WIDTH} m)")
+    h = scene.ball_half_width
+    _square(ax_ball, h, f"the metric's square (+-{h} {u})", u)
     ok = np.all(np.isfinite(ball), axis=1)
     ax_ball.scatter(
         ball[ok & ~moved, 0], ball[ok & ~moved, 1], s=14, color="0.6", label="ball not moved"
@@ -132,7 +142,7 @@ def _scatter_pair(
 def scatter_figure(run: RunData, out: Path) -> Path:
     """End-effector and ball positions from above, coloured by episode."""
     fig, axes = _new_figure(2)
-    sc = _scatter_pair(axes, run.ee_final, run.ball, run.ball_moved, run.episode)
+    sc = _scatter_pair(axes, run.ee_final, run.ball, run.ball_moved, run.episode, run.scene)
     axes[0].set_title(f"End-effector at the end of each movement ({run.n})")
     axes[1].set_title(f"Ball after each episode ({int(run.ball_moved.sum())} moved it)")
     axes[0].legend(loc="upper right", fontsize=8)
@@ -254,7 +264,7 @@ def campaign_scatter_figure(groups: dict[str, list[RunData]], out: Path) -> Path
         ee = np.concatenate([r.ee_final for r in runs])
         ball = np.concatenate([r.ball for r in runs])
         moved = np.concatenate([r.ball_moved for r in runs])
-        _scatter_pair((axes[0][c], axes[1][c]), ee, ball, moved, None)
+        _scatter_pair((axes[0][c], axes[1][c]), ee, ball, moved, None, runs[0].scene)
         axes[0][c].set_title(f"{name}: end-effector ({len(runs)} seeds)", fontsize=10)
         axes[1][c].set_title(f"{name}: ball ({int(moved.sum())} moved)", fontsize=10)
     axes[1][0].legend(loc="upper right", fontsize=7)

@@ -33,7 +33,8 @@ import numpy as np
 
 from explore.learner.goal_spaces import LatentGoalSpace
 from explore.learner.strategies import StrategyError, make_strategy
-from explore.runs.metrics import ARENA_HALF_WIDTH, CellCounter
+from explore.report.run_data import run_scene
+from explore.runs.metrics import CellCounter
 from explore.runs.store import RunStore
 
 ENGINEERED = ("rge-efr", "mge-efr")
@@ -83,14 +84,15 @@ def goal_space_vectors(
     rebuilt from ``run.json``, as ``explore.learner.goal_outcomes.goal_outcome_of`` does):
     contexts (n, c), outcomes (n, d) (NaN where not seen), modules (coordinate index arrays of
     the outcome)."""
-    strategy = RunStore.read_meta(run)["config"]["strategy"]
+    config = RunStore.read_meta(run)["config"]
+    strategy = config["strategy"]
     name, options = strategy["name"], dict(strategy.get("options", {}))
     if name not in ENGINEERED + LEARNED:
         raise DiagnosisError(f"{run}: strategy {name!r} has no inverse model to diagnose")
     if vae_dir is not None and name in LEARNED:
         options["sae" if name.endswith("-sae") else "vae"] = str(vae_dir)
     try:
-        space = make_strategy(name, **options).space
+        space = make_strategy(name, scene=run_scene(config), **options).space
     except StrategyError as exc:
         raise DiagnosisError(f"{run}: {exc}") from None
     if isinstance(space, LatentGoalSpace):
@@ -116,7 +118,7 @@ def diagnose(
     ctx, out, modules = goal_space_vectors(run, recs, vae_dir)
     moved = np.array([r.ball_moved for r in recs])
     balls = np.array([np.asarray(r.ball, dtype=float)[:2] for r in recs])
-    counter = CellCounter(ARENA_HALF_WIDTH)
+    counter = CellCounter(run_scene(RunStore.read_meta(run)["config"]).ball_half_width)
     new_cell = np.zeros(len(recs), dtype=bool)
     for k, b in enumerate(balls):
         before = counter.count

@@ -8,7 +8,8 @@ Timelines (every per-episode entity carries both):
   twin this is simulated time, so it does not depend on how fast the machine is.
 
 Entity paths (units: metres, radians, seconds; shapes are per log call):
-- ``arena/bounds`` (static) LineStrips2D: the metric's square, +-ARENA_HALF_WIDTH.
+- ``arena/bounds`` (static) LineStrips2D: the metric's square (the rig's scene's; +-0.2 m on the
+  twin).
 - ``arena/ball`` Points2D (1,): ball after the episode; orange when it moved, grey otherwise.
 - ``arena/ball_track`` LineStrips2D: ball before -> after the episode (empty when not moved).
 - ``arena/end_effector`` LineStrips2D (T, 2): tool tip path seen from above (every stride).
@@ -51,9 +52,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from explore.learner.goal_outcomes import goal_outcome_of, strategy_outcome_of
+from explore.learner.scene import TWIN_ARENA, Scene
 from explore.report.blueprint import default_blueprint
 from explore.runs.config import EpisodeConfig, RunConfig
-from explore.runs.metrics import ARENA_HALF_WIDTH, REACH_HALF_WIDTH, CellCounter
+from explore.runs.metrics import CellCounter
 from robot.spec import ERGO_JR_JOINTS
 
 if TYPE_CHECKING:
@@ -173,6 +175,7 @@ class Recorder:
             it was sampled in), shape like ``record.goal``, or None (``strategy_outcome_of``,
             ``goal_outcome_of``); without it, a record's ``outcome`` attribute if it has one.
         blueprint: send the default layout (``default_blueprint()``).
+        scene: the rig's scene (the metric's squares; the twin's arena by default).
     """
 
     def __init__(
@@ -186,6 +189,7 @@ class Recorder:
         recording_id: str | None = None,
         outcome_of: Callable[[EpisodeRecord], np.ndarray | None] | None = None,
         blueprint: bool = True,
+        scene: Scene = TWIN_ARENA,
     ) -> None:
         os.environ.setdefault("RUST_LOG", QUIET_FILE_SINK)
         import rerun as rr
@@ -198,8 +202,9 @@ class Recorder:
         self.reset_s = reset_s
         self.outcome_of = outcome_of
         self.path = Path(path) if path is not None else None
-        self.ball_cells = CellCounter(ARENA_HALF_WIDTH)
-        self.ee_cells = CellCounter(REACH_HALF_WIDTH)
+        self.scene = scene
+        self.ball_cells = CellCounter(scene.ball_half_width)
+        self.ee_cells = CellCounter(scene.hand_half_width)
         self.n_episodes = 0
         self.n_moved = 0
         self.clock_s = 0.0  # robot time at the end of the last episode
@@ -209,7 +214,11 @@ class Recorder:
         # 200 ms, which would cut one small chunk per entity per episode (bigger files, more CPU).
         batcher = rr.ChunkBatcherConfig(flush_tick=BATCH_FLUSH_S)
         self.rec = rr.RecordingStream(APP_ID, recording_id=recording_id, batcher_config=batcher)
-        bp = default_blueprint(goals=outcome_of is not None) if blueprint else None
+        bp = (
+            default_blueprint(goals=outcome_of is not None, half_width=scene.ball_half_width)
+            if blueprint
+            else None
+        )
         if sink == "save":
             if self.path is None:
                 raise ValueError("sink 'save' needs a path")
@@ -225,7 +234,7 @@ class Recorder:
 
     # ---- static content --------------------------------------------------------------------
     def _log_static(self) -> None:
-        rr, h = self._rr, ARENA_HALF_WIDTH
+        rr, h = self._rr, self.scene.ball_half_width
         square = [[-h, -h], [h, -h], [h, h], [-h, h], [-h, -h]]
         self.rec.log(
             "arena/bounds",
@@ -428,7 +437,11 @@ def open_recorder(
         from explore.runs.store import RunStore
 
         config = RunConfig.from_dict(RunStore.read_meta(run_path)["config"], run_path / "run.json")
+    from explore.rigs.rig import rig_scene
+
+    scene = rig_scene(config.rig)
     kw: dict[str, Any] = {
+        "scene": scene,
         "stride": stride,
         "rate_hz": float(config.episode.rate_hz),
         "reset_s": float(config.episode.reset_s),
@@ -436,7 +449,7 @@ def open_recorder(
         "outcome_of": (
             strategy_outcome_of(strategy)
             if strategy is not None
-            else goal_outcome_of(config.strategy.to_dict(), load_models=load_models)
+            else goal_outcome_of(config.strategy.to_dict(), load_models=load_models, scene=scene)
         ),
     }
     if url is not None:

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from explore.learner.goal_outcomes import goal_outcome_of
+from explore.learner.scene import TWIN_ARENA, Scene
 from explore.report.recorder import recording_paths
 from explore.runs.config import RunConfig
 from explore.runs.metrics import MetricsLog
@@ -59,6 +60,11 @@ class RunData:
         return len(self.episode)
 
     @property
+    def scene(self) -> Scene:
+        """The run's rig's scene (the squares of its figures)."""
+        return run_scene(self.config)
+
+    @property
     def strategy(self) -> str:
         return str(self.config.get("strategy", {}).get("name", "?"))
 
@@ -76,6 +82,17 @@ class RunData:
         }
 
 
+def run_scene(config: dict[str, Any]) -> Scene:
+    """The scene of the rig a run's config (``run.json``'s ``config``) names; the twin's arena
+    for a config without a rig."""
+    from explore.rigs.rig import RigConfig, rig_scene
+
+    rig = config.get("rig")
+    if not isinstance(rig, dict) or "name" not in rig:
+        return TWIN_ARENA
+    return rig_scene(RigConfig(rig["name"], rig.get("rig_id", "twin"), rig.get("options", {})))
+
+
 def load_run(path: Path, goal_outcomes: bool = True) -> RunData:
     """Read a run folder (config, history; metrics recomputed from the history).
 
@@ -86,11 +103,12 @@ def load_run(path: Path, goal_outcomes: bool = True) -> RunData:
     path = Path(path)
     meta = RunStore.read_meta(path)
     RunConfig.from_dict(meta["config"], where=path / "run.json")  # one line naming a bad field
-    metrics = MetricsLog(path / "metrics.csv")  # never written here
+    scene = run_scene(meta["config"])
+    metrics = MetricsLog(path / "metrics.csv", scene)  # never written here
     cols: dict[str, list[Any]] = {k: [] for k in ("ball", "context_ball", "ee_final", "goals")}
     module, reached = [], []
     outcome_of = (
-        goal_outcome_of(meta["config"].get("strategy", {}), load_models=True)
+        goal_outcome_of(meta["config"].get("strategy", {}), load_models=True, scene=scene)
         if goal_outcomes
         else None
     )

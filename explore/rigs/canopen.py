@@ -8,7 +8,7 @@ from pathlib import Path
 
 from explore.rigs.ball import rig_ball_locator
 from explore.rigs.clock import RealClock
-from explore.rigs.hardware import HardwareOptions, per_joint, rig_camera
+from explore.rigs.hardware import HardwareOptions, per_joint, rig_camera, scene
 from explore.rigs.rig import Rig, RigConfig, RigError
 from explore.rigs.video import camera_video_frame
 
@@ -17,6 +17,7 @@ from explore.rigs.video import camera_video_frame
 # guess with margin).
 PTY_HEARTBEAT_MS = 500
 PHYSICAL = True  # an arm on a host: one trial at a time, on the host that has it
+__all__ = ["PHYSICAL", "Options", "make_rig", "scene"]
 
 
 @dataclass(frozen=True)

@@ -8,13 +8,14 @@ from dataclasses import dataclass, field
 from explore.options import BadOption
 from explore.rigs.ball import rig_ball_locator
 from explore.rigs.clock import RealClock
-from explore.rigs.hardware import HardwareOptions, per_joint, rig_camera
+from explore.rigs.hardware import HardwareOptions, per_joint, rig_camera, scene
 from explore.rigs.rig import Rig, RigConfig, RigError
 from explore.rigs.video import camera_video_frame
 from robot.bus_flags import DEFAULT_BAUD
 
 POSITIVE = "a positive integer"
 PHYSICAL = True  # an arm on a host: one trial at a time, on the host that has it
+__all__ = ["PHYSICAL", "Options", "make_rig", "scene"]
 
 
 @dataclass(frozen=True)

@@ -1,11 +1,13 @@
 """What the physical rigs (``dynamixel``, ``canopen``) share: the camera options and the camera
-they name, the joint calibration options, and the arena calibration that locates the ball."""
+they name, the joint calibration options, the arena calibration that locates the ball, and
+their scene (the arena as built, the twin's dimensions)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from typing import Any
 
+from explore.learner.scene import TWIN_ARENA, Scene
 from explore.options import BadOption
 from explore.rigs.rig import RigError
 from explore.rigs.video import VideoOptions
@@ -59,3 +61,8 @@ def per_joint(options: HardwareOptions, key: str, n: int, rig: str) -> tuple[flo
     if value is not None and len(value) != n:
         raise RigError(f"rig {rig!r}: option {key} needs {n} values, got {list(value)}")
     return value
+
+
+def scene(config: Any, options: Any) -> Scene:
+    """A physical rig's scene: the Ergo Jr arena as built (sim/models/make_scene.py)."""
+    return TWIN_ARENA

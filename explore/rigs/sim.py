@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import numpy as np
 
+from explore.learner.scene import TWIN_ARENA, Scene
 from explore.options import BadOption
 from explore.rigs.ball import tracker_locator, twin_arena_model
 from explore.rigs.clock import TwinClock
@@ -130,6 +131,11 @@ def make_rig(config: RigConfig, options: Options) -> Rig:
             else None
         ),
     )  # fmt: skip
+
+
+def scene(config: RigConfig, options: Options) -> Scene:
+    """The twin's scene: the Ergo Jr arena, with the distractor when it walks."""
+    return replace(TWIN_ARENA, distractor=options.distractor == "walk")
 
 
 def distractor_walk(xy: np.ndarray, step: float, rng: np.random.Generator) -> np.ndarray:

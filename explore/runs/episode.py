@@ -12,43 +12,16 @@ durations in seconds.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from explore.learner.dmp import MotorPrimitive
 from explore.learner.experience import Observation
+from explore.rigs.episodes import EpisodeResult
 from explore.rigs.rig import Rig
 from explore.runs.config import EpisodeConfig
 from vision.observation import square_observation
-
-
-@dataclass
-class EpisodeResult:
-    """Everything an episode produced.
-
-    Attributes:
-        targets: commands actually sent during the movement, shape (T, n_joints), rad.
-        measured: joint positions read at the end of each tick, shape (T, n_joints), rad.
-        end_effector: tool tip at each tick, shape (T, 3), m (NaN where unknown).
-        outcome: the observation after the ball settled.
-        settle_s: how long the ball took to settle (or the cap).
-        ball_moved: whether the ball moved by more than ``moved_threshold`` m.
-        start_positions: joint positions read just before the first command, (n_joints,) rad.
-        frames: with the rig's ``video_frame``, the overhead camera at the start of each tick
-            (before its command, when ``start_positions``/``measured[i - 1]`` were read), shape
-            (T, side, side, 3) BGR uint8; else None.
-    """
-
-    targets: np.ndarray
-    measured: np.ndarray
-    end_effector: np.ndarray
-    outcome: Observation
-    settle_s: float
-    ball_moved: bool
-    extras: dict[str, float] = field(default_factory=dict)
-    start_positions: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    frames: np.ndarray | None = None
 
 
 @dataclass
@@ -72,8 +45,12 @@ class Movement:
 MOVED_THRESHOLD = 0.01  # m: a ball displacement under 1 cm is not "moved" (guess: tracker noise)
 
 
+__all__ = ["MOVED_THRESHOLD", "EpisodeResult", "EpisodeRunner"]
+
+
 class EpisodeRunner:
-    """Runs episodes on a rig with its motor primitive (``rig.motor``, or ``motor``)."""
+    """Runs episodes on a rig's arm with its motor primitive (``rig.motor``, or ``motor``): the
+    ``explore.rigs.episodes.EpisodePlayer`` of every rig with an arm to drive."""
 
     def __init__(
         self, rig: Rig, motor: MotorPrimitive | None = None, config: EpisodeConfig | None = None
@@ -198,6 +175,14 @@ class EpisodeRunner:
         return waited
 
     # ---- the whole episode -----------------------------------------------------------------
+    def context(self, scene_rng: np.random.Generator, render: bool) -> Observation:
+        """Go to the rest pose, let the rig change its scene (``Rig.before_episode``: the
+        twin's ball reset, the distractor's walk) and observe the context there."""
+        self.go_rest()
+        if self.rig.before_episode is not None:
+            self.rig.before_episode(scene_rng)
+        return self.observe(render=render)
+
     def run(self, theta: np.ndarray, context: Observation) -> EpisodeResult:
         """Play ``theta`` from the rest pose (``context`` seen there), go back to rest, wait for the
         ball to settle, then observe the outcome."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import time
@@ -12,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from explore.learner.strategies.base import Strategy
+from explore.rigs.episodes import EpisodePlayer
 from explore.rigs.rig import Rig
 from explore.runs.config import EpisodeConfig
 from explore.runs.episode import EpisodeRunner
@@ -102,8 +104,12 @@ class Explorer:
         self.strategy = strategy
         self.store = store
         self.seed = seed
-        self.runner = EpisodeRunner(rig, config=episode_config)
-        self.metrics = MetricsLog(store.path / METRICS_FILE)
+        self.runner: EpisodePlayer = (
+            rig.player(episode_config or EpisodeConfig())
+            if rig.player is not None
+            else EpisodeRunner(rig, config=episode_config)
+        )
+        self.metrics = MetricsLog(store.path / METRICS_FILE, rig.scene)
         self.on_episode = on_episode
         self.on_record = on_record
         self.unsaved: list[str] = []  # derived files this session could not write, and why
@@ -135,7 +141,10 @@ class Explorer:
     def _save_fault_counts(self, failing: bool) -> None:
         """``RUN/faults.json`` += this session's counters; never masks the run's own error.
         A failure is logged, or only noted in ``unsaved`` while the run is failing anyway
-        (a full disk: the caller reports it with the run's own error)."""
+        (a full disk: the caller reports it with the run's own error). A rig without an arm
+        has no counters (and no file)."""
+        if self.rig.arm is None:
+            return
         try:
             add_fault_counts(self.store.path, self.rig.arm.fault_counts())
         except Exception as exc:  # counters are a report: losing them must not hide a fault
@@ -144,11 +153,13 @@ class Explorer:
                 log.warning("could not save the fault counters to %s: %s", self.store.path, exc)
 
     def _explore(self, done: int, n_episodes: int) -> None:
-        with self.rig, torque_off_on_signals(self.rig.arm):
+        arm = self.rig.arm
+        guard = torque_off_on_signals(arm) if arm is not None else contextlib.nullcontext()
+        with self.rig, guard:
             if done and self.rig.twin is not None:
                 state = self.store.records[-1].sim_state
                 self.rig.twin.set_state(state)
-                self.rig.arm.resync()
+                self.rig.arm.resync()  # type: ignore[union-attr]
             start = time.perf_counter()
             for k in range(done, n_episodes):
                 row = self.step(k)
@@ -191,10 +202,10 @@ class Explorer:
         record is appended."""
         t0 = time.perf_counter()
         rng = episode_rng(self.seed, k)
-        self.runner.go_rest()
-        if self.rig.before_episode is not None:
-            self.rig.before_episode(np.random.default_rng([self.seed, k, SCENE_STREAM]))
-        context = self.runner.observe(render=self.strategy.needs_context_image)
+        context = self.runner.context(
+            np.random.default_rng([self.seed, k, SCENE_STREAM]),
+            render=self.strategy.needs_context_image,
+        )
         proposal = self.strategy.propose(context, rng)
         result = self.runner.run(proposal.theta, context)
         if result.frames is not None:

@@ -1,8 +1,15 @@
-"""Exploration metric: distinct cells reached on a grid over the arena's bounding square.
+"""Exploration metric: distinct cells reached on a grid over the square of the rig's scene.
 
 The paper's measure (docs/facts.md): ball positions binned into 30 x 30 cells over the
 arena's square, performance = number of non-empty cells. End-effector positions are counted
-the same way over the arm's reach, for the paper's scatter plots.
+the same way over the arm's reach, for the paper's scatter plots. The square and the reach are
+the rig's scene's (``explore.learner.scene.Scene``: the twin's arena, +-0.2 m and the Ergo
+Jr's reach; ArmBalls' square [-1, 1]^2, where this count over 900 is the CoRL 2018
+campaign's exploration ratio, docs/armballs.md).
+
+``exploration_ratio`` and ``checkpoints`` give that campaign's curves: the fraction of the
+cells holding the final ball position of at least one of the first n episodes (bootstrap
+included), at n = int(i x 10000 / 30).
 """
 
 from __future__ import annotations
@@ -12,15 +19,17 @@ from pathlib import Path
 
 import numpy as np
 
-from robot.spec import ERGO_JR_REACH_M
-from sim.models.make_scene import ARENA_RADIUS
+from explore.learner.scene import TWIN_ARENA, Scene
 
 N_BINS = 30  # paper
-# Bounding square of the ball's arena: the outer wall's inner radius (the twin's, and the rig's
-# as built: sim/models/make_scene.py), m.
-ARENA_HALF_WIDTH = ARENA_RADIUS
-# End-effector grid: the arm's horizontal reach (robot/spec.py), m.
-REACH_HALF_WIDTH = ERGO_JR_REACH_M
+# Bounding square of the twin's arena: the outer wall's inner radius (the twin's, and the rig's
+# as built: sim/models/make_scene.py), m; a run's own is its rig's scene's.
+ARENA_HALF_WIDTH = TWIN_ARENA.ball_half_width
+# End-effector grid of the twin: the arm's horizontal reach (robot/spec.py), m.
+REACH_HALF_WIDTH = TWIN_ARENA.hand_half_width
+# The published curves' checkpoints: int(i * 10000 / 30), i = 0..29 (results/
+# Experiment_Visualization.ipynb of the CoRL 2018 campaign; docs/armballs.md)
+CHECKPOINT_SPAN, CHECKPOINT_COUNT = 10000, 30
 
 
 class CellCounter:
@@ -62,10 +71,10 @@ METRIC_COLUMNS = ("episode", "ball_cells", "ee_cells", "ball_moved", "kind", "se
 class MetricsLog:
     """Cells reached after every episode, kept in memory and appended to ``metrics.csv``."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, scene: Scene = TWIN_ARENA) -> None:
         self.path = path
-        self.ball = CellCounter(ARENA_HALF_WIDTH)
-        self.ee = CellCounter(REACH_HALF_WIDTH)
+        self.ball = CellCounter(scene.ball_half_width)
+        self.ee = CellCounter(scene.hand_half_width)
         self.rows: list[dict[str, object]] = []
 
     def update(self, record: object) -> dict[str, object]:
@@ -121,3 +130,23 @@ def recorded_episodes(run: Path) -> int | None:
     except (OSError, ValueError, KeyError, TypeError, csv.Error):
         return None
     return max(episodes) + 1 if episodes else 0
+
+
+def checkpoints(span: int = CHECKPOINT_SPAN, count: int = CHECKPOINT_COUNT) -> np.ndarray:
+    """Episode counts n = int(i * span / count), i = 0..count-1 (0, 333, ..., 9666)."""
+    return np.array([int(i * span / count) for i in range(count)])
+
+
+def exploration_ratio(ball_cells: np.ndarray, n: np.ndarray, n_bins: int = N_BINS) -> np.ndarray:
+    """The fraction of the ``n_bins`` x ``n_bins`` cells holding a final ball position of one of
+    the first ``n`` episodes, from a run's ``ball_cells`` column (row k: after episode k);
+    NaN where the run holds fewer than n episodes. Shape of ``n``."""
+    cells = np.asarray(ball_cells, dtype=float)
+    n = np.asarray(n, dtype=int)
+    out = np.full(n.shape, np.nan)
+    for idx, k in np.ndenumerate(n):
+        if k == 0:
+            out[idx] = 0.0
+        elif 0 < k <= len(cells):
+            out[idx] = cells[k - 1] / n_bins**2
+    return out

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from explore.learner.strategies import Strategy, make_strategy
-from explore.rigs.rig import Rig, RigError, make_rig
+from explore.rigs.rig import Rig, RigError, is_physical, make_rig
 from explore.runs.config import RunConfig
 from explore.runs.explorer import Explorer, Progress
 from explore.runs.lock import LOCK_FILE, RunLock, remove_lock_if_free, run_lock
@@ -123,8 +123,9 @@ class OpenRun:
 def _check_sees_ball(config: RunConfig, rig: Rig, strategy: Strategy) -> None:
     """A rig that cannot locate the ball (a physical rig without an arena calibration) records
     no ball for the whole run: a ``RigError`` for a strategy that needs it (goal exploration),
-    else one warning."""
-    if rig.twin is not None or rig.ball_locator is not None:
+    else one warning. A rig with nothing physical attached (the twin, ArmBalls) knows where
+    its ball is."""
+    if rig.ball_locator is not None or not is_physical(config.rig.name):
         return
     rig_id = config.rig.rig_id
     calibrate = f"ergo calibrate arena --rig-id {rig_id} --camera ..."
@@ -197,10 +198,7 @@ def open_run(
             store = None
         # rig and strategy before a new run folder exists: a bad name leaves nothing
         the_rig = rig if rig is not None else make_rig(run_config.rig)
-        the_strategy = strategy
-        if the_strategy is None:
-            s = run_config.strategy
-            the_strategy = make_strategy(s.name, n_params=the_rig.motor.n_params, **s.options)
+        the_strategy = strategy if strategy is not None else strategy_for(run_config, the_rig)
         _check_sees_ball(run_config, the_rig, the_strategy)
         if store is None:
             make_run_dir(path)
@@ -211,6 +209,7 @@ def open_run(
                 return again(mode="resume")
             store = RunStore.create(path, run_config.to_dict())
             held.callback(store.close)
+        store.sync_interval_s = the_rig.sync_interval_s
         missing = 0
         if resume:
             missing = max(0, (recorded_episodes(path) or 0) - len(store))
@@ -244,3 +243,12 @@ def discard_empty_run(run: Path) -> None:
         left = []
     if not left:
         run.rmdir()
+
+
+def strategy_for(config: RunConfig, rig: Rig | None = None) -> Strategy:
+    """The strategy ``config`` describes, for its rig (``rig``, or the one the config names,
+    built but not connected): its motor primitive's ``n_params`` and its ``scene``; not yet
+    replayed (feed it the run's records with ``update`` to rebuild its state)."""
+    rig = rig if rig is not None else make_rig(config.rig)
+    s = config.strategy
+    return make_strategy(s.name, n_params=rig.motor.n_params, scene=rig.scene, **s.options)

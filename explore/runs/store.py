@@ -5,8 +5,18 @@ Layout of ``RUN/``:
   time. Written once, atomically (temporary file + rename).
 - ``history.bin``: append-only episode records. Each is framed as
   ``b"EREC" | u32 length | u32 CRC-32 of the payload | payload`` (little endian), the payload
-  an ``EpisodeRecord`` as compressed npz. Each append is flushed and fsync'ed before the
-  episode counts as done, so a SIGKILL loses at most the episode in flight.
+  an ``EpisodeRecord`` (``explore.runs.record``: packed, or npz before 2026-12-02). Each append
+  is flushed before the episode counts as done, so a SIGKILL loses at most the episode in
+  flight (the rest is in the kernel's page cache), and fsync'ed (by default after every
+  episode: ``sync_interval_s`` = 0), so that a crash of the machine loses no more either. A rig
+  whose episodes cost well under the 2 ms an fsync takes (ArmBalls) syncs at most every
+  ``sync_interval_s`` seconds (``Rig.sync_interval_s``) and on close: a power cut can then cost
+  it the episodes of the last interval, which a resume detects and runs again (below).
+- ``history.synced`` (only with ``sync_interval_s`` > 0): a length of ``history.bin`` known to
+  be on disk, u64 little endian, written and fsync'ed after each fsync of the history returned
+  (so it may lag the history, never lead it). After a power cut, whatever the disk kept of the
+  bytes past it (nothing, zeros, a prefix, records with holes) is the unsynced tail and is cut;
+  damage before it is corruption.
 - ``frames/episode-NNNNNN.npz`` (with the rig option ``record_video``): the overhead camera at
   every control tick of episode N, ``frames`` (T, side, side, 3) BGR uint8, written atomically
   (fsync'ed) before the episode's record is appended; a file past the last record is what a
@@ -18,8 +28,10 @@ Layout of ``RUN/``:
   resume).
 - ``coverage.png`` and whatever later stages write (models, figures, recordings).
 
-On open, a torn last record (a crash mid-write) is cut off; a bad record followed by good ones
-is corruption and raises ``RunStoreError`` naming the offset, without touching the file.
+On open, a torn last record (a crash mid-write) is cut off, and so is everything from the first
+bad record on when it lies past ``history.synced`` (a power cut's unsynced tail); any other bad
+record followed by more data is corruption and raises ``RunStoreError`` naming the offset,
+without touching the file.
 """
 
 from __future__ import annotations
@@ -27,6 +39,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import math
 import os
 import struct
 import time
@@ -46,6 +59,8 @@ MAGIC = b"EREC"
 HEADER = struct.Struct("<4sII")
 FRAMES_DIR = "frames"
 WRITER_LOCK_FILE = "writer.lock"  # the writer's lock (explore/runs/lock.py), not run data
+SYNCED = "history.synced"
+_SYNCED = struct.Struct("<Q")
 
 
 class RunStoreError(RuntimeError):
@@ -79,8 +94,13 @@ def salvage_hint(run: Path) -> str:
     return f"`ergo runs check {run}` says what can be kept, `ergo runs salvage {run}` keeps it"
 
 
-def _scan(data: bytes, hint: str = "") -> tuple[list[tuple[int, int]], int]:
+def _scan(
+    data: bytes, durable: int | None = None, hint: str = ""
+) -> tuple[list[tuple[int, int]], int]:
     """Find record payload spans in ``data``.
+
+    ``durable``: the length known to be on disk (``history.synced``; None: all of it): a bad
+    record starting at or past it is an unsynced tail that a power cut damaged.
 
     Returns:
         spans: (start, end) of each valid payload, in order.
@@ -91,11 +111,14 @@ def _scan(data: bytes, hint: str = "") -> tuple[list[tuple[int, int]], int]:
     spans: list[tuple[int, int]] = []
     pos = 0
     n = len(data)
+    durable = n if durable is None else durable
     while pos < n:
         if n - pos < HEADER.size:
             break  # torn header
         magic, length, crc = HEADER.unpack_from(data, pos)
         start, end = pos + HEADER.size, pos + HEADER.size + length
+        if pos >= durable and (magic != MAGIC or end > n or zlib.crc32(data[start:end]) != crc):
+            break  # past what was synced: what a power cut left of the unsynced tail
         if magic != MAGIC:
             raise RunStoreError(f"history.bin is corrupt at byte {pos}: bad record marker{hint}")
         if end > n:
@@ -133,6 +156,11 @@ class RunStore:
         self._fd: int | None = None  # history.bin, O_APPEND, unbuffered
         self.truncated_bytes = 0  # torn bytes cut by ``open``
         self.torn_bytes = 0  # torn bytes found after the last record (cut by ``open`` only)
+        #: seconds between two fsyncs of the history (0: every append)
+        self.sync_interval_s = 0.0
+        self._synced = -math.inf  # the first append syncs (and starts ``history.synced``)
+        self._size = 0  # bytes of history.bin written through this store
+        self._synced_length: int | None = None  # what history.synced holds (None: no file)
 
     # ---- construction ----------------------------------------------------------------------
     @classmethod
@@ -228,26 +256,59 @@ class RunStore:
         if not self.history_path.exists():
             return
         data = self.history_path.read_bytes()
+        self._synced_length = read_synced(self.path)
         hint = f" in {self.path}: {salvage_hint(self.path)}"
-        spans, good_end = _scan(data, hint)
+        spans, good_end = _scan(data, self._synced_length, hint)
         self.records = list(_decode(data, spans, hint))
         self.torn_bytes = len(data) - good_end
         if self.torn_bytes and repair:
-            # a crash during the last append: drop the torn bytes (the episode in flight)
+            # a crash during the last append (the episode in flight), or a power cut's unsynced
+            # tail: drop the bytes from the first bad record on, the episodes are run again
             self.truncated_bytes = self.torn_bytes
             with open(self.history_path, "r+b") as f:
                 f.truncate(good_end)
                 os.fsync(f.fileno())
+            if self._synced_length is not None:
+                self._write_synced(good_end)
 
     def _open_for_append(self) -> None:
         flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_CLOEXEC
         self._fd = os.open(self.history_path, flags, 0o644)
+        self._size = os.fstat(self._fd).st_size
+
+    def _sync(self) -> None:
+        """fsync the history, then record (durably) how much of it is on disk."""
+        assert self._fd is not None
+        os.fsync(self._fd)
+        self._synced = time.monotonic()
+        if (self.sync_interval_s > 0 or self._synced_length is not None) and (
+            self._size != self._synced_length
+        ):  # a run that appended nothing writes nothing
+            self._write_synced(self._size)
+
+    def _write_synced(self, length: int) -> None:
+        self._synced_length = length
+        path = self.path / SYNCED
+        new = not path.exists()
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT, 0o644)
+        try:
+            os.pwrite(fd, _SYNCED.pack(length), 0)
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        if new:  # its directory entry on disk too
+            dir_fd = os.open(self.path, os.O_RDONLY)
+            try:
+                os.fsync(dir_fd)
+            finally:
+                os.close(dir_fd)
 
     def append(self, record: EpisodeRecord) -> None:
-        """Append one episode durably (written and fsync'ed) before returning.
+        """Append one episode: written unbuffered (a killed process loses nothing of it) and
+        fsync'ed, after every append or at most every ``sync_interval_s`` seconds (module doc).
 
-        A write that fails (a full disk, a quota, an I/O error) is undone: the file is cut back
-        to the episodes before it, and ``RunStoreError`` says so in one line."""
+        A write or sync that fails (a full disk, a quota, an I/O error) is undone: the file is
+        cut back to the episodes before it, and ``RunStoreError`` says so in one line."""
         if self._fd is None:
             raise RunStoreError(f"{self.path} is not open for appending")
         if record.episode != len(self.records):
@@ -256,15 +317,18 @@ class RunStore:
             )
         payload = record.to_bytes()
         frame = memoryview(HEADER.pack(MAGIC, len(payload), zlib.crc32(payload)) + payload)
-        size = os.fstat(self._fd).st_size
+        size = self._size
         try:
-            while frame:  # unbuffered: nothing is left in a buffer to land later
+            while frame:  # unbuffered: in the page cache, nothing left in a buffer to land later
                 frame = frame[os.write(self._fd, frame) :]
-            os.fsync(self._fd)
+            self._size = os.fstat(self._fd).st_size
+            if time.monotonic() - self._synced >= self.sync_interval_s:
+                self._sync()
         except OSError as exc:
             with contextlib.suppress(OSError):  # cutting frees space: it works on a full disk
                 os.ftruncate(self._fd, size)
                 os.fsync(self._fd)
+            self._size = size
             raise RunStoreError(
                 f"cannot store episode {record.episode} in {self.history_path}: "
                 f"{exc.strerror or exc}; the {len(self.records)} episode(s) before it are kept"
@@ -288,14 +352,27 @@ class RunStore:
 
     def close(self) -> None:
         if self._fd is not None:
-            fd, self._fd = self._fd, None
-            os.close(fd)
+            try:
+                self._sync()
+            finally:
+                fd, self._fd = self._fd, None
+                os.close(fd)
 
     def __enter__(self) -> RunStore:
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def read_synced(run: str | Path) -> int | None:
+    """The length of ``RUN/history.bin`` known to be on disk (``history.synced``), or None
+    when the run keeps none (it fsyncs every append)."""
+    try:
+        raw = (Path(run) / SYNCED).read_bytes()
+    except FileNotFoundError:
+        return None
+    return _SYNCED.unpack(raw[: _SYNCED.size])[0] if len(raw) >= _SYNCED.size else None
 
 
 @dataclass(frozen=True)
@@ -305,8 +382,9 @@ class History:
     Attributes:
         meta: ``run.json`` (checked as ``RunStore.read_meta`` checks it).
         records: the complete records, in order.
-        torn_bytes: bytes of a torn last record after them (a crash mid-append; 0 if none),
-            left in the file (``RunStore.open`` cuts them when the run is resumed).
+        torn_bytes: bytes of a torn last record after them (a crash mid-append, or a power
+            cut's unsynced tail; 0 if none), left in the file (``RunStore.open`` cuts them when
+            the run is resumed).
     """
 
     meta: dict[str, Any]
@@ -350,5 +428,5 @@ def iter_history(run: Path) -> Iterator[EpisodeRecord]:
         return
     data = path.read_bytes()
     hint = f" in {run}: {salvage_hint(Path(run))}"
-    spans, _ = _scan(data, hint)
+    spans, _ = _scan(data, read_synced(run), hint)
     yield from _decode(data, spans, hint)

@@ -8,7 +8,9 @@ by replaying the history.
 Strategies are built by name from ``STRATEGIES`` (imported lazily). Each declares its options
 as a dataclass ``Options`` (``explore.options``): unknown keys and wrong types are refused in
 one line with the known options listed. It proposes ``n_params`` motor parameters, the count of
-the rig's motor primitive (48 for the Ergo Jr's DMPs).
+the rig's motor primitive (48 for the Ergo Jr's DMPs, 49 for ArmBalls' RBFs), and knows the
+rig's ``scene`` (``explore.learner.scene``: the frame of engineered features, whether the scene
+resets between episodes), both given by the rig, never assumed.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import numpy as np
 
 from explore.learner.dmp import N_PARAMS
 from explore.learner.experience import Experience, Observation
+from explore.learner.scene import TWIN_ARENA, Scene
 from explore.options import OptionsError, parse_options
 from robot.registry import LazyTable
 
@@ -56,6 +59,7 @@ class Strategy(ABC):
 
     Args:
         n_params: motor parameters to propose (the rig's ``motor.n_params``).
+        scene: the rig's scene (``explore.rigs.rig.rig_scene``; default the twin's arena).
         **options: the strategy's options as given (``self.options``), read into its ``Options``
             dataclass (``self.settings``).
     """
@@ -69,13 +73,16 @@ class Strategy(ABC):
     #: sees none, and ``open_run`` refuses such a run
     needs_ball: bool = False
 
-    def __init__(self, n_params: int = N_PARAMS, **options: Any) -> None:
+    def __init__(
+        self, n_params: int = N_PARAMS, scene: Scene | None = None, **options: Any
+    ) -> None:
         self.options = dict(options)
         try:
             self.settings = parse_options(self.Options, options, f"strategy {self.name!r}")
         except OptionsError as exc:
             raise StrategyError(str(exc)) from None
         self.n_params = int(n_params)
+        self.scene = TWIN_ARENA if scene is None else scene
 
     @abstractmethod
     def propose(self, context: Observation, rng: np.random.Generator) -> Proposal:
@@ -161,6 +168,9 @@ STRATEGY_SUMMARIES = {
 }
 
 
-def make_strategy(name: str, n_params: int = N_PARAMS, **options: Any) -> Strategy:
-    """The strategy ``name`` with ``options``, proposing ``n_params`` parameters."""
-    return STRATEGIES.load(name)(n_params=n_params, **options)
+def make_strategy(
+    name: str, n_params: int = N_PARAMS, scene: Scene | None = None, **options: Any
+) -> Strategy:
+    """The strategy ``name`` with ``options``, proposing ``n_params`` parameters on a rig with
+    ``scene`` (the twin's arena when None)."""
+    return STRATEGIES.load(name)(n_params=n_params, scene=scene, **options)

@@ -2,11 +2,22 @@
 
 Every episode after a bootstrap of random parameters:
 1. choose a module (RGE: the whole goal space; MGE: by learning-progress interest);
-2. sample a goal in that module (uniformly in the bounds of the outcomes seen so far, or, for
-   latent spaces, optionally N(0, 1) clipped at +-2.5 as in the paper);
+2. sample a goal in that module (uniformly in the bounds of the outcomes seen so far, uniformly
+   in the fixed box [-1, 1]^d, or, for latent spaces, N(0, 1) clipped at +-2.5 as in the paper);
 3. play the parameters of the nearest (context, outcome) in the module's database, plus
-   Gaussian noise ("explore"), or without noise ("exploit", a fraction of MGE episodes, which
-   alone update interests).
+   Gaussian noise ("explore"), or without noise ("exploit", which alone updates interests).
+
+Two schedules of explore and exploit episodes (option ``schedule``):
+- ``"random"`` (the default): every episode chooses its own module and goal, and is an exploit
+  episode with probability ``exploit`` (0.2 MGE, 0 RGE);
+- ``"cycle"``: the original ArmBalls campaign's (``mge_efr.py``, ``exploactors.py``,
+  docs/armballs.md): one module and goal per ``n_explore`` + 1 episodes: ``n_explore`` noisy
+  variations of the parameters nearest to the goal when it was chosen, then one noise-free
+  episode with the parameters nearest to it after them (the exploit); only the exploit's
+  (goal, outcome) enters the interest's goal history, one entry per goal.
+
+A rig whose scene resets before every episode (``Scene.resets``: ArmBalls) gives no context:
+the database is indexed by outcomes alone, as the original's.
 
 All randomness comes from the generator passed to ``propose``; the state is a deterministic
 function of the records given to ``update`` (a resumed run replays them).
@@ -29,6 +40,7 @@ from explore.learner.goal_spaces import (
 )
 from explore.learner.interest import RANDOM_CHOICE, WINDOW, ModuleInterest
 from explore.learner.meta_policy import MetaPolicy
+from explore.learner.scene import Scene
 from explore.learner.strategies.base import (
     MAKE_VAE,
     Description,
@@ -41,6 +53,8 @@ from explore.options import BadOption
 BOOTSTRAP = 100  # paper: 100-400 random episodes in the simulations
 EXPLOIT_MGE = 0.2  # paper: about 1 episode in 5 is a noise-free exploit episode (MGE)
 NORMAL_CLIP = 2.5  # paper: latent goals N(0, 1) clipped at +-2.5
+BOX = 1.0  # goals="box": uniform in [-BOX, BOX]^d, the original's engineered goal bounds
+N_EXPLORE = 4  # schedule="cycle": noisy episodes per goal before its exploit (original: 4)
 LATENT_FORMS = ("raw", "zscore")
 # The original rig's settings (the original implementation, docs/facts.md), the defaults here
 # because the ball is not reset between episodes, on the rig as on the twin. With the paper's
@@ -59,23 +73,36 @@ class GoalExplorationOptions:
         bootstrap: random episodes before goal exploration (default 100).
         sigma: exploration noise in the [-1, 1] parameter space (default 0.2, the original
             rig; the paper's simulations used 0.05).
-        exploit: probability of a noise-free exploit episode (default 0.2 MGE, 0 RGE).
+        exploit: probability of a noise-free exploit episode (default 0.2 MGE, 0 RGE), in the
+            random schedule (the cycle has one exploit per goal).
         random_episodes: probability of a random-parameter episode after the bootstrap
             (default 0.1, the original rig; 0 in the paper's simulations).
-        goals: "uniform" in the outcome bounds seen so far, or "normal" (latent spaces).
+        goals: "uniform" in the outcome bounds seen so far (default), "box" uniform in the fixed
+            box [-1, 1]^d (the original's engineered goals), or "normal" N(0, 1) clipped at
+            +-2.5 (latent spaces).
         modular: choose modules by interest (MGE) instead of the whole space (RGE); default:
             the strategy's.
         window, random_choice: interest window (exploit episodes) and random module share.
+        schedule: "random" (default) or "cycle" (module doc), with ``n_explore`` noisy
+            episodes per goal (default 4).
+        interest: "window" (default: the mean of the last ``window`` progresses) or
+            "exponential" (the original's average, time constant ``window``).
+        competence: "scaled" (default: distance over the module's outcome diagonal, capped at
+            1) or "distance" (the original's: the distance capped at 2).
     """
 
     bootstrap: int = BOOTSTRAP
     sigma: float = SIGMA_RIG
     exploit: float | None = None
     random_episodes: float = RANDOM_EPISODES_RIG
-    goals: Literal["uniform", "normal"] = "uniform"
+    goals: Literal["uniform", "normal", "box"] = "uniform"
     modular: bool | None = None
     window: int = WINDOW
     random_choice: float = RANDOM_CHOICE
+    schedule: Literal["random", "cycle"] = "random"
+    n_explore: int = N_EXPLORE
+    interest: Literal["window", "exponential"] = "window"
+    competence: Literal["scaled", "distance"] = "scaled"
 
     def __post_init__(self) -> None:
         for key in ("bootstrap", "sigma"):
@@ -85,18 +112,25 @@ class GoalExplorationOptions:
             p = getattr(self, key)
             if p is not None and not 0.0 <= p <= 1.0:
                 raise BadOption(key, f"must be a probability, got {p}")
+        for key in ("window", "n_explore"):
+            if getattr(self, key) < 1:
+                raise BadOption(key, f"must be at least 1, got {getattr(self, key)}")
 
 
 @dataclass(frozen=True)
 class EngineeredOptions(GoalExplorationOptions):
-    """Goal-exploration options, and: ``form`` ("wrap-safe" (default) or "polar"),
-    ``hand_module`` (the tool tip as a module; default True when modular) and ``distractor``
-    (the distractor's features as a module and in the context, for a rig with
-    ``distractor=walk``; default False)."""
+    """Goal-exploration options, and: ``form`` ("wrap-safe", "polar" or "cartesian"; default:
+    the scene's, wrap-safe on the twin, cartesian on ArmBalls), ``hand_module`` (the tool tip
+    as a module; default True when modular), ``distractor`` (the distractor's features as a
+    module and in the context, for a scene with one; default False; null: exactly when the
+    rig's scene has a distractor) and ``flat`` (every feature in one module, the original's
+    RGE-EFR over (distractor, ball) as one 4-D goal; default False: RGE explores the ball's
+    module, the rest in the context)."""
 
-    form: Literal["wrap-safe", "polar"] = "wrap-safe"
+    form: Literal["wrap-safe", "polar", "cartesian"] | None = None
     hand_module: bool | None = None
-    distractor: bool = False
+    distractor: bool | None = False
+    flat: bool = False
 
 
 @dataclass(frozen=True)
@@ -118,8 +152,10 @@ class GoalExploration(Strategy):
     modular_default = False
     needs_ball = True
 
-    def __init__(self, n_params: int = N_PARAMS, **options: Any) -> None:
-        super().__init__(n_params, **options)
+    def __init__(
+        self, n_params: int = N_PARAMS, scene: Scene | None = None, **options: Any
+    ) -> None:
+        super().__init__(n_params, scene, **options)
         s = self.settings
         self.bootstrap = s.bootstrap
         self.sigma = s.sigma
@@ -129,7 +165,11 @@ class GoalExploration(Strategy):
         self.goal_sampling = s.goals
         self.window = s.window
         self.random_choice = s.random_choice
+        self.cycle = s.schedule == "cycle"
+        self.cycle_length = s.n_explore + 1
         self.n_seen = 0
+        self.n_goal_episodes = 0  # goal-directed episodes learnt from (the cycle's position)
+        self._goal_cycle: tuple[int, np.ndarray, np.ndarray] | None = None  # module, goal, base
         self.space: GoalSpace | None = None
         self._last_latent: np.ndarray | None = None  # latent spaces: context of the next move
         self._pending: list[Experience] = []  # records seen before the space exists
@@ -146,21 +186,29 @@ class GoalExploration(Strategy):
         if space is None:
             return
         dims = [len(m) for m in space.modules]
-        self.policy = MetaPolicy(space.context_dim, dims, self.n_params)
+        context_dim = 0 if self.scene.resets else space.context_dim
+        self.policy = MetaPolicy(context_dim, dims, self.n_params)
         self.low = [np.full(d, np.inf) for d in dims]
         self.high = [np.full(d, -np.inf) for d in dims]
-        self.interest = ModuleInterest(dims, self.window, self.random_choice)
+        s = self.settings
+        self.interest = ModuleInterest(
+            dims, self.window, self.random_choice, average=s.interest, competence=s.competence
+        )
         if isinstance(space, LatentGoalSpace):
             self._last_latent = np.zeros(space.dim)
 
     def _record_context(self, record: Experience) -> np.ndarray:
         assert self.space is not None
+        if self.scene.resets:
+            return np.zeros(0)
         if isinstance(self.space, LatentGoalSpace):
             return self._last_latent  # type: ignore[return-value]
         return self.space.context(record)
 
     def _propose_context(self, context: Observation) -> np.ndarray:
         assert self.space is not None
+        if self.scene.resets:
+            return np.zeros(0)
         if isinstance(self.space, LatentGoalSpace):
             return self._last_latent  # type: ignore[return-value]
         return self.space.context_of(context.ball, context.distractor)  # type: ignore[attr-defined]
@@ -182,19 +230,32 @@ class GoalExploration(Strategy):
         context = self._record_context(record)
         outcome = space.outcome(record)
         parts = space.module_outcomes(outcome)
-        self.policy.add(context, parts, record.theta)
-        for k, o in enumerate(parts):
-            if o is not None:
-                self.low[k] = np.minimum(self.low[k], o)
-                self.high[k] = np.maximum(self.high[k], o)
-        if record.module >= 0 and record.kind in ("explore", "exploit"):
+        directed = record.module >= 0 and record.kind in ("explore", "exploit")
+        if directed:
             k = record.module
             if k >= len(parts) or len(record.goal) != len(space.modules[k]):
                 raise StrategyError(
                     f"episode {record.episode} has module {k} and a goal of size "
                     f"{len(record.goal)}: not recorded by this strategy's goal space"
                 )
-            self.interest.update(k, record.goal, parts[k], record.kind == "exploit", self._scale(k))
+            if self.cycle and self.n_goal_episodes % self.cycle_length == 0:
+                # a new goal: its noisy episodes vary the parameters nearest to it now (before
+                # this record joins the database), as ``propose`` computed them
+                base = self.policy.nearest_theta(k, context, record.goal)
+                self._goal_cycle = (k, np.asarray(record.goal, dtype=float), base)
+            self.n_goal_episodes += 1
+        self.policy.add(context, parts, record.theta)
+        for k, o in enumerate(parts):
+            if o is not None:
+                self.low[k] = np.minimum(self.low[k], o)
+                self.high[k] = np.maximum(self.high[k], o)
+        if directed:
+            k = record.module
+            exploit = record.kind == "exploit"
+            self.interest.update(
+                k, record.goal, parts[k], exploit, self._scale(k),
+                remember=exploit or not self.cycle,
+            )  # fmt: skip
         if outcome is not None and isinstance(space, LatentGoalSpace):
             self._last_latent = outcome
 
@@ -209,10 +270,13 @@ class GoalExploration(Strategy):
         return Proposal(theta=rng.uniform(-1.0, 1.0, self.n_params), kind="random")
 
     def sample_goal(self, module: int, rng: np.random.Generator) -> np.ndarray:
-        """A goal in ``module``: uniform in the bounds seen so far, or clipped N(0, 1)."""
+        """A goal in ``module``: uniform in the bounds seen so far, uniform in [-1, 1]^d
+        (``box``), or clipped N(0, 1) (``normal``)."""
+        d = len(self.low[module])
         if self.goal_sampling == "normal":
-            d = len(self.low[module])
             return np.clip(rng.normal(0.0, 1.0, d), -NORMAL_CLIP, NORMAL_CLIP)
+        if self.goal_sampling == "box":
+            return rng.uniform(-BOX, BOX, d)
         return rng.uniform(self.low[module], self.high[module])
 
     def propose(self, context: Observation, rng: np.random.Generator) -> Proposal:
@@ -220,6 +284,8 @@ class GoalExploration(Strategy):
             return self._random(rng)
         if self.random_episodes > 0 and rng.random() < self.random_episodes:
             return self._random(rng)
+        if self.cycle:
+            return self._propose_in_cycle(context, rng)
         module = self.interest.choose(rng) if self.modular else 0
         if self.policy.size(module) == 0:
             return self._random(rng)
@@ -231,6 +297,25 @@ class GoalExploration(Strategy):
         return Proposal(
             theta=theta, goal=goal, module=module, kind="exploit" if exploit else "explore"
         )
+
+    def _propose_in_cycle(self, context: Observation, rng: np.random.Generator) -> Proposal:
+        """The next episode of the goal cycle (module doc, ``schedule="cycle"``)."""
+        position = self.n_goal_episodes % self.cycle_length
+        ctx = self._propose_context(context)
+        if position == 0:
+            module = self.interest.choose(rng) if self.modular else 0
+            if self.policy.size(module) == 0:
+                return self._random(rng)
+            goal = self.sample_goal(module, rng)
+            base = self.policy.nearest_theta(module, ctx, goal)
+        else:
+            assert self._goal_cycle is not None
+            module, goal, base = self._goal_cycle
+        if position < self.cycle_length - 1:
+            noisy = base + rng.normal(0.0, self.sigma, self.n_params) if self.sigma > 0 else base
+            return Proposal(np.clip(noisy, -1.0, 1.0), goal.copy(), module, "explore")
+        theta = self.policy.nearest_theta(module, ctx, goal)
+        return Proposal(np.clip(theta, -1.0, 1.0), goal.copy(), module, "exploit")
 
     def phase(self) -> str:
         if self.space is None or self.n_seen < self.bootstrap:
@@ -264,7 +349,14 @@ class EngineeredGoalExploration(GoalExploration):
     def make_space(self) -> GoalSpace:
         s = self.settings
         hand = self.modular if s.hand_module is None else s.hand_module
-        return EngineeredGoalSpace(s.form, hand, s.distractor)
+        distractor = self.scene.distractor if s.distractor is None else s.distractor
+        try:
+            space = EngineeredGoalSpace(s.form, hand, distractor, self.scene)
+        except ValueError as exc:
+            raise StrategyError(f"{self.name}: {exc}") from None
+        if s.flat:
+            space.modules = [np.arange(space.dim)]
+        return space
 
 
 class ModularEngineeredGoalExploration(EngineeredGoalExploration):

@@ -16,6 +16,7 @@ from typing import Any, Literal
 import numpy as np
 
 from explore.learner.dmp import N_PARAMS
+from explore.learner.scene import Scene
 from explore.learner.strategies.base import StrategyError
 from explore.learner.strategies.goal_exploration import (
     GoalExploration,
@@ -59,8 +60,10 @@ class OnlineLatentGoalExploration(GoalExploration):
     name = "rge-online"
     Options = OnlineOptions
 
-    def __init__(self, n_params: int = N_PARAMS, **options: Any) -> None:
-        super().__init__(n_params, **options)
+    def __init__(
+        self, n_params: int = N_PARAMS, scene: Scene | None = None, **options: Any
+    ) -> None:
+        super().__init__(n_params, scene, **options)
         if self.bootstrap < 1:
             raise StrategyError(f"{self.name}: bootstrap must be at least 1 (the VAE's data)")
         self._configs = self._vae_configs()  # bad options fail now, not after the bootstrap

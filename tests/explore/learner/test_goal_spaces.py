@@ -57,7 +57,24 @@ def test_engineered_space_outcomes_contexts_and_modules():
     rec_no_tip = _Rec([0.15, 0.0], [0.15, 0.0], tip=(np.nan, np.nan))
     assert space.module_outcomes(space.outcome(rec_no_tip))[1] is None
     with pytest.raises(ValueError, match="unknown polar form"):
-        EngineeredGoalSpace("cartesian")
+        EngineeredGoalSpace("spherical")
+
+
+def test_engineered_forms_follow_the_rig_s_scene():
+    from explore.learner.scene import ARM_2_BALLS_SQUARE, TWIN_ARENA
+
+    # ArmBalls: the balls' positions themselves, (x, y) in its square [-1, 1]^2
+    space = EngineeredGoalSpace(None, distractor=True, scene=ARM_2_BALLS_SQUARE)
+    assert space.form == "cartesian" and space.dim == 4
+    rec = _Rec([0.6, -0.2], [0.6, 0.6])
+    rec.distractor, rec.context_distractor = np.array([0.7, -0.45]), np.array([0.7, -0.45])
+    np.testing.assert_allclose(space.outcome(rec), [0.6, -0.2, 0.7, -0.45])
+    with pytest.raises(ValueError, match="not defined on the Arm-2-Balls square"):
+        EngineeredGoalSpace("polar", scene=ARM_2_BALLS_SQUARE)
+    # the twin: cartesian over its arena's square, wrap-safe by default
+    twin = EngineeredGoalSpace("cartesian", scene=TWIN_ARENA)
+    np.testing.assert_allclose(twin.outcome(_Rec([0.1, -0.2], [0, 0])), [0.5, -1.0])
+    assert EngineeredGoalSpace(scene=TWIN_ARENA).form == "wrap-safe"
 
 
 def test_latent_modules_are_pairs_ranked_by_kl():
@@ -97,3 +114,36 @@ def test_competence_progress_uses_the_nearest_previous_goal():
     assert mi.update(0, np.array([0.2]), np.array([0.2]), True, 1.0) == pytest.approx(0.8)
     assert mi.update(0, np.array([0.2]), None, True, 1.0) == pytest.approx(-1.0)
     assert mi.interests()[0] == pytest.approx(abs(0.0 + 0.8 - 1.0) / 3)
+
+
+def test_the_original_interest_is_an_exponential_average_of_distance_progress():
+    # interest_model.py of the CoRL 2018 campaign: c = -min(d, 2), p += (progress - p) / w from
+    # p = 1e-5, interest |p|; goals compared with the previous goals' outcomes
+    mi = ModuleInterest([2, 2], window=4, average="exponential", competence="distance")
+    np.testing.assert_allclose(mi.interests(), [1e-5, 1e-5])  # uniform choice at first
+    g = np.array([0.0, 0.0])
+    assert mi.update(0, g, np.array([3.0, 0.0]), exploit=True, scale=99.0) == 0.0  # first goal
+    p = 1e-5 + (0.0 - 1e-5) / 4
+    # nearest previous goal is g, which reached distance 3 (capped at 2): progress -0.5 + 2
+    assert mi.update(0, g, np.array([0.0, 0.5]), True, 99.0) == pytest.approx(1.5)
+    p += (1.5 - p) / 4
+    assert mi.interests()[0] == pytest.approx(abs(p)) and mi.interests()[1] == 1e-5
+    # not remembered: a later goal cannot compare with it
+    mi.update(1, g, np.array([0.0, 0.0]), exploit=True, scale=1.0, remember=False)
+    assert mi.goals[1] == []
+    assert mi.competence(g, None, 1.0) == -2.0
+
+
+def test_goal_sampling_in_the_fixed_box_and_the_latent_prior():
+    from explore.learner.scene import ARM_2_BALLS_SQUARE
+    from explore.learner.strategies import make_strategy
+
+    rng = np.random.default_rng(0)
+    s = make_strategy("mge-efr", n_params=49, scene=ARM_2_BALLS_SQUARE, goals="box",
+                      distractor=None, hand_module=False)  # fmt: skip
+    assert [len(m) for m in s.space.modules] == [2, 2]  # the scene's distractor joins
+    goals = np.array([s.sample_goal(0, rng) for _ in range(2000)])
+    assert goals.min() >= -1 and goals.max() <= 1 and goals.min() < -0.99 and goals.max() > 0.99
+    s = make_strategy("rge-efr", goals="normal")
+    goals = np.array([s.sample_goal(0, rng) for _ in range(20000)])
+    assert np.abs(goals).max() == pytest.approx(2.5)  # clipped N(0, 1)

@@ -1,0 +1,81 @@
+"""What the learned representations of Arm-2-Balls encode (docs/results_armballs.md): for each
+model, on scenes it was not trained on (both balls uniform over [-1, 1]^2, the database's
+distribution, another seed), how well the ball's and the distractor's positions are predicted
+linearly (R^2, with an intercept) from the whole code and from each MGE module, and each
+latent's KL and strongest correlation with a position coordinate.
+
+A module is object-aligned when it predicts one ball well and the other not at all: what MGE
+needs to give its interest to the ball and take it from the distractor. The labels are a
+diagnostic of this table only: no strategy and no model choice sees them.
+
+    .venv/bin/python bench/armballs_representation.py --vae runs/armballs/models/vae \
+        --betavae runs/armballs/models/betavae --sae runs/armballs/models/sae [--n 2000]
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from explore.learner.goal_spaces import kl_ranked_modules, spatial_goal_space
+from explore.rigs.armballs import outcome_dataset
+from explore.rigs.rig import RigConfig, rig_options
+
+FACTORS = ("ball x", "ball y", "distractor x", "distractor y")
+
+
+def r2(x: np.ndarray, y: np.ndarray) -> float:
+    """R^2 of the least-squares linear prediction (with intercept) of y (n, k) from x (n, d),
+    over all of y's coordinates."""
+    a = np.hstack([x, np.ones((len(x), 1))])
+    w, *_ = np.linalg.lstsq(a, y, rcond=None)
+    return float(1 - ((a @ w - y) ** 2).sum() / ((y - y.mean(axis=0)) ** 2).sum())
+
+
+def describe(name: str, codes: np.ndarray, modules: list[np.ndarray], kl: list[float] | None,
+             ball: np.ndarray, dis: np.ndarray) -> None:  # fmt: skip
+    truth = np.hstack([ball, dis])
+    print(f"## {name}: code of {codes.shape[1]}")
+    print(f"whole code: R^2 ball {r2(codes, ball):.3f}, distractor {r2(codes, dis):.3f}")
+    for k, idx in enumerate(modules):
+        x = codes[:, idx]
+        print(f"  module {k} {list(map(int, idx))}: R^2 ball {r2(x, ball):.3f}, "
+              f"distractor {r2(x, dis):.3f}")  # fmt: skip
+    corr = np.corrcoef(np.hstack([codes, truth]).T)[: codes.shape[1], codes.shape[1] :]
+    corr = np.nan_to_num(corr)
+    for i in range(codes.shape[1]):
+        j = int(np.argmax(np.abs(corr[i])))
+        kl_txt = f"KL {kl[i]:.2f}, " if kl is not None else ""
+        print(f"  latent {i}: {kl_txt}sd {codes[:, i].std():.3f}, strongest |corr| "
+              f"{abs(corr[i, j]):.2f} with {FACTORS[j]}")  # fmt: skip
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--vae", action="append", default=[], help="a VAE folder (repeatable)")
+    ap.add_argument("--betavae", action="append", default=[], help="a beta-VAE folder")
+    ap.add_argument("--sae", action="append", default=[], help="a spatial autoencoder folder")
+    ap.add_argument("--n", type=int, default=2000, help="held-out scenes (default 2000)")
+    ap.add_argument("--seed", type=int, default=12345, help="their seed (not the training's)")
+    args = ap.parse_args()
+    from vision.spatial_ae import load_sae
+    from vision.vae import load_vae
+
+    config = RigConfig("arm2balls")
+    data = outcome_dataset(config, rig_options(config), args.n, seed=args.seed)
+    images, ball, dis = data["images"], data["ball"], data["distractor"]
+    for path in [*args.vae, *args.betavae]:
+        vae = load_vae(path)
+        kl = vae.config.kl_per_latent
+        mu = vae.encode_bgr(images)
+        modules = kl_ranked_modules(kl) if kl is not None else []
+        describe(path, mu, modules, kl, ball, dis)
+    for path in args.sae:
+        sae = load_sae(path)
+        space = spatial_goal_space(sae.encode_bgr, sae.config.code_std, True, sae.config.code_corr)
+        describe(path, space.outcomes(images), space.modules, None, ball, dis)
+
+
+if __name__ == "__main__":
+    main()

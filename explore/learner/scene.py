@@ -1,0 +1,98 @@
+"""What the learner may know of a rig's scene: the frame its engineered features and its metric
+are defined in, and whether the scene changes between episodes.
+
+A rig declares its scene (``explore.rigs.rig.rig_scene``, from the rig module's ``scene``);
+strategies, engineered goal spaces and the metric take it, as they take the motor primitive's
+``n_params``, so that a new rig needs no special case in the learner.
+
+Two scenes exist:
+- ``TWIN_ARENA``: the Ergo Jr's round arena (the twin's, and the real rigs' as built,
+  sim/models/make_scene.py), in metres; the ball's centre lies on a ring between the arena's
+  kerb and its wall, and the ball stays where the last episode left it (the context changes);
+- ``ARM_BALLS_SQUARE`` (``ARM_2_BALLS_SQUARE`` with the distractor): the square [-1, 1]^2 of
+  ArmBalls / Arm-2-Balls, in units of the arm's reach (docs/armballs.md); the ball can lie
+  anywhere in the square, and every episode starts from the same scene (the context is
+  constant).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+from robot.spec import ERGO_JR_REACH_M
+from sim.models.make_scene import ARENA_RADIUS, BALL_RADIUS, INNER_RADIUS, OUTER_RADIUS
+
+# Engineered forms of an object's (x, y): "wrap-safe" (r_n, cos t, sin t) and "polar"
+# (r_n, t / pi) are defined on a ring, "cartesian" (x / h, y / h) on every scene.
+RING_FORMS = ("wrap-safe", "polar")
+CARTESIAN = "cartesian"
+FORMS = (*RING_FORMS, CARTESIAN)
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A rig's scene as the learner and the metric see it.
+
+    Attributes:
+        name: for messages.
+        unit: the length unit of positions ("m", or "reach": the arm's reach is 1).
+        ball_half_width: half the side of the square [-h, h]^2 that holds every ball position
+            the rig can produce: the metric's grid (30 x 30 cells over it) and the scale of the
+            cartesian features.
+        hand_half_width: the hand's horizontal reach: the scale of the hand's features (the
+            modular engineered space's hand module) and the end-effector grid.
+        ring: (r_min, r_max), the radii between which the ball's centre lies (the polar forms'
+            normalisation), or None where it may lie anywhere in the square.
+        resets: every episode starts from the same scene (ArmBalls resets the ball, the
+            distractor and the arm before each episode): the context carries no information,
+            so goal spaces use none (context_dim 0).
+        distractor: the scene holds a distractor, a second ball the arm cannot move (the
+            engineered option ``distractor=null`` follows this).
+    """
+
+    name: str
+    unit: str
+    ball_half_width: float
+    hand_half_width: float
+    ring: tuple[float, float] | None = None
+    resets: bool = False
+    distractor: bool = False
+
+    def __post_init__(self) -> None:
+        if not (self.ball_half_width > 0 and self.hand_half_width > 0):
+            raise ValueError(f"scene {self.name}: half widths must be positive")
+        if self.ring is not None and not 0 <= self.ring[0] < self.ring[1]:
+            raise ValueError(f"scene {self.name}: ring must be 0 <= r_min < r_max, got {self.ring}")
+
+    @property
+    def forms(self) -> tuple[str, ...]:
+        """The engineered forms defined on this scene, the default first."""
+        return FORMS if self.ring is not None else (CARTESIAN,)
+
+    @property
+    def default_form(self) -> str:
+        return self.forms[0]
+
+
+#: The Ergo Jr's arena: the ball's centre between the kerb and the wall, less its radius
+#: (0.13-0.17 m), inside the wall's square (+-0.20 m); the arm's horizontal reach.
+TWIN_ARENA = Scene(
+    name="the Ergo Jr arena",
+    unit="m",
+    ball_half_width=ARENA_RADIUS,
+    hand_half_width=ERGO_JR_REACH_M,
+    ring=(INNER_RADIUS + BALL_RADIUS, OUTER_RADIUS - BALL_RADIUS),
+)
+
+#: ArmBalls: the square [-1, 1]^2 in units of the arm's reach (the links sum to 1), reset before
+#: every episode (docs/armballs.md).
+ARM_BALLS_SQUARE = Scene(
+    name="the ArmBalls square",
+    unit="reach",
+    ball_half_width=1.0,
+    hand_half_width=1.0,
+    ring=None,
+    resets=True,
+)
+#: Arm-2-Balls: the same square with the distractor.
+ARM_2_BALLS_SQUARE = replace(ARM_BALLS_SQUARE, name="the Arm-2-Balls square", distractor=True)
