@@ -77,12 +77,11 @@ MATCH_HORIZON_S = 5.0
 # answering (unpowered) and comes back costs at most this many waits of later calls before
 # its replies line up again. Guess: two calls of three attempts, and some.
 MAX_OUTSTANDING = 8
-# Each retry of a call waits this many times longer than the attempt before (20, 40, 80 ms
+# Each retry of a call waits this many times longer than the attempt before (20, 80, 320 ms
 # from the default slack), up to MAX_LATENCY_S: a reply that is late rather than lost is
-# still caught, and a servo that is gone is reported after at most the sum. TCP's
-# retransmission backoff (RFC 6298, 5.5); 4 made the tests' 30 %-loss buses wait up to 0.5 s
-# a retry for replies that were lost, not late.
-RETRY_BACKOFF = 2.0
+# still caught, and a servo that is gone is reported after at most the sum. Guess; 2 (TCP's,
+# RFC 6298 5.5) let the soak's 30 ms late replies (2 ms floor) run out every retry.
+RETRY_BACKOFF = 4.0
 # Gains of the latency estimate: the smoothed latency and its mean deviation, as TCP's
 # retransmission timer (RFC 6298: alpha 1/8, beta 1/4; slack = mean + 4 deviations).
 LATENCY_GAIN, DEVIATION_GAIN, DEVIATIONS = 1 / 8, 1 / 4, 4.0
