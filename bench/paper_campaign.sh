@@ -13,9 +13,10 @@
 # uses is the one that best explains held-out images (selection.json), a criterion that never
 # looks at the ball's position.
 #
-# Order: the engineered and spatial-autoencoder comparisons first, then the VAE baselines. The
-# distractor's runs and the VAE baselines run to 2000 episodes first and are extended to 5000
-# at the end (a run extended is the run it would have been: the twin is deterministic).
+# Order: the engineered and spatial-autoencoder comparisons first, then the VAE baselines, then
+# mge-vae and rge-online, then the exploration of each training seed's model. The distractor's
+# runs and the RGE-VAE baselines run to 2000 episodes first and are extended to 5000 at the end
+# (a run extended is the run it would have been: the twin is deterministic).
 set -euo pipefail
 OUT=${1:-runs/paper}
 JOBS=${2:-2}
@@ -75,13 +76,9 @@ DISTRACTOR_BVAE=(rge-betavae,mge-betavae --betavae "$OUT/models/betavae_distract
 campaign "$OUT/distractor" 2000 "${DISTRACTOR_BVAE[@]}"
 report "$OUT/distractor"
 
-# ---- everything to the full length, and the rest of the paper's strategies ---------------------
-campaign "$OUT/stay" "$EPISODES" rge-vae,rge-betavae "${LEARNED[@]}"
-campaign "$OUT/distractor" "$EPISODES" "${DISTRACTOR[@]}"
-campaign "$OUT/distractor" "$EPISODES" "${DISTRACTOR_BVAE[@]}"
+# ---- the paper's strategies left to run: mge-vae and rge-online, the full length ---------------
 campaign "$OUT/stay" "$EPISODES" mge-vae,rge-online "${LEARNED[@]}"
 report "$OUT/stay"
-report "$OUT/distractor"
 
 # ---- the exploration each training seed's model gives (the representation table) ---------------
 for kind in sae vae; do
@@ -94,3 +91,10 @@ for kind in sae vae; do
     wait
 done
 "${PYTHON:-.venv/bin/python}" bench/representation_table.py "$OUT"
+
+# ---- everything else to the full length --------------------------------------------------------
+campaign "$OUT/stay" "$EPISODES" rge-vae,rge-betavae "${LEARNED[@]}"
+report "$OUT/stay"
+campaign "$OUT/distractor" "$EPISODES" "${DISTRACTOR[@]}"
+campaign "$OUT/distractor" "$EPISODES" "${DISTRACTOR_BVAE[@]}"
+report "$OUT/distractor"
