@@ -305,6 +305,8 @@ class _Expected:
     nominal_s: float  # wire time and return delays up to this reply, s
     expires: float
     spare: bool = False
+    deadline: float = 0.0  # when its attempt stopped waiting for it, s (monotonic)
+    question: bytes = b""  # what it asked (instruction, and address + length for reads)
 
 
 _FORGOTTEN = _Expected(-1, -1, 0.0, 0.0, 0.0)  # what _match returns for a reply of nobody's
@@ -329,6 +331,14 @@ def _match(queue: deque[_Expected] | None, status: proto.StatusPacket) -> _Expec
     return _FORGOTTEN
 
 
+def _question(packet: proto.InstructionPacket) -> bytes:
+    """What ``packet`` asks each servo, as the servo sees it: a READ and a SYNC READ of the
+    same address and length ask the same; anything else, its instruction and parameters."""
+    if packet.instruction in (proto.Instruction.READ, proto.Instruction.SYNC_READ):
+        return b"R" + bytes(packet.params[:4])
+    return bytes([packet.instruction]) + bytes(packet.params)
+
+
 class _Replies:
     """What one exchange of call ``call`` received, matched against the requests still
     unanswered (``DynamixelBus._expected``, see ``DynamixelBus._exchange``)."""
@@ -340,7 +350,7 @@ class _Replies:
         self.got: dict[int, proto.StatusPacket] = {}
         self.corrupt = 0
         # late for an older call, it seemed: id -> (status, its latency sample as such)
-        self.set_aside: dict[int, tuple[proto.StatusPacket, float | None]] = {}
+        self.set_aside: dict[int, tuple[proto.StatusPacket, float | None, bytes]] = {}
         self.latency: float | None = None  # the latest of this call's replies, beyond nominal, s
 
     @property
@@ -359,7 +369,7 @@ class _Replies:
         and this one, the retry's, is as late as it says."""
         others = [o for o in self.bus._expected.get(sid, ()) if o.call == entry.call]
         for other in others:
-            other.spare = True
+            other.spare = True  # surplus now: awaited only up to its attempt's deadline
         if others and not entry.spare:
             return None
         return now - entry.sent_at - entry.nominal_s
@@ -400,25 +410,30 @@ class _Replies:
                         self.latency = max(sample, self.latency or 0.0)
                 continue
             if self._wanted(item):
-                # this call's (the request it was counted against lost its reply), unless its
-                # own comes too: its latency is known only then
-                self.set_aside[item.id] = (item, sample)
+                # this call's if the request it was counted against lost its reply, unless
+                # this call's own comes too: its latency is known only then
+                self.set_aside[item.id] = (item, sample, entry.question)
                 continue
             bus.counters.late_replies += 1
             if sample is not None:  # an older call's first answer from this servo, late
                 bus.latency.add(sample)
         for sid in [i for i in self.set_aside if i in self.got]:
-            _, sample = self.set_aside.pop(sid)  # the servo's own answer came: that one was late
+            _, sample, _ = self.set_aside.pop(sid)  # the servo's own answer came: that one was late
             bus.counters.late_replies += 1
             if sample is not None:
                 bus.latency.add(sample)
 
-    def take_set_aside(self) -> None:
+    def take_set_aside(self, question: bytes) -> None:
         """The attempt ends without some servos' replies: a reply of theirs set aside as
         late was this call's after all (the request it was counted against had lost its
-        reply); take it, and forget this call's request it answered."""
-        for sid, (status, _) in self.set_aside.items():
+        reply); take it, and forget this call's request it answered. Only a reply counted
+        against a request of the same ``question``: one that asked something else may be
+        that request's late answer, a wrong value for this call (the retry asks again)."""
+        for sid, (status, _, asked) in self.set_aside.items():
             if sid in self.got:
+                continue
+            if asked != question:
+                self.bus.counters.late_replies += 1
                 continue
             self.got[sid] = status
             queue = self.bus._expected.get(sid, deque())
@@ -575,14 +590,15 @@ class DynamixelBus:
         wire = packet.encode()
         replies = _Replies(self, self._call_no, expect)
         try:
+            self._settle(ser)
             replies.take(ser.read(ser.in_waiting) if ser.in_waiting else b"")
             ser.write(wire)
             ser.flush()
             sent_at = time.monotonic()
             if not expect:
                 return {}, 0
-            self._register(expect, len(wire), sent_at)
             deadline = sent_at + self.timeout_for(len(wire), list(expect.values()), attempt)
+            self._register(expect, len(wire), sent_at, deadline, _question(packet))
             last_look = False
             while not replies.complete and not last_look:
                 # once past the deadline, one last look at what already arrived: a host that
@@ -593,7 +609,7 @@ class DynamixelBus:
                 chunk = ser.read(ser.in_waiting) if last_look else ser.read(max(1, ser.in_waiting))
                 replies.take(chunk)
             if not replies.complete:
-                replies.take_set_aside()
+                replies.take_set_aside(_question(packet))
             if replies.latency is not None:
                 self.latency.add(replies.latency)
             return replies.got, replies.corrupt
@@ -601,8 +617,42 @@ class DynamixelBus:
             detail = " ".join(str(exc).split()) or type(exc).__name__
             raise PortLostError(f"Dynamixel bus {self.port} failed: {detail}") from exc
 
-    def _register(self, expect: Mapping[int, int], request_bytes: int, sent_at: float) -> None:
-        """Note the status packets a request just sent asks for (in reply order)."""
+    def _settle(self, ser: SerialLike) -> None:
+        """Before a new request: wait for the replies still due to surplus requests (the
+        retries of a call already answered, or the first attempt of one answered by its retry)
+        up to their attempts' deadlines, then forget those requests. Without it the count
+        drifts: a retry whose first attempt's reply had been lost leaves a request nobody will
+        answer, and the next call's reply is counted against it; a late first attempt leaves
+        a reply that the next call would count against its own request, one call behind for
+        good (and the latency learnt would be the calls' spacing, not the replies')."""
+        pending = _Replies(self, -1, {})
+        while True:
+            now = time.monotonic()
+            due = [
+                e.deadline
+                for q in self._expected.values()
+                for e in q
+                if e.spare and e.deadline > now
+            ]
+            if not due:
+                break
+            self.guard.check()
+            pending.take(ser.read(max(1, ser.in_waiting)))
+        for queue in self._expected.values():
+            kept = [e for e in queue if not e.spare]
+            queue.clear()
+            queue.extend(kept)
+
+    def _register(
+        self,
+        expect: Mapping[int, int],
+        request_bytes: int,
+        sent_at: float,
+        deadline: float,
+        question: bytes,
+    ) -> None:
+        """Note the status packets a request just sent asks for (in reply order), awaited
+        by its attempt until ``deadline`` (monotonic s)."""
         params: list[int] = []
         for sid, n in expect.items():
             params.append(n)
@@ -611,7 +661,10 @@ class DynamixelBus:
                 queue.popleft()  # older than any reply can be: it was lost
             nominal = self._nominal(request_bytes, params)
             horizon = max(self.latency.longest, MATCH_HORIZON_S)
-            queue.append(_Expected(self._call_no, n, sent_at, nominal, sent_at + nominal + horizon))
+            expires = sent_at + nominal + horizon
+            queue.append(
+                _Expected(self._call_no, n, sent_at, nominal, expires, False, deadline, question)
+            )
             while len(queue) > MAX_OUTSTANDING:
                 queue.popleft()  # a servo this far behind is not answering: forget the oldest
 
