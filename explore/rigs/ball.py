@@ -81,9 +81,9 @@ def rig_ball_locator(config: Any) -> tuple[BallLocator | None, str | None]:
     try:
         path = config.options.get("arena_calibration")
         if path:
-            from calibration.store import load_file
+            from calibration.store import load_arena_file
 
-            return locator_from_calibration(load_file(path, "arena")), None
+            return locator_from_calibration(load_arena_file(path)), None
         return calibrated_locator(config.rig_id), None
     except (CalibrationMissing, FileNotFoundError) as exc:
         return None, str(exc)
