@@ -77,6 +77,12 @@ MATCH_HORIZON_S = 5.0
 # answering (unpowered) and comes back costs at most this many waits of later calls before
 # its replies line up again. Guess: two calls of three attempts, and some.
 MAX_OUTSTANDING = 8
+# A surplus request (a retry of a call already answered) is awaited before the next request
+# for this many times as long as its attempt waited, then forgotten: a reply later than that
+# counts as lost. Guess: twice leaves a host descheduled for as long as the slack itself (at
+# load 5-6 on 2 cores, replies 30 ms late were read up to about that late) and costs one such
+# wait per lost reply.
+SPARE_PATIENCE = 2.0
 # Each retry of a call waits this many times longer than the attempt before (20, 80, 320 ms
 # from the default slack), up to MAX_LATENCY_S: a reply that is late rather than lost is
 # still caught, and a servo that is gone is reported after at most the sum. Guess; 2 (TCP's,
@@ -620,24 +626,27 @@ class DynamixelBus:
     def _settle(self, ser: SerialLike) -> None:
         """Before a new request: wait for the replies still due to surplus requests (the
         retries of a call already answered, or the first attempt of one answered by its retry)
-        up to their attempts' deadlines, then forget those requests. Without it the count
-        drifts: a retry whose first attempt's reply had been lost leaves a request nobody will
-        answer, and the next call's reply is counted against it; a late first attempt leaves
-        a reply that the next call would count against its own request, one call behind for
-        good (and the latency learnt would be the calls' spacing, not the replies')."""
+        up to ``SPARE_PATIENCE`` times as long as their attempts waited, take one last look at
+        what arrived, then forget those requests. Without it the count drifts: a retry whose
+        first attempt's reply had been lost leaves a request nobody will answer, and the next
+        call's reply is counted against it; a late first attempt leaves a reply that the next
+        call would count against its own request, one call behind for good (and the latency
+        learnt would be the calls' spacing, not the replies')."""
         pending = _Replies(self, -1, {})
         while True:
             now = time.monotonic()
             due = [
-                e.deadline
+                e
                 for q in self._expected.values()
                 for e in q
-                if e.spare and e.deadline > now
+                if e.spare and e.sent_at + SPARE_PATIENCE * (e.deadline - e.sent_at) > now
             ]
             if not due:
                 break
             self.guard.check()
             pending.take(ser.read(max(1, ser.in_waiting)))
+        if ser.in_waiting:  # a host late to look must not forget a reply sitting in its buffer
+            pending.take(ser.read(ser.in_waiting))
         for queue in self._expected.values():
             kept = [e for e in queue if not e.spare]
             queue.clear()
