@@ -86,10 +86,6 @@ class Backend:
         """The argv of ``arms.py`` run as the signal test's child on this backend."""
         return [self.kind, self.address or "-", "emulated" if self.emulated else "real"]
 
-    def torque(self) -> np.ndarray:
-        """Torque on per joint, shape (6,) bool, seen from outside the arm under test."""
-        raise NotImplementedError
-
     @property
     def sees_torque_while_held(self) -> bool:
         """Whether ``torque`` works while another process holds the link (an emulator)."""
@@ -119,21 +115,29 @@ class Backend:
 
     # ---- helpers every test uses -----------------------------------------------------------
     def narrow(self, arm: Arm) -> np.ndarray:
-        """Narrow the connected ``arm``'s limits to ``WINDOW_RAD`` around the pose it reads
-        now (never wider than the Ergo Jr's); returns that pose, shape (6,), rad. A pose
-        outside the limits is a rig to set up, not a pass: the test fails saying so."""
+        """Narrow the connected ``arm``'s limits to a window ``2 WINDOW_RAD`` wide holding the
+        pose it reads now, centred on it unless a joint limit is nearer than ``WINDOW_RAD``
+        (a limp arm may lie against a stop: the window then starts at the limit); never wider
+        than the Ergo Jr's. Returns that pose, shape (6,), rad. A pose further than
+        ``WINDOW_RAD`` outside the limits is a rig to set up, not a pass: the test fails."""
         q0 = arm.read().positions
-        spec = arm.spec
+        spec, w = arm.spec, arms.WINDOW_RAD
         joints = zip(spec.names, q0, spec.lower, spec.upper, strict=True)
-        outside = [f"{n} {q:.3f}" for n, q, lo, hi in joints if not lo < q < hi]
+        outside = [f"{n} {q:.3f}" for n, q, lo, hi in joints if not lo - w < q < hi + w]
         if outside:
             pytest.fail(
                 f"{self.name}: the arm is outside its joint limits ({', '.join(outside)} rad): "
                 f"put it in its rest pose first"
             )
-        arm.spec = arm.spec.with_limits(q0 - arms.WINDOW_RAD, q0 + arms.WINDOW_RAD)
+        centre = np.clip(q0, spec.lower + w, spec.upper - w)
+        arm.spec = spec.with_limits(centre - w, centre + w)
         arm.resync()
         return q0
+
+    def torque(self, arm: Arm | None = None) -> np.ndarray:
+        """Torque on per joint, shape (6,) bool, seen from outside the arm under test where
+        the backend can (an emulator, the twin), else through ``arm``'s link."""
+        raise NotImplementedError
 
     def hold(self, arm: Arm, seconds: float = arms.HOLD_S) -> np.ndarray:
         """Read the arm every tick for ``seconds``; returns the readings, shape (k, 6), rad."""
@@ -154,7 +158,7 @@ class TwinBackend(Backend):
 
         self.twin = Twin(render_size=(32, 32))
 
-    def torque(self) -> np.ndarray:
+    def torque(self, arm: Arm | None = None) -> np.ndarray:
         from sim.arm import SimArm
 
         return arms.torque_bits(SimArm(self.twin))  # reads the twin's actuators only
@@ -188,7 +192,7 @@ class DynamixelPtyBackend(Backend):
         self.server.start()
         self.address = self.server.port
 
-    def torque(self) -> np.ndarray:
+    def torque(self, arm: Arm | None = None) -> np.ndarray:
         return np.array(list(self.emulator.torque_states().values()))
 
     def unplug(self) -> None:
@@ -240,7 +244,7 @@ class CanSlcanBackend(Backend):
         self.bridge.start()
         self.address = f"slcan:{self.bridge.port}"
 
-    def torque(self) -> np.ndarray:
+    def torque(self, arm: Arm | None = None) -> np.ndarray:
         from robot.canopen.cia402 import State
 
         return np.array([s is State.OPERATION_ENABLED for s in self.drives.states().values()])
@@ -282,9 +286,11 @@ class RealBackend(Backend):
         self.name, self.kind, self.address = name, kind, address
         self.traffic_counter = "bus_calls" if kind == "dynamixel" else "can_cycles"
 
-    def torque(self) -> np.ndarray:
-        """A fresh arm's read-back (connect, read, close leaving torque as it is): the port is
-        free only while no arm of the suite holds it."""
+    def torque(self, arm: Arm | None = None) -> np.ndarray:
+        """Through ``arm``'s link while it is connected; else a fresh arm's read-back
+        (connect, read, close leaving torque as it is: the port is free)."""
+        if arm is not None and arm.is_connected:
+            return arms.torque_bits(arm)
         arm = self.arm()
         arm.connect()
         try:
