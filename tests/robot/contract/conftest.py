@@ -108,7 +108,14 @@ class Backend:
         yield
 
     def reset(self) -> None:
-        """Before each test: plugged in, no injected faults."""
+        """Before and after each test: plugged in, no injected faults."""
+
+    def _limp(self) -> None:
+        """Torque off if a test failed leaving it on (so that the next test starts limp, as
+        after every passing test): an arm of the suite connects and leaves."""
+        if self.torque().any():
+            with self.arm():
+                pass
 
     def close(self) -> None:
         """After the module."""
@@ -170,6 +177,9 @@ class TwinBackend(Backend):
     def tick(self) -> None:
         self.twin.step(arms.PERIOD_S)
 
+    def reset(self) -> None:
+        self._limp()
+
     def close(self) -> None:
         self.twin.close()
 
@@ -214,6 +224,7 @@ class DynamixelPtyBackend(Backend):
     def reset(self) -> None:
         self.emulator.faults.drop_rate = 0.0
         self.server.replug()
+        self._limp()
 
     def close(self) -> None:
         self.server.close()
@@ -266,6 +277,7 @@ class CanSlcanBackend(Backend):
     def reset(self) -> None:
         self.drives.drop_rate = 0.0
         self.bridge.replug()
+        self._limp()
 
     def close(self) -> None:
         self.bridge.close()

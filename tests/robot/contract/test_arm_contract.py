@@ -57,9 +57,8 @@ def test_connect_and_read_give_finite_joint_states_in_radians(backend) -> None:
         assert np.all(state.positions < ERGO_JR.upper + 0.1), state.positions
         assert np.isfinite(state.timestamp)
     assert second.timestamp >= first.timestamp
-    assert (
-        np.abs(second.positions - first.positions).max() < arms.HOLD_TOLERANCE_RAD
-    )  # nothing moved
+    moved = np.abs(second.positions - first.positions).max()
+    assert moved < arms.HOLD_TOLERANCE_RAD, moved  # nothing was commanded
 
 
 def test_a_command_beyond_the_limits_is_clamped_to_them(backend) -> None:
@@ -107,10 +106,13 @@ def test_a_big_jump_is_limited_to_the_max_step_per_command(backend) -> None:
 
 
 def test_torque_on_holds_the_pose(backend) -> None:
+    """Torque on holds the pose found (no jump to an old goal), then a goal reached stays."""
     with backend.arm() as arm:
-        backend.narrow(arm)
+        q0 = backend.narrow(arm)
         arm.set_torque(True)
         assert arm.torque_enabled and backend.torque(arm).all()
+        found = backend.hold(arm, seconds=0.3)
+        assert np.abs(found - q0).max() < arms.HOLD_TOLERANCE_RAD, np.abs(found - q0).max()
         centre = (arm.spec.lower + arm.spec.upper) / 2
         goal = centre + np.array([0.06, -0.06, 0.06, -0.06, 0.06, -0.06])  # inside the window
         for _ in range(10):
