@@ -17,6 +17,7 @@ arms of the child and of the parent are built in one place.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import sys
 import time
@@ -39,6 +40,13 @@ EMULATED_DYNAMIXEL_LATENCY_S = 0.05
 # (a 500 ms heartbeat and 50 ms for the TPDOs ride out a loaded machine).
 CAN_HEARTBEAT_MS = 500
 CAN_PDO_TIMEOUT_S = 0.05
+# SDO response timeout of the emulated drives, s: with bench/load.py --busy 6 beside the
+# lead's campaign (2026-12-02) one SDO of the connect's configuration went unanswered for
+# canopen's default 0.3 s at load 6-8, and for 1.0 s at load 13-15 (the drives, the SLCAN
+# bridge and the notifier threads waiting for a CPU). A bound on the emulator's answers at
+# connect, not a safety bound (the heartbeat and the TPDO wait are unchanged); a real arm
+# keeps 0.3 s.
+EMULATED_CAN_SDO_TIMEOUT_S = 2.0
 
 # Half-width of the joint window the suite commands in, around the pose found at connect, rad
 # (5.7 degrees): every goal of the suite stays inside it and inside the Ergo Jr's limits. A
@@ -75,7 +83,8 @@ def make_arm(
             port ``address``; a pty gets the emulator's slack) or ``canopen`` (``CanArm`` on
             the CAN bus ``address``, e.g. ``slcan:/dev/pts/7``, ``socketcan:can0``).
         address: the port or bus (ignored for the twin).
-        emulated: an emulator answers (the Dynamixel bus then gets the emulator's slack);
+        emulated: an emulator answers (the Dynamixel bus then gets the emulator's slack, the
+            CAN drives a longer SDO timeout);
             a real Dynamixel arm's baud rate is ``ERGO_TEST_BAUD`` (default 1 Mbit/s, the
             Poppy Ergo Jr's).
         spec: joints, limits, step bound (default ``contract_spec()``).
@@ -100,6 +109,8 @@ def make_arm(
         from robot.canopen.arm import CanArm, CanArmConfig
 
         config = CanArmConfig(heartbeat_ms=CAN_HEARTBEAT_MS, pdo_timeout_s=CAN_PDO_TIMEOUT_S)
+        if emulated:
+            config = dataclasses.replace(config, sdo_timeout_s=EMULATED_CAN_SDO_TIMEOUT_S)
         return CanArm(address, spec=spec, config=config, recovery=recovery)
     raise ValueError(f"unknown arm kind {kind!r}: expected twin, dynamixel or canopen")
 
