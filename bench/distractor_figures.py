@@ -27,7 +27,7 @@ from explore.runs.store import RunStore
 
 def interests_over_time(run: Path) -> tuple[np.ndarray, list[str]]:
     """(interest after each episode (n, modules), module names) of an MGE run."""
-    store = RunStore.open(run)
+    store = RunStore.read(run)  # a reader: cuts nothing
     strategy = strategy_for(RunConfig.from_dict(store.config, run / "run.json"))
     rows = []
     for rec in store:
@@ -99,7 +99,7 @@ def main() -> None:
                              squeeze=False)  # fmt: skip
     for ax, name in zip(axes[0], strategies, strict=True):
         run = sorted((args.campaign / name).glob("seed-*"))[0]
-        store = RunStore.open(run)
+        store = RunStore.read(run)
         ball = np.stack([r.ball for r in store])
         dis = np.stack([r.distractor for r in store])
         store.close()

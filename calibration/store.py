@@ -36,6 +36,10 @@ class CalibrationError(ValueError):
     """A calibration could not be made, read or written; the message is one line."""
 
 
+class CalibrationMissing(CalibrationError):
+    """There is no calibration file where one was looked for (never made: not a bad file)."""
+
+
 # ---- where files live --------------------------------------------------------------------
 def calibration_root(directory: str | Path | None = None) -> Path:
     """The folder holding one subfolder per rig id (see the module docstring)."""
@@ -239,9 +243,65 @@ def save(kind: str, rig_id: str, data: dict[str, Any], directory: str | Path | N
     return path
 
 
+# The arena file keeps a copy of the intrinsics it was fitted with (its homography is only
+# valid for them); a camera.json beside it that differs by more than this, relative, means
+# the camera was recalibrated after the arena. Guess: far above JSON round-off, far below
+# what a recalibration changes (fx moves by 0.1-1% between two ChArUco calibrations).
+INTRINSICS_RTOL = 1e-6
+
+
+def intrinsics_mismatch(arena: dict[str, Any], camera: dict[str, Any]) -> str | None:
+    """What differs between an arena payload's copy of the intrinsics and a camera payload
+    (camera_matrix, dist_coeffs, image_size), in words, or None when they agree."""
+    for name in ("image_size", "camera_matrix", "dist_coeffs"):
+        a, c = _flat(arena[name]), _flat(camera[name])
+        differ = len(a) != len(c)
+        for x, y in zip(a, c, strict=False):
+            differ = differ or abs(x - y) > INTRINSICS_RTOL * max(abs(x), abs(y), 1.0)
+        if differ:
+            if name == "camera_matrix":
+                return (
+                    f"camera_matrix differs (fx {a[0]:.2f} in the arena file, "
+                    f"{c[0]:.2f} in camera.json)"
+                )
+            return (
+                f"{name} differs ({arena[name]} in the arena file, {camera[name]} in camera.json)"
+            )
+    return None
+
+
+def _flat(v: Any) -> list[float]:
+    if isinstance(v, list | tuple):
+        return [x for item in v for x in _flat(item)]
+    return [float(v)]
+
+
+def load_arena_file(path: str | Path) -> dict[str, Any]:
+    """Read and validate an arena calibration, and check it against the camera calibration
+    beside it (``camera.json`` in the same folder), when there is one: an arena fitted with
+    other intrinsics than the camera's current ones puts the ball in the wrong place, so it is
+    refused in one line naming what differs and the fix."""
+    path = Path(path)
+    data = load_file(path, "arena")
+    camera_path = path.with_name("camera.json")
+    if camera_path.is_file():
+        camera = load_file(camera_path, "camera")
+        why = intrinsics_mismatch(data, camera)
+        if why is not None:
+            rig = path.parent.name
+            raise CalibrationError(
+                f"{path}: made with another camera calibration than {camera_path} ({why}): "
+                f"the camera was recalibrated after the arena; run `ergo calibrate arena "
+                f"--rig-id {rig}` again"
+            )
+    return data
+
+
 def load(kind: str, rig_id: str, directory: str | Path | None = None) -> dict[str, Any]:
-    """Read and validate a calibration's payload (the ``data`` object)."""
-    return load_file(calibration_path(kind, rig_id, directory), kind)
+    """Read and validate a calibration's payload (the ``data`` object); an arena's is also
+    checked against the rig's camera calibration (``load_arena_file``)."""
+    path = calibration_path(kind, rig_id, directory)
+    return load_arena_file(path) if kind == "arena" else load_file(path, kind)
 
 
 def load_file(path: str | Path, kind: str | None = None) -> dict[str, Any]:
@@ -250,9 +310,14 @@ def load_file(path: str | Path, kind: str | None = None) -> dict[str, Any]:
     try:
         text = path.read_text()
     except FileNotFoundError:
-        raise CalibrationError(f"no calibration file {path}") from None
+        raise CalibrationMissing(f"no calibration file {path}") from None
     except OSError as exc:
         raise CalibrationError(f"cannot read {path}: {exc.strerror}") from None
+    except UnicodeDecodeError as exc:
+        raise CalibrationError(
+            f"{path}: not a calibration file (binary data at byte {exc.start}, not UTF-8 JSON): "
+            "restore it or calibrate again"
+        ) from None
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:

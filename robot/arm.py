@@ -28,6 +28,7 @@ import numpy as np
 
 from robot.errors import BusError, LinkLost, NotConnectedError, SafetyStop
 from robot.spec import ArmSpec
+from robot.torque_guardian import EmergencyPayload
 from robot.watchdog import Watchdog
 
 log = logging.getLogger(__name__)
@@ -147,6 +148,12 @@ class Arm(ABC):
         self._resync_needed = False
         # set by ``interrupt`` (a signal): no recovery may turn torque back on
         self._interrupted = threading.Event()
+        # when the last ``interrupt`` began, and when the last torque-off command left the host
+        # (the write to the port returned, the frames went to the adapter): time.monotonic s,
+        # None before. What a test of the torque-off latency needs to tell the host's share
+        # from the servos' (or an emulator's).
+        self.interrupted_at: float | None = None
+        self.torque_off_sent_at: float | None = None
 
     # ---- lifecycle -------------------------------------------------------------------------
     @property
@@ -372,6 +379,7 @@ class Arm(ABC):
         ``robot.signals.torque_off_on_signals``), and keep it off: a link recovery in progress
         gives up instead of turning it back on, until ``clear_interrupt`` or the next
         ``connect``. Never raises (a failed torque-off is logged)."""
+        self.interrupted_at = time.monotonic()
         self._interrupted.set()
         self._emergency_torque_off()
 
@@ -385,6 +393,17 @@ class Arm(ABC):
         except Exception as exc:
             log.error("emergency torque off failed: %s", exc)
         self._torque = False
+
+    def emergency_payload(self) -> EmergencyPayload | None:
+        """The shared bytes that cut this arm's torque when written to its port by another
+        process (``robot.torque_guardian``), kept current by the backend; None (the default)
+        where the bus is not a serial port that can be opened by path."""
+        return None
+
+    def _torque_off_sent(self) -> None:
+        """Backends call this as soon as a torque-off command has left the host (before any
+        confirmation): stamps ``torque_off_sent_at``."""
+        self.torque_off_sent_at = time.monotonic()
 
     def _require(self) -> None:
         if not self._connected:

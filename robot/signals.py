@@ -1,7 +1,8 @@
 """Torque off on SIGINT/SIGTERM: ``torque_off_on_signals`` turns an arm's torque off before the
 usual exception unwinds, so a Ctrl-C never leaves a stiff arm behind; a watcher thread does it
-without waiting for the main thread's C call in progress. It only uses the arm's public
-``interrupt`` and ``clear_interrupt``.
+without waiting for the main thread's C call in progress, and on a serial bus a guardian
+process (``robot.torque_guardian``) writes the torque-off without waiting for the GIL. It only
+uses the arm's public ``interrupt``, ``clear_interrupt`` and ``emergency_payload``.
 """
 
 from __future__ import annotations
@@ -14,6 +15,8 @@ import socket
 import threading
 from collections.abc import Iterator
 from typing import TYPE_CHECKING
+
+from robot.torque_guardian import Guardian
 
 if TYPE_CHECKING:
     from robot.arm import Arm
@@ -49,6 +52,19 @@ def _raise_priority() -> bool:
     return True
 
 
+def _start_guardian(arm: Arm, forward_fd: int) -> Guardian | None:
+    """The arm's torque-off guardian process (``robot.torque_guardian``), when its bus can
+    have one; None otherwise, or when it cannot start (then the watcher thread alone acts)."""
+    payload = arm.emergency_payload()
+    if payload is None:
+        return None
+    try:
+        return Guardian.start(payload, forward_fd, WATCHER_RT_PRIORITY)
+    except OSError as exc:
+        log.warning("no torque-off guardian for %s (%s): the watcher thread alone acts", arm, exc)
+        return None
+
+
 @contextlib.contextmanager
 def torque_off_on_signals(arm: Arm) -> Iterator[None]:
     """Within the block, SIGINT and SIGTERM turn the arm's torque off at once, then raise
@@ -64,6 +80,12 @@ def torque_off_on_signals(arm: Arm) -> Iterator[None]:
     torque off; the other only raises (main thread) or returns (watcher). The arm is also
     marked interrupted, so no link recovery in progress turns torque back on. The watcher
     asks for a real-time priority (``WATCHER_RT_PRIORITY``) where the system allows it.
+
+    The watcher still needs the GIL, which a thread waiting for a CPU on a loaded machine may
+    hold for hundreds of ms: where the arm's bus is a serial port it can write to by path
+    (``Arm.emergency_payload``: Dynamixel, SLCAN), a guardian process writes the torque-off
+    bytes first, without the GIL (``robot.torque_guardian``), then wakes the watcher, which
+    confirms it as usual.
 
     Only installs in the main thread (Python's rule); elsewhere it is a no-op. While inside,
     this replaces any other wakeup fd of the process (e.g. an asyncio loop's), restored after.
@@ -94,6 +116,7 @@ def torque_off_on_signals(arm: Arm) -> Iterator[None]:
     reader, writer = socket.socketpair()
     writer.setblocking(False)  # set_wakeup_fd needs a non-blocking fd
     stop = threading.Event()
+    guardian = _start_guardian(arm, writer.fileno())
 
     def watch() -> None:
         _raise_priority()
@@ -109,7 +132,8 @@ def torque_off_on_signals(arm: Arm) -> Iterator[None]:
                     cut(signum, "watcher thread")
 
     previous = {s: signal.signal(s, handler) for s in STOP_SIGNALS}
-    previous_fd = signal.set_wakeup_fd(writer.fileno(), warn_on_full_buffer=False)
+    wakeup = guardian.wakeup_fd if guardian is not None else writer.fileno()
+    previous_fd = signal.set_wakeup_fd(wakeup, warn_on_full_buffer=False)
     watcher = threading.Thread(target=watch, name="torque-off-on-signals", daemon=True)
     watcher.start()
     try:
@@ -127,6 +151,8 @@ def torque_off_on_signals(arm: Arm) -> Iterator[None]:
         signal.set_wakeup_fd(previous_fd)
         for s, h in previous.items():
             signal.signal(s, h)
+        if guardian is not None:
+            guardian.stop()  # its write, if any, is stamped in the payload's ``sent_at``
         stop.set()
         with contextlib.suppress(OSError):
             writer.send(b"\0")

@@ -1,6 +1,6 @@
-"""``ergo find-cameras`` (device indices that open, with their resolution), ``ergo track``
-(the ball tracker on any camera source, one line per frame) and ``ergo vae train`` (the learned
-goal space's representation, on a dataset of outcome images).
+"""``ergo find-cameras`` (device indices that open, with their resolution) and ``ergo vae
+train`` (the learned goal space's representation, on a dataset of outcome images). ``ergo
+track`` is in ``calibration.cli``: it reads the arena calibration file.
 
 Imports nothing heavy at module level: OpenCV and torch are imported inside the commands.
 """
@@ -8,7 +8,6 @@ Imports nothing heavy at module level: OpenCV and torch are imported inside the 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -20,33 +19,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     find = sub.add_parser("find-cameras", help="list camera device indices that open")
     find.add_argument("--max-index", type=int, default=MAX_INDEX, help="probe 0..N-1")
     find.set_defaults(func=_find_cameras)
-
-    track = sub.add_parser("track", help="track the ball, one line per frame")
-    track.add_argument(
-        "--camera",
-        required=True,
-        help="device index, video file, folder of images, or stream URL (127.0.0.1 only)",
-    )
-    track.add_argument("--frames", type=int, default=None, help="stop after N frames")
-    track.add_argument(
-        "--arena",
-        type=Path,
-        default=None,
-        help="arena calibration file (from `ergo calibrate arena`): positions in metres",
-    )
-    track.add_argument(
-        "--hsv",
-        action="append",
-        default=None,
-        metavar="H,S,V:H,S,V",
-        help="ball colour range lower:upper (repeat for red); default: the arena file's or the "
-        "original rig's",
-    )
-    track.add_argument("--width", type=int, default=None, help="requested width, px")
-    track.add_argument("--height", type=int, default=None, help="requested height, px")
-    track.add_argument("--fps", type=float, default=None, help="requested frame rate")
-    track.add_argument("--fourcc", default=None, help="requested pixel format, e.g. MJPG")
-    track.set_defaults(func=_track)
 
     v = sub.add_parser("vae", help="representation learning (VAE)")
     vsub = v.add_subparsers(dest="vae_command", metavar="COMMAND")
@@ -140,18 +112,6 @@ def _error(message: str) -> int:
     return 2
 
 
-def _read_arena_data(path: Path) -> dict:
-    """The ``data`` object of an arena calibration file (``calibration.store`` writes and
-    validates the file; ``vision`` imports no other package, so only that object is read)."""
-    try:
-        data = json.loads(path.read_text())["data"]
-    except OSError as exc:
-        raise ValueError(str(exc)) from None
-    if not isinstance(data, dict):
-        raise TypeError(f"its data is a {type(data).__name__}, not an object")
-    return data
-
-
 def _find_cameras(args: argparse.Namespace) -> int:
     import cv2
 
@@ -175,54 +135,6 @@ def _find_cameras(args: argparse.Namespace) -> int:
         found += 1
     if not found:
         print(f"no camera among device indices 0..{args.max_index - 1}")
-    return 0
-
-
-def _track(args: argparse.Namespace) -> int:
-    import dataclasses
-
-    from vision.camera import CameraError, make_camera
-    from vision.rectify import ArenaModel
-    from vision.tracker import BallTracker, HSVRange, TrackerConfig, tracker_config_from_arena
-
-    arena, config = None, TrackerConfig()
-    if args.arena is not None:
-        try:
-            data = _read_arena_data(args.arena)
-            arena = ArenaModel.from_dict(data)
-            config = tracker_config_from_arena(data)
-        except (ValueError, KeyError, TypeError) as exc:
-            return _error(f"cannot read arena calibration {args.arena}: {exc}")
-    if args.hsv:
-        try:
-            ranges = tuple(HSVRange.parse(h) for h in args.hsv)
-        except ValueError as exc:
-            return _error(f"--hsv: {exc}")
-        config = dataclasses.replace(config, ranges=ranges)
-    tracker = BallTracker(config, arena)
-    try:
-        camera = make_camera(args.camera, args.width, args.height, args.fps, args.fourcc)
-    except CameraError as exc:
-        return _error(str(exc))
-    n = 0
-    try:
-        with camera:
-            for warning in getattr(camera, "settings_warnings", []):
-                print(f"warning: camera ignored a setting: {warning}", file=sys.stderr)
-            while args.frames is None or n < args.frames:
-                try:
-                    frame = camera.read()
-                except CameraError as exc:
-                    if n and "end of replay" in str(exc):
-                        break
-                    raise
-                obs = tracker.track(frame.image)
-                print(f"frame {n} t={frame.timestamp:.3f}s: {obs.describe()}", flush=True)
-                n += 1
-    except CameraError as exc:
-        return _error(str(exc))
-    except KeyboardInterrupt:
-        pass
     return 0
 
 

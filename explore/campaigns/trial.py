@@ -9,21 +9,19 @@ host with that arm advertises, with capacity 1 so that one trial at a time uses 
 the worker, the rig's arena calibration is found by rig id (calibration/store.py).
 
 Files a trial adds to its run folder: ``trial.json`` (host, pid, start and end times, unix
-seconds) and ``trial.lock`` (an exclusive ``flock`` held while the trial runs, so two
-processes never append to one history).
+seconds). Like every writer, a trial holds the run's ``writer.lock`` while it runs
+(``explore/runs/lock.py``), so two processes never append to one history.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import fcntl
 import json
+import logging
 import os
 import socket
 import sys
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -31,9 +29,10 @@ from typing import Any
 from explore.rigs import rig as rigs
 from explore.rigs.rig import RigConfig
 
+log = logging.getLogger(__name__)
+
 CAMPAIGN_FILE = "campaign.json"
 TRIAL_FILE = "trial.json"
-LOCK_FILE = "trial.lock"
 
 RIG_RESOURCE_PREFIX = "rig:"  # Ray custom resource of a physical rig: "rig:<rig_id>"
 
@@ -164,24 +163,6 @@ def _check_campaign(trial: Trial) -> None:
         )
 
 
-@contextmanager
-def _trial_lock(run_dir: Path) -> Iterator[None]:
-    """Hold ``RUN/trial.lock`` exclusively, or fail at once naming who holds it."""
-    fd = os.open(run_dir / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = read_json(run_dir / TRIAL_FILE)
-            raise CampaignError(
-                f"{run_dir} is being run by another process (host {holder.get('host')}, "
-                f"pid {holder.get('pid')})"
-            ) from None
-        yield
-    finally:
-        os.close(fd)  # releases the lock
-
-
 def read_json(path: Path) -> dict[str, Any]:
     try:
         data = json.loads(path.read_text())
@@ -218,11 +199,12 @@ def run_trial(trial: Trial, progress: bool = False) -> TrialResult:
         run = open_run(
             path, trial_config(trial), mode="auto", episodes=trial.episodes,
             rig_options=trial.rig.get("options", {}),  # ports change between sessions
-            hold=_trial_lock,
         )  # fmt: skip
     except RunStoreError as exc:
         raise CampaignError(str(exc)) from exc
     with run:  # the history closes before the lock goes
+        for note in run.notes():
+            log.warning("%s", note)
         info = {"host": host, "pid": pid, "started": started, "resumed_from": run.resumed_from}
         atomic_write_text(path / TRIAL_FILE, json.dumps(info))
         bar = _Bar(trial, run.resumed_from) if progress else None

@@ -21,6 +21,7 @@ COMMAND_MODULES = LazyTable(
         "calibration": "calibration.cli:register",
         "experiment": "explore.cli.experiment:register",
         "report": "explore.cli.report:register",
+        "runs": "explore.cli.runs:register",
         "export": "explore.cli.export:register",
     },
 )

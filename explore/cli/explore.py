@@ -154,10 +154,9 @@ def _refuse_changes(args: argparse.Namespace) -> Any:
 
 def run_explore(args: argparse.Namespace) -> int:
     from explore.learner.strategies import StrategyError
-    from explore.report.figures import coverage_curve
     from explore.rigs.rig import RigError
     from explore.runs.open_run import open_run
-    from explore.runs.store import RunStore, RunStoreError
+    from explore.runs.store import RunStoreError
     from robot.errors import RobotError
 
     if args.episodes is not None and args.episodes < 1:
@@ -166,29 +165,28 @@ def run_explore(args: argparse.Namespace) -> int:
         raise CliError("give either --resume RUN or --out DIR, not both")
     if args.resume_or_new and not args.out:
         raise CliError("--resume-or-new needs --out DIR")
-    resume_path = args.resume
-    if args.resume_or_new and RunStore.is_run(args.out):
-        resume_path = args.out
     try:
-        if resume_path is not None:
+        if args.resume is not None:
             run = open_run(
-                resume_path, mode="resume", episodes=args.episodes,
+                args.resume, mode="resume", episodes=args.episodes,
                 rig_options=rig_options(args),  # ports change between sessions
                 check_resumed=_refuse_changes(args),
             )  # fmt: skip
-            if run.store.truncated_bytes:
-                print(
-                    f"dropped a torn last record ({run.store.truncated_bytes} bytes)",
-                    file=sys.stderr,
-                )
         else:
             config = _new_config(args)  # checked by open_run before anything is made
             out = args.out or Path("runs") / (
                 f"{config.strategy.name}-s{config.seed}-{time.strftime('%Y%m%d-%H%M%S')}"
             )
-            run = open_run(out, config, mode="new")
+            # --resume-or-new: new or resumed is decided under the run's lock
+            run = open_run(
+                out, config, mode="auto" if args.resume_or_new else "new",
+                episodes=args.episodes, rig_options=rig_options(args),
+                check_resumed=_refuse_changes(args),
+            )  # fmt: skip
     except (RunStoreError, RigError, StrategyError) as exc:
         raise CliError(str(exc)) from exc
+    for line in run.notes():
+        print(line, file=sys.stderr)
 
     from explore.cli.rerun_flags import make_recorder
 
@@ -212,25 +210,77 @@ def run_explore(args: argparse.Namespace) -> int:
             recorder.on_progress(p)
 
     explorer = run.explorer(on_episode, recorder.on_record if recorder else None)
+    new_run = run.created
+    closer = _Closer(recorder, run, bar)
     try:
         explorer.run(run.config.episodes)
-    except RobotError as exc:
-        raise CliError(
-            f"{exc}; run paused after {len(store)} episodes: resume with "
-            f"ergo explore --resume {store.path}"
-        ) from exc
-    finally:
-        if recorder:
-            recorder.close()
-        run.close()
-        if bar:
-            bar.close()
-        if (store.path / "metrics.csv").exists() and len(store):
-            coverage_curve(store.path)
+    except BaseException as exc:
+        unsaved = explorer.unsaved + closer.close()
+        if new_run and not len(store):
+            # a new run that stored nothing (a rig that did not connect): the same command
+            # can then run again
+            done = _discard(run)
+            if isinstance(exc, RobotError | RunStoreError):
+                raise CliError(f"{exc}; nothing stored: {done}") from exc
+            raise
+        unsaved += _coverage_curve(store.path, len(store))
+        if isinstance(exc, RobotError | RunStoreError):
+            also = f" (not written either: {'; '.join(unsaved)})" if unsaved else ""
+            raise CliError(
+                f"{exc}; run paused after {len(store)} episodes: resume with "
+                f"ergo explore --resume {store.path}{also}"
+            ) from exc
+        raise
+    for line in closer.close() + _coverage_curve(store.path, len(store)):
+        print(f"not written: {line}", file=sys.stderr)
     last = explorer.metrics.rows[-1] if explorer.metrics.rows else None
     cells = last["ball_cells"] if last else 0
     print(f"{store.path}: {len(store)} episodes, {cells} ball cells reached")
     return 0
+
+
+def _discard(run: Any) -> str:
+    """Remove what a new run that stored nothing created, so that the same command can run
+    again; returns what was done, in words."""
+    from explore.runs.open_run import discard_empty_run
+
+    try:
+        discard_empty_run(run.path)
+    except OSError as exc:
+        return f"{run.path} could not be removed ({exc})"
+    return f"{run.path} removed (the same command can be run again)"
+
+
+class _Closer:
+    """Closes the recorder, the run and the bar, once; a failure to close one (a full disk
+    under the recorder's writer) does not keep the others open."""
+
+    def __init__(self, *things: Any) -> None:
+        self.things = [t for t in things if t is not None]
+
+    def close(self) -> list[str]:
+        """Close them all; returns what failed, in words."""
+        things, self.things = self.things, []
+        failed = []
+        for thing in things:
+            try:
+                thing.close()
+            except Exception as exc:
+                failed.append(f"the {type(thing).__name__.strip('_').lower()} ({exc})")
+        return failed
+
+
+def _coverage_curve(run: Path, episodes: int) -> list[str]:
+    """Draw ``RUN/coverage.png`` when the run has episodes; returns what failed, in words."""
+    from explore.report.figures import coverage_curve
+
+    if not episodes or not (run / "metrics.csv").exists():
+        return []
+    try:
+        coverage_curve(run)
+    except OSError as exc:  # a full disk: the figure is derived, the run is kept
+        return [f"coverage.png ({exc.strerror or exc})"]
+    return []
 
 
 class _Bar:

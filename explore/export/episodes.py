@@ -28,14 +28,9 @@ import numpy as np
 
 from explore.learner.strategies import StrategyError, make_strategy
 from explore.runs.config import RunConfig
+from explore.runs.lock import describe_holder, holder_of
 from explore.runs.record import EpisodeRecord
-from explore.runs.store import (
-    RunStoreError,
-    frames_path,
-    is_being_written,
-    read_frames,
-    read_history,
-)
+from explore.runs.store import RunStoreError, frames_path, read_frames, read_history
 from robot.spec import ergo_jr_spec
 
 # The goal space a run without one (RPE) is described in: rge-efr's, default options.
@@ -108,10 +103,11 @@ def open_source(path: str | Path) -> RunSource:
     """A run folder checked for export: an ``ExportError`` (one line) for a folder that is not
     a run, a run being written, a corrupt history or a run with no episode."""
     path = Path(path)
-    if is_being_written(path):
+    holder = holder_of(path)
+    if holder is not None:
         raise ExportError(
-            f"{path} is being written (a process holds its writer.lock): export it once that "
-            "ergo explore or campaign trial has stopped"
+            f"{path} is being written ({describe_holder(holder)}): export it once that ergo "
+            "explore or campaign trial has stopped"
         )
     try:
         history = read_history(path)

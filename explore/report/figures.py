@@ -285,6 +285,13 @@ def coverage_curve(run: Path, out: Path | None = None) -> Path:
     ax.grid(alpha=0.3)
     ax.legend()
     fig.tight_layout()
-    fig.savefig(out)
-    plt.close(fig)
+    tmp = out.with_name(out.name + ".tmp.png")
+    try:
+        fig.savefig(tmp)
+        tmp.replace(out)  # a full disk leaves the previous figure, not half a new one
+    except OSError:
+        tmp.unlink(missing_ok=True)
+        raise
+    finally:
+        plt.close(fig)
     return out

@@ -114,7 +114,7 @@ def diagnose(
     episode; ``pair_space`` and ``pair_arena`` (p,): goal-space distance (over the median
     one) and arena distance (m) of random pairs of outcomes.
     """
-    recs = RunStore.open(run).records
+    recs = RunStore.read(run).records
     ctx, out, modules = goal_space_vectors(run, recs, vae_dir)
     moved = np.array([r.ball_moved for r in recs])
     balls = np.array([np.asarray(r.ball, dtype=float)[:2] for r in recs])

@@ -42,6 +42,7 @@ Entity paths (units: metres, radians, seconds; shapes are per log call):
 from __future__ import annotations
 
 import logging
+import os
 import re
 import uuid
 from collections.abc import Callable, Iterable
@@ -63,6 +64,13 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 APP_ID = "ergo-explore"
+# rerun's own logger reports a file sink's write failure (a full disk) from its writer thread
+# in several lines; ``close`` then raises it once, and ``ergo explore`` reports that in its own
+# one line. So, unless RUST_LOG says otherwise, those loggers are off (the rest at "warn").
+QUIET_FILE_SINK = (
+    "warn,re_log_encoding::rrd::file_sink=off,re_log_encoding::rrd::encoder=off,"
+    "re_sdk::recording_stream=off"
+)
 RECORDING_NAME = "recording"  # RUN/recording.rrd, then RUN/recording-2.rrd, ... on resumes
 JOINT_NAMES = ERGO_JR_JOINTS
 BATCH_FLUSH_S = 1.0  # latency of a live viewer, s
@@ -183,6 +191,7 @@ class Recorder:
         blueprint: bool = True,
         scene: Scene = TWIN_ARENA,
     ) -> None:
+        os.environ.setdefault("RUST_LOG", QUIET_FILE_SINK)
         import rerun as rr
 
         if stride < 1:

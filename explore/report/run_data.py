@@ -13,6 +13,7 @@ import numpy as np
 from explore.learner.goal_outcomes import goal_outcome_of
 from explore.learner.scene import TWIN_ARENA, Scene
 from explore.report.recorder import recording_paths
+from explore.runs.config import RunConfig
 from explore.runs.metrics import MetricsLog
 from explore.runs.store import RunStore, iter_history
 
@@ -101,6 +102,7 @@ def load_run(path: Path, goal_outcomes: bool = True) -> RunData:
     """
     path = Path(path)
     meta = RunStore.read_meta(path)
+    RunConfig.from_dict(meta["config"], where=path / "run.json")  # one line naming a bad field
     scene = run_scene(meta["config"])
     metrics = MetricsLog(path / "metrics.csv", scene)  # never written here
     cols: dict[str, list[Any]] = {k: [] for k in ("ball", "context_ball", "ee_final", "goals")}

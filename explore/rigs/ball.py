@@ -75,14 +75,17 @@ def rig_ball_locator(config: Any) -> tuple[BallLocator | None, str | None]:
     file named by the rig option ``arena_calibration``), and None; without one, (None, why):
     ball positions are then recorded as unknown (NaN), never guessed, and ``open_run`` warns
     once, or refuses a run whose strategy needs the ball."""
-    from calibration.store import CalibrationError
+    from calibration.store import CalibrationError, CalibrationMissing
+    from explore.rigs.rig import RigError
 
     try:
         path = config.options.get("arena_calibration")
         if path:
-            from calibration.store import load_file
+            from calibration.store import load_arena_file
 
-            return locator_from_calibration(load_file(path, "arena")), None
+            return locator_from_calibration(load_arena_file(path)), None
         return calibrated_locator(config.rig_id), None
-    except (CalibrationError, FileNotFoundError) as exc:
+    except (CalibrationMissing, FileNotFoundError) as exc:
         return None, str(exc)
+    except CalibrationError as exc:  # a file that is there but wrong: never run without it
+        raise RigError(f"{exc} (a damaged or foreign arena calibration is not ignored)") from exc

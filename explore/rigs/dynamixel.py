@@ -27,8 +27,9 @@ class Options(HardwareOptions):
             ``ergo twin serve --bus dynamixel`` (required).
         baud: bit/s (default 1_000_000, the Ergo Jr's XL-320 setting).
         model: servo model (default "XL-320").
-        latency_s: slack added to every bus timeout, s (default 0.020, see
-            ``robot.dynamixel.bus.DEFAULT_LATENCY_S``; more for an emulator on a loaded machine).
+        latency_s: the least slack added to every bus timeout, s (default 0.020, see
+            ``robot.dynamixel.bus.DEFAULT_LATENCY_S``); the bus raises it to the reply latency
+            it measures, up to ``robot.dynamixel.bus.MAX_LATENCY_S``.
         retries: retries per bus call after a lost or corrupt reply (default 2).
     """
 

@@ -114,11 +114,19 @@ class Rig:
         return rig_scene(self.config)
 
     def connect(self) -> None:
-        if self.camera is not None:
-            self.camera.connect()
+        """The arm first (a port that is missing or busy is the error to name, before any
+        camera thread runs), then the camera, then torque on. A rig may lack any of them."""
         if self.arm is not None:
             self.arm.connect()
-            self.arm.set_torque(True)
+        try:
+            if self.camera is not None:
+                self.camera.connect()
+            if self.arm is not None:
+                self.arm.set_torque(True)
+        except BaseException:
+            if self.arm is not None:
+                self.arm.disconnect(torque_off=True)
+            raise
         if self.clock is not None:
             self.clock.restart()
 

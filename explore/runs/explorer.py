@@ -17,9 +17,9 @@ from explore.rigs.episodes import EpisodePlayer
 from explore.rigs.rig import Rig
 from explore.runs.config import EpisodeConfig
 from explore.runs.episode import EpisodeRunner
-from explore.runs.metrics import MetricsLog
+from explore.runs.metrics import METRICS_FILE, MetricsLog
 from explore.runs.record import EpisodeRecord
-from explore.runs.store import RunStore
+from explore.runs.store import RunStore, RunStoreError
 from robot.signals import torque_off_on_signals
 
 log = logging.getLogger(__name__)
@@ -45,8 +45,12 @@ def add_fault_counts(run_path: Path, counts: dict[str, float]) -> dict[str, floa
     for k, v in counts.items():
         totals[k] = round(totals.get(k, 0.0) + float(v), 3)
     tmp = path.with_name(FAULTS_FILE + ".tmp")
-    tmp.write_text(json.dumps({"sessions": sessions + 1, "totals": totals}, indent=1))
-    tmp.replace(path)
+    try:
+        tmp.write_text(json.dumps({"sessions": sessions + 1, "totals": totals}, indent=1))
+        tmp.replace(path)
+    except OSError:
+        tmp.unlink(missing_ok=True)  # a full disk: no half-written file left behind
+        raise
     return totals
 
 
@@ -105,16 +109,20 @@ class Explorer:
             if rig.player is not None
             else EpisodeRunner(rig, config=episode_config)
         )
-        self.metrics = MetricsLog(store.path / "metrics.csv", rig.scene)
+        self.metrics = MetricsLog(store.path / METRICS_FILE, rig.scene)
         self.on_episode = on_episode
         self.on_record = on_record
+        self.unsaved: list[str] = []  # derived files this session could not write, and why
 
     def _replay(self) -> None:
         """Rebuild strategy and metrics from the stored history (after a resume)."""
         for rec in self.store:
             self.strategy.update(rec)
             self.metrics.update(rec)
-        self.metrics.rewrite()
+        try:
+            self.metrics.rewrite()
+        except OSError as exc:
+            raise RunStoreError(f"cannot write {self.metrics.path}: {exc.strerror or exc}") from exc
 
     def run(self, n_episodes: int) -> None:
         """Explore until the store holds ``n_episodes`` episodes."""
@@ -125,18 +133,24 @@ class Explorer:
             return
         try:
             self._explore(done, n_episodes)
-        finally:
-            self._save_fault_counts()
+        except BaseException:
+            self._save_fault_counts(failing=True)
+            raise
+        self._save_fault_counts(failing=False)
 
-    def _save_fault_counts(self) -> None:
+    def _save_fault_counts(self, failing: bool) -> None:
         """``RUN/faults.json`` += this session's counters; never masks the run's own error.
-        A rig without an arm has no counters (and no file)."""
+        A failure is logged, or only noted in ``unsaved`` while the run is failing anyway
+        (a full disk: the caller reports it with the run's own error). A rig without an arm
+        has no counters (and no file)."""
         if self.rig.arm is None:
             return
         try:
             add_fault_counts(self.store.path, self.rig.arm.fault_counts())
         except Exception as exc:  # counters are a report: losing them must not hide a fault
-            log.warning("could not save the fault counters to %s: %s", self.store.path, exc)
+            self.unsaved.append(f"{FAULTS_FILE} ({exc})")
+            if not failing:
+                log.warning("could not save the fault counters to %s: %s", self.store.path, exc)
 
     def _explore(self, done: int, n_episodes: int) -> None:
         arm = self.rig.arm
@@ -171,7 +185,13 @@ class Explorer:
         self.store.append(rec)
         self.strategy.update(rec)
         row = self.metrics.update(rec)
-        self.metrics.append_last()
+        try:
+            self.metrics.append_last()
+        except OSError as exc:  # a full disk: the episode is stored, the metrics are derived
+            raise RunStoreError(
+                f"cannot write {self.metrics.path}: {exc.strerror or exc}; episode {k} is "
+                "stored (the metrics are rebuilt on resume)"
+            ) from exc
         if self.on_record is not None:
             self.on_record(rec)
         return row

@@ -64,6 +64,7 @@ class CellCounter:
         return int(self.grid.sum())
 
 
+METRICS_FILE = "metrics.csv"  # in the run folder
 METRIC_COLUMNS = ("episode", "ball_cells", "ee_cells", "ball_moved", "kind", "settle_s")
 
 
@@ -116,6 +117,19 @@ def read_metrics(path: Path) -> dict[str, np.ndarray]:
         vals = [r[col] for r in rows]
         out[col] = np.array(vals) if col == "kind" else np.array(vals, dtype=float)
     return out
+
+
+def recorded_episodes(run: Path) -> int | None:
+    """Episodes ``RUN/metrics.csv`` says the run had stored (its last episode + 1), or None
+    without a readable file. The writer appends a row after each episode it stored, and
+    rewrites the file from the history on resume, so more than the history holds means the
+    history lost some (cut short, emptied, deleted)."""
+    try:
+        with open(Path(run) / METRICS_FILE, newline="") as f:
+            episodes = [int(r["episode"]) for r in csv.DictReader(f)]
+    except (OSError, ValueError, KeyError, TypeError, csv.Error):
+        return None
+    return max(episodes) + 1 if episodes else 0
 
 
 def checkpoints(span: int = CHECKPOINT_SPAN, count: int = CHECKPOINT_COUNT) -> np.ndarray:

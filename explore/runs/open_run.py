@@ -6,16 +6,19 @@ trials, tests, benchmarks).
 
 ``open_run`` reads the config of a run already in ``path`` (``run.json``, checked) or checks
 the one given for a new run, builds the rig and the strategy *before* a new folder is made (a
-bad name or option leaves nothing behind), then creates or reopens the folder (verifying its
-history and cutting a torn last record). A caller that needs a special rig or strategy (a
-fault-injecting arm, an emulator) passes it; everything else comes from the config.
+bad name or option leaves nothing behind), then takes the folder's writer lock (one writer
+at a time: a second is refused in one line naming the first's pid) and creates or reopens
+the folder (verifying its history and cutting a torn last record). A caller that needs a
+special rig or strategy (a fault-injecting arm, an emulator) passes it; everything else
+comes from the config.
 """
 
 from __future__ import annotations
 
+import functools
 import logging
 from collections.abc import Callable
-from contextlib import AbstractContextManager, ExitStack
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -24,8 +27,10 @@ from explore.learner.strategies import Strategy, make_strategy
 from explore.rigs.rig import Rig, RigError, is_physical, make_rig
 from explore.runs.config import RunConfig
 from explore.runs.explorer import Explorer, Progress
+from explore.runs.lock import LOCK_FILE, RunLock, remove_lock_if_free, run_lock
+from explore.runs.metrics import recorded_episodes
 from explore.runs.record import EpisodeRecord
-from explore.runs.store import RunStore, RunStoreError, writer_lock
+from explore.runs.store import RunStore, RunStoreError, make_run_dir
 
 Mode = Literal["new", "resume", "auto"]
 log = logging.getLogger(__name__)
@@ -41,6 +46,11 @@ class OpenRun:
         rig: the rig, built but not connected (``explore`` connects it).
         strategy: the strategy, not yet replayed (``explore`` replays the history first).
         resumed_from: episodes the folder held when it was opened (0 for a new run).
+        lock: the folder's writer lock, held until ``close`` (``took_over`` says whether a
+            writer that died without releasing it held it before).
+        created: whether this open made the folder's run (not a resume).
+        missing: episodes the run had stored (``metrics.csv`` says) that its history no
+            longer holds (cut short, emptied or deleted): they will be run again.
     """
 
     config: RunConfig
@@ -48,6 +58,9 @@ class OpenRun:
     rig: Rig
     strategy: Strategy
     resumed_from: int
+    lock: RunLock | None = None
+    created: bool = False
+    missing: int = 0
     _held: ExitStack = field(default_factory=ExitStack, repr=False)
 
     @property
@@ -76,8 +89,28 @@ class OpenRun:
         explorer.run(self.config.episodes)
         return explorer
 
+    def notes(self) -> list[str]:
+        """What opening the run found worth saying, one line each: a torn last record cut, a
+        history that lost episodes, a dead writer's lock taken over."""
+        out = []
+        if self.store.truncated_bytes:
+            out.append(
+                f"{self.path}: dropped a torn last record ({self.store.truncated_bytes} bytes)"
+            )
+        if self.missing:
+            out.append(
+                f"{self.path}: the history holds {len(self.store)} episodes but the run had "
+                f"stored {len(self.store) + self.missing} (metrics.csv): {self.missing} "
+                "episode(s) missing (history.bin cut short, emptied or deleted); they will be "
+                "run again"
+            )
+        takeover = self.lock.describe_takeover() if self.lock is not None else None
+        if takeover:
+            out.append(takeover)
+        return out
+
     def close(self) -> None:
-        """Close the history (and release what ``hold`` took)."""
+        """Close the history, then release the writer lock."""
         self._held.close()
 
     def __enter__(self) -> OpenRun:
@@ -116,43 +149,43 @@ def open_run(
     check_resumed: Callable[[RunConfig], None] | None = None,
     rig: Rig | None = None,
     strategy: Strategy | None = None,
-    hold: Callable[[Path], AbstractContextManager[Any]] | None = None,
 ) -> OpenRun:
-    """Create the run ``config`` describes in ``path``, or reopen the one there.
+    """Create the run ``config`` describes in ``path``, or reopen the one there, holding the
+    folder's writer lock (``explore/runs/lock.py``) until ``close``.
 
     Args:
         path: the run folder.
         config: a new run's config (checked here); needed unless the folder holds a run.
         mode: ``"new"`` (the folder must not hold anything), ``"resume"`` (it must hold a run)
-            or ``"auto"`` (resume if it holds a run, else create).
+            or ``"auto"`` (resume if it holds a run, else create). Which one it is is decided
+            under the lock, so two ``auto`` writers never both create.
         episodes, rig_options: on resume, override the run's episode count and add options to
             its rig's (ports change between sessions); a new run takes them from ``config``.
         check_resumed: called with a resumed run's config before anything is built (a CLI
             refusing flags that would change it).
         rig, strategy: use these instead of building them from the config.
-        hold: a context manager factory entered with the folder before an existing run is
-            opened, or just after a new one is made (an exclusive lock), left on ``close``.
-            ``RUN/writer.lock`` is always held the same way (``store.writer_lock``): a second
-            writer of the same run is refused in one line.
 
     Raises:
-        RunStoreError (a ``RunConfigError`` for a bad config), RigError, StrategyError: one
-        line each; nothing is created when the config, the rig or the strategy is bad.
+        RunStoreError (a ``RunLockedError`` when another process writes the run, a
+        ``RunConfigError`` for a bad config), RigError, StrategyError: one line each; nothing
+        is created when the config, the rig or the strategy is bad.
     """
     path = Path(path)
     if mode not in ("new", "resume", "auto"):
         raise ValueError(f"mode must be new, resume or auto, got {mode!r}")
-    resume = mode == "resume" or (mode == "auto" and RunStore.is_run(path))
+    again = functools.partial(
+        open_run, path, config, episodes=episodes, rig_options=rig_options,
+        check_resumed=check_resumed, rig=rig, strategy=strategy,
+    )  # fmt: skip
     held = ExitStack()
     try:
-        store = None
+        lock = None
+        resume = mode == "resume" or (mode == "auto" and RunStore.is_run(path))
         if resume:
-            if hold is not None:
-                held.enter_context(hold(path))
-            RunStore.read_meta(path)  # a folder that is not a run: its one-line error first
-            held.enter_context(writer_lock(path))  # before a torn tail is cut
-            store = RunStore.open(path)
-            held.callback(store.close)
+            RunStore.read_meta(path)  # a one-line error for a folder that holds no run
+            lock = held.enter_context(run_lock(path))
+            store = RunStore.open(path)  # under the lock: no other writer is appending
+            held.callback(store.close)  # unwinds first: the history closes before the lock
             run_config = RunConfig.from_dict(store.config, where=path / "run.json")
             if check_resumed is not None:
                 check_resumed(run_config)
@@ -162,22 +195,54 @@ def open_run(
             if config is None:
                 raise RunStoreError(f"{path} holds no run and no config was given for a new one")
             run_config = config.with_overrides(episodes, rig_options).checked()
+            store = None
         # rig and strategy before a new run folder exists: a bad name leaves nothing
         the_rig = rig if rig is not None else make_rig(run_config.rig)
-        if strategy is None:
-            strategy = strategy_for(run_config, the_rig)
-        _check_sees_ball(run_config, the_rig, strategy)
+        the_strategy = strategy if strategy is not None else strategy_for(run_config, the_rig)
+        _check_sees_ball(run_config, the_rig, the_strategy)
         if store is None:
+            make_run_dir(path)
+            lock = held.enter_context(run_lock(path))
+            if mode == "auto" and RunStore.is_run(path):
+                # another writer made the run between our look and our lock: resume it
+                held.close()
+                return again(mode="resume")
             store = RunStore.create(path, run_config.to_dict())
-            if hold is not None:
-                held.enter_context(hold(path))
-            held.enter_context(writer_lock(path))
-            held.callback(store.close)  # unwinds first: the history closes before the hold
+            held.callback(store.close)
         store.sync_interval_s = the_rig.sync_interval_s
-        return OpenRun(run_config, store, the_rig, strategy, len(store), held)
+        missing = 0
+        if resume:
+            missing = max(0, (recorded_episodes(path) or 0) - len(store))
+        return OpenRun(
+            run_config, store, the_rig, the_strategy, len(store), lock, not resume, missing, held
+        )
     except BaseException:
         held.close()
         raise
+
+
+# What a new run writes before its first episode is stored (``discard_empty_run`` removes
+# only these, and only from a run that holds no episode).
+_NEW_RUN_FILES = (
+    "history.bin", "metrics.csv", "faults.json", "trial.json", "recording.rrd", "run.json",
+)  # fmt: skip
+
+
+def discard_empty_run(run: Path) -> None:
+    """Remove a run that holds no episode (a new run whose rig failed to connect), so that the
+    command that made it can run again: its own files only, then the folder if nothing else
+    is left (the lock file aside). Refuses (``RunStoreError``) a run with episodes."""
+    run = Path(run)
+    history = run / "history.bin"
+    if history.exists() and history.stat().st_size:
+        raise RunStoreError(f"{run} holds episodes: not removed")
+    for name in _NEW_RUN_FILES:
+        (run / name).unlink(missing_ok=True)
+    left = [p.name for p in run.iterdir()]
+    if left == [LOCK_FILE] and remove_lock_if_free(run):
+        left = []
+    if not left:
+        run.rmdir()
 
 
 def strategy_for(config: RunConfig, rig: Rig | None = None) -> Strategy:

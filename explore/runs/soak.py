@@ -109,7 +109,7 @@ def soak(episodes: int, rate: float, bus: str, seed: int, out: Path) -> dict:
                 counters.update(rig.arm.counts)  # type: ignore[attr-defined]
             rig.twin.close()
     wall = time.perf_counter() - t0
-    check = RunStore.open(out)  # verifies every checksum, cuts nothing
+    check = RunStore.read(out)  # verifies every checksum, cuts nothing
     ids = [r.episode for r in check]
     check.close()
     lost = episodes - len(set(ids)) if ids == sorted(set(ids)) else -1

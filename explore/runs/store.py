@@ -21,8 +21,9 @@ Layout of ``RUN/``:
   every control tick of episode N, ``frames`` (T, side, side, 3) BGR uint8, written atomically
   (fsync'ed) before the episode's record is appended; a file past the last record is what a
   crash left of the episode in flight, replaced when that episode is run again.
-- ``writer.lock``: held (an exclusive ``flock``) by the one process writing the run
-  (``writer_lock``); readers that need a finished history check it (``is_being_written``).
+- ``writer.lock``: held (an exclusive ``flock``) by the one process writing the run, and
+  naming it (``explore/runs/lock.py``: ``run_lock``); readers never take it, those that need a
+  finished history ask whether it is held (``lock.is_being_written``).
 - ``metrics.csv``: cells reached after every episode (derived; rebuilt from the history on
   resume).
 - ``coverage.png`` and whatever later stages write (models, figures, recordings).
@@ -36,7 +37,6 @@ without touching the file.
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import io
 import json
 import math
@@ -58,7 +58,7 @@ APP = "ergo-explore"
 MAGIC = b"EREC"
 HEADER = struct.Struct("<4sII")
 FRAMES_DIR = "frames"
-WRITER_LOCK = "writer.lock"
+WRITER_LOCK_FILE = "writer.lock"  # the writer's lock (explore/runs/lock.py), not run data
 SYNCED = "history.synced"
 _SYNCED = struct.Struct("<Q")
 
@@ -77,7 +77,26 @@ def atomic_write_text(path: Path, text: str) -> None:
     os.replace(tmp, path)
 
 
-def _scan(data: bytes, durable: int | None = None) -> tuple[list[tuple[int, int]], int]:
+def make_run_dir(path: Path) -> None:
+    """Create the run folder ``path`` (and its parents); one line when that cannot be done
+    (a parent is a regular file, no permission, a full disk)."""
+    for parent in (path, *path.parents):
+        if parent.exists() and not parent.is_dir():
+            raise RunStoreError(f"cannot make the run folder {path}: {parent} is a file")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise RunStoreError(f"cannot make the run folder {path}: {exc.strerror or exc}") from exc
+
+
+def salvage_hint(run: Path) -> str:
+    """What to do about a damaged history, for the end of an error line."""
+    return f"`ergo runs check {run}` says what can be kept, `ergo runs salvage {run}` keeps it"
+
+
+def _scan(
+    data: bytes, durable: int | None = None, hint: str = ""
+) -> tuple[list[tuple[int, int]], int]:
     """Find record payload spans in ``data``.
 
     ``durable``: the length known to be on disk (``history.synced``; None: all of it): a bad
@@ -101,16 +120,30 @@ def _scan(data: bytes, durable: int | None = None) -> tuple[list[tuple[int, int]
         if pos >= durable and (magic != MAGIC or end > n or zlib.crc32(data[start:end]) != crc):
             break  # past what was synced: what a power cut left of the unsynced tail
         if magic != MAGIC:
-            raise RunStoreError(f"history.bin is corrupt at byte {pos}: bad record marker")
+            raise RunStoreError(f"history.bin is corrupt at byte {pos}: bad record marker{hint}")
         if end > n:
             break  # torn payload
         if zlib.crc32(data[start:end]) != crc:
             if end == n:
                 break  # last record incomplete on disk
-            raise RunStoreError(f"history.bin is corrupt at byte {pos}: checksum mismatch")
+            raise RunStoreError(f"history.bin is corrupt at byte {pos}: checksum mismatch{hint}")
         spans.append((start, end))
         pos = end
     return spans, pos
+
+
+def _decode(data: bytes, spans: list[tuple[int, int]], hint: str) -> Iterator[EpisodeRecord]:
+    """The records of ``spans``, each checked to be the next episode (0, 1, 2...)."""
+    for i, (a, b) in enumerate(spans):
+        try:
+            rec = EpisodeRecord.from_bytes(data[a:b])
+        except RecordError as exc:
+            raise RunStoreError(f"history.bin record {i}: {exc}{hint}") from exc
+        if rec.episode != i:
+            raise RunStoreError(
+                f"history.bin record {i} is episode {rec.episode}: missing or duplicated{hint}"
+            )
+        yield rec
 
 
 class RunStore:
@@ -120,8 +153,9 @@ class RunStore:
         self.path = path
         self.meta = meta
         self.records: list[EpisodeRecord] = []
-        self._fh: Any = None
-        self.truncated_bytes = 0
+        self._fd: int | None = None  # history.bin, O_APPEND, unbuffered
+        self.truncated_bytes = 0  # torn bytes cut by ``open``
+        self.torn_bytes = 0  # torn bytes found after the last record (cut by ``open`` only)
         #: seconds between two fsyncs of the history (0: every append)
         self.sync_interval_s = 0.0
         self._synced = -math.inf  # the first append syncs (and starts ``history.synced``)
@@ -131,16 +165,19 @@ class RunStore:
     # ---- construction ----------------------------------------------------------------------
     @classmethod
     def create(cls, path: str | Path, config: dict[str, Any]) -> RunStore:
-        """Make a new run folder; refuses a non-empty existing folder."""
+        """Make a new run folder; refuses a non-empty existing folder (its writer's lock file,
+        ``explore/runs/lock.py``, aside)."""
         path = Path(path)
+        make_run_dir(path)
         stale = path / "run.json.tmp"
-        if path.is_dir() and [p.name for p in path.iterdir()] == [stale.name]:
+        found = sorted(p.name for p in path.iterdir() if p.name != WRITER_LOCK_FILE)
+        if found == [stale.name]:
             stale.unlink()  # a kill during a previous create's atomic write: nothing was made
-        if path.exists() and any(path.iterdir()):
+            found = []
+        if found:
             raise RunStoreError(
                 f"{path} exists and is not empty: use --resume {path} or a new --out"
             )
-        path.mkdir(parents=True, exist_ok=True)
         meta = {
             "app": APP,
             "format": RUN_FORMAT,
@@ -154,12 +191,24 @@ class RunStore:
 
     @classmethod
     def open(cls, path: str | Path) -> RunStore:
-        """Open an existing run, verifying its history and cutting a torn last record."""
+        """Open an existing run for appending, verifying its history and cutting a torn last
+        record. Only its writer may do this (``open_run``, under the run's lock): a reader
+        uses ``read``."""
         path = Path(path)
         meta = cls.read_meta(path)
         store = cls(path, meta)
         store._load()
         store._open_for_append()
+        return store
+
+    @classmethod
+    def read(cls, path: str | Path) -> RunStore:
+        """Open an existing run for reading only: its history verified as by ``open``, but a
+        torn last record (perhaps an append in progress in another process) is left alone,
+        and nothing can be appended."""
+        path = Path(path)
+        store = cls(path, cls.read_meta(path))
+        store._load(repair=False)
         return store
 
     @staticmethod
@@ -203,16 +252,19 @@ class RunStore:
     def __iter__(self) -> Iterator[EpisodeRecord]:
         return iter(self.records)
 
-    def _load(self) -> None:
+    def _load(self, repair: bool = True) -> None:
         if not self.history_path.exists():
             return
         data = self.history_path.read_bytes()
         self._synced_length = read_synced(self.path)
-        self.records, good_end = _decode(data, self._synced_length)
-        if good_end < len(data):
+        hint = f" in {self.path}: {salvage_hint(self.path)}"
+        spans, good_end = _scan(data, self._synced_length, hint)
+        self.records = list(_decode(data, spans, hint))
+        self.torn_bytes = len(data) - good_end
+        if self.torn_bytes and repair:
             # a crash during the last append (the episode in flight), or a power cut's unsynced
             # tail: drop the bytes from the first bad record on, the episodes are run again
-            self.truncated_bytes = len(data) - good_end
+            self.truncated_bytes = self.torn_bytes
             with open(self.history_path, "r+b") as f:
                 f.truncate(good_end)
                 os.fsync(f.fileno())
@@ -220,12 +272,14 @@ class RunStore:
                 self._write_synced(good_end)
 
     def _open_for_append(self) -> None:
-        self._fh = open(self.history_path, "ab")  # noqa: SIM115 - held open for appends
-        self._size = self._fh.tell()
+        flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_CLOEXEC
+        self._fd = os.open(self.history_path, flags, 0o644)
+        self._size = os.fstat(self._fd).st_size
 
     def _sync(self) -> None:
         """fsync the history, then record (durably) how much of it is on disk."""
-        os.fsync(self._fh.fileno())
+        assert self._fd is not None
+        os.fsync(self._fd)
         self._synced = time.monotonic()
         if (self.sync_interval_s > 0 or self._synced_length is not None) and (
             self._size != self._synced_length
@@ -250,19 +304,35 @@ class RunStore:
                 os.close(dir_fd)
 
     def append(self, record: EpisodeRecord) -> None:
-        """Append one episode: flushed (a killed process loses nothing of it) and fsync'ed, after
-        every append or at most every ``sync_interval_s`` seconds (module doc)."""
+        """Append one episode: written unbuffered (a killed process loses nothing of it) and
+        fsync'ed, after every append or at most every ``sync_interval_s`` seconds (module doc).
+
+        A write or sync that fails (a full disk, a quota, an I/O error) is undone: the file is
+        cut back to the episodes before it, and ``RunStoreError`` says so in one line."""
+        if self._fd is None:
+            raise RunStoreError(f"{self.path} is not open for appending")
         if record.episode != len(self.records):
             raise RunStoreError(
                 f"episode {record.episode} appended after {len(self.records)} episodes"
             )
         payload = record.to_bytes()
-        frame = HEADER.pack(MAGIC, len(payload), zlib.crc32(payload)) + payload
-        self._fh.write(frame)
-        self._fh.flush()  # in the page cache: a killed process loses nothing of it
-        self._size += len(frame)
-        if time.monotonic() - self._synced >= self.sync_interval_s:
-            self._sync()
+        frame = memoryview(HEADER.pack(MAGIC, len(payload), zlib.crc32(payload)) + payload)
+        size = self._size
+        try:
+            while frame:  # unbuffered: in the page cache, nothing left in a buffer to land later
+                frame = frame[os.write(self._fd, frame) :]
+            self._size = os.fstat(self._fd).st_size
+            if time.monotonic() - self._synced >= self.sync_interval_s:
+                self._sync()
+        except OSError as exc:
+            with contextlib.suppress(OSError):  # cutting frees space: it works on a full disk
+                os.ftruncate(self._fd, size)
+                os.fsync(self._fd)
+            self._size = size
+            raise RunStoreError(
+                f"cannot store episode {record.episode} in {self.history_path}: "
+                f"{exc.strerror or exc}; the {len(self.records)} episode(s) before it are kept"
+            ) from exc
         self.records.append(record)
 
     def write_frames(self, episode: int, frames: np.ndarray) -> Path:
@@ -281,11 +351,12 @@ class RunStore:
         return path
 
     def close(self) -> None:
-        if self._fh is not None:
-            self._fh.flush()
-            self._sync()
-            self._fh.close()
-            self._fh = None
+        if self._fd is not None:
+            try:
+                self._sync()
+            finally:
+                fd, self._fd = self._fd, None
+                os.close(fd)
 
     def __enter__(self) -> RunStore:
         return self
@@ -302,24 +373,6 @@ def read_synced(run: str | Path) -> int | None:
     except FileNotFoundError:
         return None
     return _SYNCED.unpack(raw[: _SYNCED.size])[0] if len(raw) >= _SYNCED.size else None
-
-
-def _decode(data: bytes, durable: int | None = None) -> tuple[list[EpisodeRecord], int]:
-    """The records of a history's bytes, in order, and where a torn tail starts (``_scan``); a
-    ``RunStoreError`` naming the record for corruption, an unreadable or out-of-order one."""
-    spans, good_end = _scan(data, durable)
-    records = []
-    for i, (a, b) in enumerate(spans):
-        try:
-            rec = EpisodeRecord.from_bytes(data[a:b])
-        except RecordError as exc:
-            raise RunStoreError(f"history.bin record {i}: {exc}") from exc
-        if rec.episode != i:
-            raise RunStoreError(
-                f"history.bin record {i} is episode {rec.episode}: missing or duplicated"
-            )
-        records.append(rec)
-    return records, good_end
 
 
 @dataclass(frozen=True)
@@ -342,14 +395,8 @@ class History:
 def read_history(run: str | Path) -> History:
     """A run's history, checked as ``RunStore.open`` checks it, without modifying the folder:
     a ``RunStoreError`` (one line) for a folder that is not a run, or a corrupt history."""
-    run = Path(run)
-    meta = RunStore.read_meta(run)
-    path = run / "history.bin"
-    if not path.exists():
-        return History(meta, [], 0)
-    data = path.read_bytes()
-    records, good_end = _decode(data, read_synced(run))
-    return History(meta, records, len(data) - good_end)
+    store = RunStore.read(run)
+    return History(store.meta, store.records, store.torn_bytes)
 
 
 def frames_path(run: str | Path, episode: int) -> Path:
@@ -373,41 +420,6 @@ def read_frames(run: str | Path, episode: int) -> np.ndarray | None:
     return frames
 
 
-@contextlib.contextmanager
-def writer_lock(run: str | Path) -> Iterator[None]:
-    """Hold ``RUN/writer.lock`` exclusively while writing the run, or fail at once (one line)
-    when another process holds it: two writers would interleave their episodes."""
-    fd = os.open(Path(run) / WRITER_LOCK, os.O_RDWR | os.O_CREAT, 0o644)
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise RunStoreError(
-                f"{run} is being written by another process (it holds {WRITER_LOCK}): wait for "
-                "it to stop, or stop it"
-            ) from None
-        yield
-    finally:
-        os.close(fd)  # releases the lock
-
-
-def is_being_written(run: str | Path) -> bool:
-    """Whether a process holds ``RUN/writer.lock`` (an ``ergo explore`` or a campaign trial
-    writing the run) now."""
-    path = Path(run) / WRITER_LOCK
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except FileNotFoundError:
-        return False
-    try:
-        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
-    except BlockingIOError:
-        return True
-    finally:
-        os.close(fd)
-    return False
-
-
 def iter_history(run: Path) -> Iterator[EpisodeRecord]:
     """Read a run's stored episodes without modifying the folder (no torn-tail repair, no
     append handle): safe on a run that another process is still writing."""
@@ -415,6 +427,6 @@ def iter_history(run: Path) -> Iterator[EpisodeRecord]:
     if not path.exists():
         return
     data = path.read_bytes()
-    spans, _ = _scan(data, read_synced(run))
-    for a, b in spans:
-        yield EpisodeRecord.from_bytes(data[a:b])
+    hint = f" in {run}: {salvage_hint(Path(run))}"
+    spans, _ = _scan(data, read_synced(run), hint)
+    yield from _decode(data, spans, hint)

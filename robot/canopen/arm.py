@@ -63,6 +63,7 @@ from robot.canopen.network import (
 from robot.canopen.units import JointScaling
 from robot.errors import SafetyStop
 from robot.spec import ArmSpec, ergo_jr_spec
+from robot.torque_guardian import EmergencyPayload, serial_path
 from robot.watchdog import Watchdog
 
 log = logging.getLogger(__name__)
@@ -220,6 +221,18 @@ class CanArm(Arm):
                 window = self.config.following_error_window * cpr[i] / (2 * np.pi)
                 net.sdo_write(i, 0x6065, 0, round(window))
             net.map_pdos(i)
+
+    def emergency_payload(self) -> EmergencyPayload | None:
+        """On an SLCAN adapter (a serial port), the torque-off lines a guardian process writes
+        to it (``DriveNetwork.torque_off_lines``, refreshed every cycle); None on other
+        interfaces (socketcan, virtual)."""
+        path = serial_path(self.bus_spec.channel.split("@", 1)[0])
+        if self.bus_spec.interface != "slcan" or path is None:
+            return None
+        if self.net.emergency is None:
+            self.net.emergency = EmergencyPayload(path)
+        self.net.emergency.set(self.net.torque_off_lines())
+        return self.net.emergency
 
     # ---- disconnect ------------------------------------------------------------------------
     def _disconnect(self) -> None:
@@ -404,7 +417,7 @@ class CanArm(Arm):
                 enabling = (net.cw & 0x8F) == cia402.CW_ENABLE_OPERATION
                 net.cw[enabling] = cia402.CW_DISABLE_OPERATION
                 while True:
-                    net.cycle(send_rpdo=True)
+                    net.cycle(send_rpdo=True, on_sent=self._torque_off_sent)
                     lost = self._lost()
                     todo = [
                         i

@@ -10,6 +10,7 @@ Every failure to parse or open becomes a ``CanBusError`` with a one-line message
 from __future__ import annotations
 
 import os
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -61,6 +62,12 @@ DEFAULT_BITRATE = 1_000_000
 # python-can waits 2 s after opening an SLCAN serial port (for boards that reset on open);
 # a pty does not reset, so we skip the wait there.
 PTY_SLEEP_AFTER_OPEN_S = 0.0
+# Answers python-can's slcanBus waits for on opening (C, S<n>, an empty command, O: each
+# answered by CR, or BEL when refused; python-can 4.6 ``slcanBus.__init__``/``set_bitrate``).
+SLCAN_OPENING_COMMANDS = 4
+# How long ``open_bus`` waits for an emulated adapter's answers to them, s: a bound against a
+# bridge that never answers, not an expectation (it answers in microseconds when idle; guess).
+SLCAN_ANSWER_WAIT_S = 2.0
 
 # What to try when an interface fails to open (python-can and Linux SocketCAN docs).
 HINTS = {
@@ -157,8 +164,39 @@ def open_bus(spec: CanBusSpec | str, bitrate: int | None = DEFAULT_BITRATE) -> A
     import can
 
     try:
-        return can.Bus(**spec.bus_kwargs())
+        bus = can.Bus(**spec.bus_kwargs())
     except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as exc:
         detail = " ".join(str(exc).split()) or type(exc).__name__
         hint = HINTS.get(spec.interface, "")
         raise CanBusError(f"cannot open CAN bus {spec}: {detail}{hint}") from exc
+    if spec.interface == "slcan" and _is_pty(spec.channel):
+        _await_opening_answers(bus)
+    return bus
+
+
+def _await_opening_answers(bus: Any) -> None:
+    """Read an emulated SLCAN adapter's answers to the opening commands before anything else
+    reads the port. The emulator (``sim.canopen.server``) flushes what a dead client left
+    queued when it handles C; a reader already running then (the CANopen network's notifier
+    thread) can find the data it was told of gone, which pyserial reports as "device reports
+    readiness to read but returned no data". Once C, S, the empty command and O are answered,
+    the flush is over. Frames read meanwhile are a dead client's: dropped, as the flush does.
+    Gives up quietly after ``SLCAN_ANSWER_WAIT_S`` (the first read then tells what is wrong)."""
+    import serial
+
+    port = bus.serialPortOrig  # python-can's pyserial port (slcanBus attribute)
+    answers, line = 0, b""
+    deadline = time.monotonic() + SLCAN_ANSWER_WAIT_S
+    while answers < SLCAN_OPENING_COMMANDS and time.monotonic() < deadline:
+        try:
+            chunk = port.read(max(1, port.in_waiting))
+        except serial.SerialException:
+            continue  # the flush emptied what select() had seen: read again
+        for byte in chunk:
+            if byte == 0x07:  # BEL: a command refused (answered all the same)
+                answers += 1
+            elif byte == 0x0D:
+                answers += line == b""  # a bare CR answers a command; "t...CR" is a frame
+                line = b""
+            else:
+                line += bytes([byte])

@@ -26,6 +26,7 @@ converts them (``robot.canopen.units.JointScaling``).
 from __future__ import annotations
 
 import logging
+import struct
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -39,6 +40,7 @@ from robot.canopen import cia402, emcy
 from robot.canopen.bus import CanBusError, CanBusSpec, open_bus
 from robot.canopen.cia402 import State
 from robot.errors import BusError, LinkLost
+from robot.torque_guardian import EmergencyPayload
 
 log = logging.getLogger(__name__)
 
@@ -46,6 +48,9 @@ PDO_NOT_VALID = 1 << 31  # COB-ID bit 31 of a PDO communication parameter (CiA 3
 # Synchronous transmission type: RPDO applied at the next SYNC, TPDO sent at every SYNC.
 TRANS_SYNC = 1
 NMT_START_ALL, NMT_PRE_OPERATIONAL = 0x01, 0x80
+# COB-ID bases of PDO 1 (CiA 301 predefined connection set: 0x180 + node id for TPDO1, 0x200
+# + node id for RPDO1), and of SYNC.
+TPDO1_BASE, RPDO1_BASE, SYNC_COB_ID = 0x180, 0x200, 0x080
 HEARTBEAT_OPERATIONAL = 5  # NMT state byte in a heartbeat (CiA 301)
 # Longest blocking receive of the bus's notifier thread, s: bounds how long disconnect waits
 # for it (canopen's default is 1 s; the thread wakes at once when a frame arrives).
@@ -74,6 +79,11 @@ def safe_decode(statusword: int) -> State | None:
         return cia402.decode_statusword(int(statusword))
     except cia402.Cia402Error:
         return None
+
+
+def slcan_line(can_id: int, data: bytes) -> bytes:
+    """A standard-id data frame as an SLCAN (Lawicel) transmit command."""
+    return f"t{can_id:03X}{len(data)}{data.hex().upper()}\r".encode()
 
 
 class DriveNetwork:
@@ -108,6 +118,9 @@ class DriveNetwork:
         self.sdo_timeout_s = sdo_timeout_s
         self.pdo_timeout_s = pdo_timeout_s
         self.on_alarm = on_alarm
+        # the torque-off bytes shared with a guardian process, refreshed every cycle (set by
+        # the arm when its adapter is an SLCAN serial port)
+        self.emergency: EmergencyPayload | None = None
         self.network: Any = None
         self.nodes: list[Any] = []
         # What the notifier thread hears, guarded by cond.
@@ -233,8 +246,8 @@ class DriveNetwork:
         node, nid = self.nodes[i], self.node_ids[i]
         try:
             for maps, base, entries in (
-                (node.rpdo, 0x200, (0x6040, 0x607A)),
-                (node.tpdo, 0x180, (0x6041, 0x6064)),
+                (node.rpdo, RPDO1_BASE, (0x6040, 0x607A)),
+                (node.tpdo, TPDO1_BASE, (0x6041, 0x6064)),
             ):
                 for number, pdo in maps.map.items():
                     if number == 1:
@@ -312,9 +325,21 @@ class DriveNetwork:
             self.on_alarm()
 
     # ---- the control cycle -----------------------------------------------------------------
-    def cycle(self, send_rpdo: bool = True) -> None:
+    def torque_off_lines(self) -> bytes:
+        """What cuts every drive's torque, as SLCAN lines (Lawicel ``tIIILDD..\\r``): RPDO1 to
+        each node with "disable operation" (to SWITCHED_ON, or no change: no state with torque
+        follows it) and its current target, then a SYNC (the RPDOs are synchronous). The
+        bytes a torque-off guardian writes to the adapter (``robot.torque_guardian``)."""
+        lines = [
+            slcan_line(RPDO1_BASE + nid, struct.pack("<Hi", cia402.CW_DISABLE_OPERATION, int(t)))
+            for nid, t in zip(self.node_ids, self.target, strict=True)
+        ]
+        return b"".join([*lines, slcan_line(SYNC_COB_ID, b"")])
+
+    def cycle(self, send_rpdo: bool = True, on_sent: Callable[[], None] | None = None) -> None:
         """RPDO1 to every node (``cw`` + ``target``), then a SYNC, then wait for the TPDOs.
-        Call it inside ``guard.hold()``.
+        Call it inside ``guard.hold()``. ``on_sent`` is called once the RPDOs and the SYNC
+        (at which the drives apply them) are sent, before the wait.
 
         Raises:
             CanLinkLost: the adapter failed (unplugged, bus off, serial error).
@@ -323,6 +348,8 @@ class DriveNetwork:
         import can
 
         self.guard.check()
+        if self.emergency is not None:
+            self.emergency.set(self.torque_off_lines())
         with self.cond:
             self.seq += 1
             seq = self.seq
@@ -335,6 +362,8 @@ class DriveNetwork:
                     pdo[0x607A].raw = int(self.target[i])
                     pdo.transmit()
             self.network.sync.transmit()
+            if on_sent is not None:
+                on_sent()
         except (can.CanError, OSError) as exc:
             detail = " ".join(str(exc).split()) or type(exc).__name__
             raise CanLinkLost(f"CAN bus {self.bus_spec} failed: {detail}") from exc

@@ -31,6 +31,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from robot.arm import Arm, JointState, RecoveryPolicy
+from robot.dynamixel import protocol as proto
 from robot.dynamixel.bus import (
     DEFAULT_BAUD,
     DEFAULT_LATENCY_S,
@@ -43,6 +44,7 @@ from robot.dynamixel.bus import (
 from robot.dynamixel.control_table import MODELS, Model, model_by_name
 from robot.errors import BusError, SafetyStop
 from robot.spec import ArmSpec, ergo_jr_spec
+from robot.torque_guardian import EmergencyPayload, serial_path
 from robot.watchdog import Watchdog
 
 log = logging.getLogger(__name__)
@@ -123,6 +125,7 @@ class DynamixelArm(Arm):
         self._fast = m.block(["position", "velocity"])
         self._slow = m.block(["position", "velocity", "load", "voltage", "temperature"])
         self._reopenable = connection is None
+        self._emergency: EmergencyPayload | None = None
         self._reads = 0
         self._loads = np.full(n, np.nan)
         self._temperatures = np.full(n, np.nan)
@@ -262,6 +265,8 @@ class DynamixelArm(Arm):
         data = dict.fromkeys(self.ids, reg.encode(int(enabled)))
         for _ in range(2):
             self.bus.sync_write(reg.address, reg.size, data)
+            if not enabled:
+                self._torque_off_sent()
             try:
                 state = self._read_torque()
             except HardwareAlertError as exc:
@@ -274,6 +279,19 @@ class DynamixelArm(Arm):
         off = [sid for sid, s in zip(self.ids, state, strict=True) if s != enabled]
         word = "on" if enabled else "off"
         raise BusError(f"servo(s) {', '.join(map(str, off))} did not turn torque {word}")
+
+    def emergency_payload(self) -> EmergencyPayload | None:
+        """A broadcast WRITE of Torque Enable = 0 (no status reply: e-manual, Protocol 2.0),
+        for a guardian process to write to the port by its path; None for an arm given a
+        ``connection`` or a pyserial URL."""
+        path = serial_path(self.bus.port) if self._reopenable else None
+        if path is None:
+            return None
+        if self._emergency is None:
+            reg = self.model.reg("torque")
+            packet = proto.write(proto.BROADCAST_ID, reg.address, reg.encode(0))
+            self._emergency = EmergencyPayload(path, packet.encode())
+        return self._emergency
 
     def _emergency_torque_off(self) -> None:
         """Torque off now, from any thread: a call in progress elsewhere gives up first

@@ -2,8 +2,15 @@
 errors.
 
 - Each call sends one instruction packet and waits for the status packets it implies, with a
-  timeout computed from the baud rate, the bytes on the wire, the servos' return delay and the
-  adapter's latency.
+  timeout computed from the baud rate, the bytes on the wire, the servos' return delay and a
+  slack for the adapter's and the host's latency: at least ``latency_s``, raised to the
+  latency the bus measures (``LatencyEstimate``, as TCP's retransmission timer), at most
+  ``MAX_LATENCY_S``; each retry waits twice as long.
+- Replies are matched to requests per servo, oldest first (a servo answers in order) and by
+  size: a status packet that comes after its call gave up is recognised and set aside
+  (``counters.late_replies``), never taken for a later call's answer (the input used to be
+  flushed before each call: a reply later than that was read as the next call's, a wrong
+  value, or of another size, counted as a CRC error with no fault injected).
 - A call that gets no status (``NoStatusError``) or a corrupt one (``CorruptPacketError``) is
   retried at most ``retries`` times; a sync read retries only the servos that did not answer.
   ``counters`` keeps totals (retries, timeouts, CRC errors, servo errors, alerts).
@@ -24,6 +31,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import time
+from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, fields
 from typing import Any, Protocol
@@ -54,6 +62,35 @@ DEFAULT_LATENCY_S = 0.020
 # Retries per call after the first attempt. Guess: two lost packets in a row are rare on a
 # healthy bus, three mean something is wrong.
 DEFAULT_RETRIES = 2
+# The slack adapts to the reply latency the bus measures (``LatencyEstimate``), never below
+# ``latency_s`` and never above this, s. Guess: a USB adapter at its worst (a 16 ms latency
+# timer, a busy host) answers well within it; on 2 cores at load 8 an emulator's reply was
+# seen up to about 0.3 s late. A reply later than this counts as lost.
+MAX_LATENCY_S = 0.5
+# How long a request's reply is still expected after the call gave up on it, s: a reply later
+# than that is taken for one to a later request of the same size. Status packets up to 0.5 s
+# late were measured on 2 cores at load 7 (twin serve over a pty, bench/hil_pty.py); a
+# reply never expected costs one wait of a later call of the same size (it set the reply
+# aside, then takes it), whatever this is. Guess: ten times that.
+MATCH_HORIZON_S = 5.0
+# Requests remembered per servo while their replies are awaited: a servo that stopped
+# answering (unpowered) and comes back costs at most this many waits of later calls before
+# its replies line up again. Guess: two calls of three attempts, and some.
+MAX_OUTSTANDING = 8
+# A surplus request (a retry of a call already answered) is awaited before the next request
+# for this many times as long as its attempt waited, then forgotten: a reply later than that
+# counts as lost. Guess: twice leaves a host descheduled for as long as the slack itself (at
+# load 5-6 on 2 cores, replies 30 ms late were read up to about that late) and costs one such
+# wait per lost reply.
+SPARE_PATIENCE = 2.0
+# Each retry of a call waits this many times longer than the attempt before (20, 80, 320 ms
+# from the default slack), up to MAX_LATENCY_S: a reply that is late rather than lost is
+# still caught, and a servo that is gone is reported after at most the sum. Guess; 2 (TCP's,
+# RFC 6298 5.5) let the soak's 30 ms late replies (2 ms floor) run out every retry.
+RETRY_BACKOFF = 4.0
+# Gains of the latency estimate: the smoothed latency and its mean deviation, as TCP's
+# retransmission timer (RFC 6298: alpha 1/8, beta 1/4; slack = mean + 4 deviations).
+LATENCY_GAIN, DEVIATION_GAIN, DEVIATIONS = 1 / 8, 1 / 4, 4.0
 # How long one serial read may block while waiting (pyserial timeout), s. Small, so the
 # deadline is kept to about this precision; not a protocol figure.
 POLL_S = 0.001
@@ -143,6 +180,9 @@ class BusCounters:
     crc_errors: int = 0  # corrupt frames received, and CRC errors reported by servos
     servo_errors: int = 0  # status packets with an error number (ServoError raised)
     alerts: int = 0  # status packets with the alert bit (HardwareAlertError raised)
+    # status packets that came after their exchange had given up on them: recognised (each
+    # servo answers its requests in order) and set aside, never taken for a later call's
+    late_replies: int = 0
     # total duration of the calls that needed a retry, s: an upper bound of what the faults
     # cost (the first attempt's wait for the timeout, then the retries)
     retried_call_s: float = 0.0
@@ -212,6 +252,204 @@ def _explain_open_error(port: str, baud: int, exc: Exception) -> str:
     return f"cannot open Dynamixel bus {port}: {why}"
 
 
+@dataclass
+class LatencyEstimate:
+    """The reply latency beyond the wire time (adapter, OS, servo), learnt from the replies:
+    the slack every timeout adds (``slack``), between ``floor`` and ``cap`` (the floor wins
+    when it is the larger: a slack asked for is kept), s.
+
+    A sample is how much later than its wire time and return delays a reply was read, from
+    the request it answers. After a retry that is ambiguous (the first reply may answer the
+    first request, late, or the retry, the first reply lost): it gives no sample (Karn's
+    rule) until a second reply comes and shows the first was late; a reply that may be a
+    later call's (``_Replies.set_aside``) gives none until that call's own reply comes too.
+    """
+
+    floor: float
+    cap: float = MAX_LATENCY_S
+    mean: float | None = None
+    deviation: float = 0.0
+    largest: float = 0.0  # the largest sample seen, s
+    samples: int = 0
+
+    def add(self, sample: float) -> None:
+        sample = max(0.0, sample)
+        self.largest = max(self.largest, sample)
+        self.samples += 1
+        if self.mean is None:
+            self.mean, self.deviation = sample, sample / 2
+            return
+        self.deviation += DEVIATION_GAIN * (abs(sample - self.mean) - self.deviation)
+        self.mean += LATENCY_GAIN * (sample - self.mean)
+
+    @property
+    def slack(self) -> float:
+        """The slack of a first attempt, s."""
+        if self.mean is None:
+            return self.floor
+        return max(self.floor, min(self.cap, self.mean + DEVIATIONS * self.deviation))
+
+    @property
+    def longest(self) -> float:
+        """The most slack any attempt gets, s: a reply later than that counts as lost."""
+        return max(self.cap, self.floor)
+
+    def slack_of_attempt(self, attempt: int) -> float:
+        """The slack of attempt ``attempt`` (0: the first) of a call, s."""
+        return min(self.longest, self.slack * RETRY_BACKOFF**attempt)
+
+
+@dataclass
+class _Expected:
+    """A status packet asked for and not yet received: by which call, when, of what size.
+    ``spare``: its call already has this servo's answer (a retry's, or the first attempt's
+    come late): a reply counted against it is surplus and gives no latency sample."""
+
+    call: int
+    n_params: int
+    sent_at: float
+    nominal_s: float  # wire time and return delays up to this reply, s
+    expires: float
+    spare: bool = False
+    deadline: float = 0.0  # when its attempt stopped waiting for it, s (monotonic)
+    question: bytes = b""  # what it asked (instruction, and address + length for reads)
+
+
+_FORGOTTEN = _Expected(-1, -1, 0.0, 0.0, 0.0)  # what _match returns for a reply of nobody's
+
+
+def _match(queue: deque[_Expected] | None, status: proto.StatusPacket) -> _Expected | None:
+    """The request ``status`` answers, taken off its servo's ``queue``: the oldest one, as a
+    servo answers in order, unless the size differs (a READ's reply holds exactly the bytes
+    asked for; a status with an error number holds none and answers the oldest): then the
+    first whose size fits, the ones before it lost; ``_FORGOTTEN`` when none fits (the reply
+    of a request given up on and forgotten); None when nothing is awaited from that servo."""
+    if not queue:
+        return None
+    if status.error_code:
+        return queue.popleft()
+    n = len(status.params)
+    for k, entry in enumerate(queue):
+        if entry.n_params == n:
+            for _ in range(k):
+                queue.popleft()  # asked before, of another size: their replies were lost
+            return queue.popleft()
+    return _FORGOTTEN
+
+
+def _question(packet: proto.InstructionPacket) -> bytes:
+    """What ``packet`` asks each servo, as the servo sees it: a READ and a SYNC READ of the
+    same address and length ask the same; anything else, its instruction and parameters."""
+    if packet.instruction in (proto.Instruction.READ, proto.Instruction.SYNC_READ):
+        return b"R" + bytes(packet.params[:4])
+    return bytes([packet.instruction]) + bytes(packet.params)
+
+
+class _Replies:
+    """What one exchange of call ``call`` received, matched against the requests still
+    unanswered (``DynamixelBus._expected``, see ``DynamixelBus._exchange``)."""
+
+    def __init__(self, bus: DynamixelBus, call: int, expect: Mapping[int, int]) -> None:
+        self.bus = bus
+        self.call = call
+        self.expect = expect
+        self.got: dict[int, proto.StatusPacket] = {}
+        self.corrupt = 0
+        # late for an older call, it seemed: id -> (status, its latency sample as such)
+        self.set_aside: dict[int, tuple[proto.StatusPacket, float | None, bytes]] = {}
+        self.latency: float | None = None  # the latest of this call's replies, beyond nominal, s
+
+    @property
+    def complete(self) -> bool:
+        return all(i in self.got for i in self.expect)
+
+    def _wanted(self, status: proto.StatusPacket) -> bool:
+        n = self.expect.get(status.id)
+        return n is not None and status.id not in self.got and len(status.params) == n
+
+    def _answered(self, entry: _Expected, sid: int, now: float) -> float | None:
+        """``entry`` got its reply at ``now``: the other requests of its call to that servo
+        become spare. Returns the latency sample, or None when the reply may answer another
+        request of its call than ``entry`` (Karn's rule: a retry's, the first reply lost).
+        A spare entry's reply is a second answer to one call: the first was late, not lost,
+        and this one, the retry's, is as late as it says."""
+        others = [o for o in self.bus._expected.get(sid, ()) if o.call == entry.call]
+        for other in others:
+            other.spare = True  # surplus now: awaited only up to its attempt's deadline
+        if others and not entry.spare:
+            return None
+        return now - entry.sent_at - entry.nominal_s
+
+    def take(self, chunk: bytes) -> None:
+        """Decode ``chunk`` and sort what it holds: this call's replies, late ones of older
+        calls, corrupt frames."""
+        if not chunk:
+            return
+        bus = self.bus
+        now = time.monotonic()
+        for item in bus._decoder.feed(chunk):
+            if isinstance(item, proto.InstructionPacket):
+                continue  # our own echo
+            queue = bus._expected.get(item.id)
+            while queue and queue[0].expires < now:
+                queue.popleft()  # older than any reply can be: it was lost
+            if isinstance(item, proto.CorruptFrame):
+                entry = queue.popleft() if queue else None
+                bus.counters.crc_errors += 1
+                if entry is None or entry.call == self.call:
+                    self.corrupt += 1  # ours, or nobody's (its id may be damaged)
+                continue
+            entry = _match(queue, item)
+            if entry is _FORGOTTEN:
+                bus.counters.late_replies += 1  # for a request no longer remembered
+                continue
+            sample = None if entry is None else self._answered(entry, item.id, now)
+            if entry is not None and entry.call == self.call and entry.spare:
+                bus.counters.late_replies += 1  # an earlier attempt's, after a retry's
+                if sample is not None:
+                    bus.latency.add(sample)
+                continue
+            if entry is None or entry.call == self.call:
+                if item.id in self.expect and (entry is not None or self._wanted(item)):
+                    self.got.setdefault(item.id, item)  # unasked for but awaited: ours
+                    if sample is not None:
+                        self.latency = max(sample, self.latency or 0.0)
+                continue
+            if self._wanted(item):
+                # this call's if the request it was counted against lost its reply, unless
+                # this call's own comes too: its latency is known only then
+                self.set_aside[item.id] = (item, sample, entry.question)
+                continue
+            bus.counters.late_replies += 1
+            if sample is not None:  # an older call's first answer from this servo, late
+                bus.latency.add(sample)
+        for sid in [i for i in self.set_aside if i in self.got]:
+            _, sample, _ = self.set_aside.pop(sid)  # the servo's own answer came: that one was late
+            bus.counters.late_replies += 1
+            if sample is not None:
+                bus.latency.add(sample)
+
+    def take_set_aside(self, question: bytes) -> None:
+        """The attempt ends without some servos' replies: a reply of theirs set aside as
+        late was this call's after all (the request it was counted against had lost its
+        reply); take it, and forget this call's request it answered. Only a reply counted
+        against a request of the same ``question``: one that asked something else may be
+        that request's late answer, a wrong value for this call (the retry asks again)."""
+        for sid, (status, _, asked) in self.set_aside.items():
+            if sid in self.got:
+                continue
+            if asked != question:
+                self.bus.counters.late_replies += 1
+                continue
+            self.got[sid] = status
+            queue = self.bus._expected.get(sid, deque())
+            for k, entry in enumerate(queue):
+                if entry.call == self.call:
+                    del queue[k]
+                    break
+        self.set_aside.clear()
+
+
 class DynamixelBus:
     """Protocol 2.0 transactions over one serial port.
 
@@ -219,7 +457,10 @@ class DynamixelBus:
         port: serial device path or pyserial URL.
         baud: baud rate, bit/s (the Ergo Jr's XL-320s run at 1 Mbps).
         retries: extra attempts per call after a timeout or a corrupt packet.
-        latency_s: slack added to every timeout, s (adapter latency + OS).
+        latency_s: the least slack added to every timeout, s (adapter latency + OS); the bus
+            raises it to the latency it measures, up to ``max_latency_s``.
+        max_latency_s: the most slack the bus adapts to, s (a reply later than that, or than
+            ``latency_s`` if larger, counts as lost).
         return_delay_s: the servos' return delay time, s (``2 us x`` the register value).
         models: servo id -> Model, for the Hardware Error Status address (XL-320 if absent).
         connection: an already open serial-like object (tests, emulators); ``port`` is then
@@ -236,6 +477,7 @@ class DynamixelBus:
         return_delay_s: float = DEFAULT_RETURN_DELAY_S,
         models: Mapping[int, Model] | None = None,
         connection: SerialLike | None = None,
+        max_latency_s: float = MAX_LATENCY_S,
     ) -> None:
         if baud <= 0:
             raise BusError(f"baud rate must be positive, got {baud}")
@@ -243,10 +485,12 @@ class DynamixelBus:
             raise BusError(f"retries must be >= 0, got {retries}")
         if not latency_s >= 0:
             raise BusError(f"latency_s must be >= 0 s, got {latency_s}")
+        if not max_latency_s >= 0:
+            raise BusError(f"max_latency_s must be >= 0 s, got {max_latency_s}")
         self.port = port
         self.baud = baud
         self.retries = retries
-        self.latency_s = latency_s
+        self.latency = LatencyEstimate(latency_s, max_latency_s)
         self.return_delay_s = return_delay_s
         self.models: dict[int, Model] = dict(models or {})
         self.status_return_level = 2  # 2: every instruction gets a status (e-manual default)
@@ -261,6 +505,21 @@ class DynamixelBus:
             )
         )
         self._last_bad = 0
+        # status packets asked for and not yet received, per servo id, oldest first (a servo
+        # answers its requests in order); the call counter tells this call's from older ones
+        self._expected: dict[int, deque[_Expected]] = {}
+        self._call_no = 0
+
+    @property
+    def latency_s(self) -> float:
+        """The least slack of every timeout, s (``latency.floor``)."""
+        return self.latency.floor
+
+    @latency_s.setter
+    def latency_s(self, value: float) -> None:
+        if not value >= 0:
+            raise BusError(f"latency_s must be >= 0 s, got {value}")
+        self.latency.floor = value
 
     # ---- lifecycle ---------------------------------------------------------------------------
     @property
@@ -270,6 +529,8 @@ class DynamixelBus:
     def open(self) -> None:
         if self._serial is None:
             self._serial = open_serial(self.port, self.baud)
+            self._expected.clear()  # a new connection: nothing of the old one will come
+            self._decoder.reset()
 
     def close(self) -> None:
         """Close the port; never raises (a port that vanished may fail to close)."""
@@ -296,61 +557,125 @@ class DynamixelBus:
         """Seconds to move ``n_bytes`` at the baud rate (10 bits a byte)."""
         return n_bytes * BITS_PER_BYTE / self.baud
 
-    def timeout_for(self, request_bytes: int, reply_params: Sequence[int]) -> float:
-        """Time to wait for all status packets after sending ``request_bytes``, s.
+    def timeout_for(
+        self, request_bytes: int, reply_params: Sequence[int], attempt: int = 0
+    ) -> float:
+        """Time to wait for all status packets after sending ``request_bytes``, s: their wire
+        time and return delays, plus the slack of that attempt (``latency``).
 
         Args:
             request_bytes: length of the instruction packet on the wire.
             reply_params: parameter bytes of each expected status packet, in reply order.
+            attempt: 0 for a call's first attempt, 1 for its first retry...
         """
+        return self._nominal(request_bytes, reply_params) + self.latency.slack_of_attempt(attempt)
+
+    def _nominal(self, request_bytes: int, reply_params: Sequence[int]) -> float:
+        """Wire time of the request and the replies, and the replies' return delays, s."""
         reply_bytes = sum(STATUS_OVERHEAD + n for n in reply_params)
-        return (
-            self.wire_time(request_bytes + reply_bytes)
-            + len(reply_params) * self.return_delay_s
-            + self.latency_s
-        )
+        return self.wire_time(request_bytes + reply_bytes) + len(reply_params) * self.return_delay_s
 
     # ---- one exchange ------------------------------------------------------------------------
     def _exchange(
-        self, packet: proto.InstructionPacket, expect: Mapping[int, int]
+        self, packet: proto.InstructionPacket, expect: Mapping[int, int], attempt: int = 0
     ) -> tuple[dict[int, proto.StatusPacket], int]:
         """Send ``packet`` and collect status packets from the ids in ``expect`` (id -> number
-        of parameter bytes). Returns (replies by id, corrupt frames seen)."""
+        of parameter bytes). Returns (replies by id, corrupt frames of this call seen).
+
+        Replies are matched to requests by counting (``_Replies``): a servo answers its
+        requests in order, so its status packet first answers the oldest request of it not yet
+        answered. A late reply to an earlier call is so recognised and set aside
+        (``late_replies``) instead of being read as this call's answer, or as garbage; one to an
+        earlier attempt of this call answers it (the same question). The count corrects
+        itself: a reply nobody seems to wait for, but that this call does, is this call's; and
+        when this attempt ends without the reply of a servo, one set aside as late is taken
+        (the request it was counted against had lost its reply)."""
         if self._serial is None:
             raise BusError(f"Dynamixel bus {self.port} is not open")
         ser = self._serial
         wire = packet.encode()
+        replies = _Replies(self, self._call_no, expect)
         try:
-            ser.reset_input_buffer()  # late replies of an earlier call must not match this one
-            self._decoder.reset()
+            self._settle(ser)
+            replies.take(ser.read(ser.in_waiting) if ser.in_waiting else b"")
             ser.write(wire)
             ser.flush()
+            sent_at = time.monotonic()
             if not expect:
                 return {}, 0
-            deadline = time.monotonic() + self.timeout_for(len(wire), list(expect.values()))
-            got: dict[int, proto.StatusPacket] = {}
-            corrupt = 0
+            deadline = sent_at + self.timeout_for(len(wire), list(expect.values()), attempt)
+            self._register(expect, len(wire), sent_at, deadline, _question(packet))
             last_look = False
-            while len(got) < len(expect) and not last_look:
+            while not replies.complete and not last_look:
                 # once past the deadline, one last look at what already arrived: a host that
                 # was not scheduled for a while must not time out on a reply sitting in its
-                # buffer (the retry would flush it)
+                # buffer (the retry would ask again)
                 last_look = time.monotonic() >= deadline
                 self.guard.check()
                 chunk = ser.read(ser.in_waiting) if last_look else ser.read(max(1, ser.in_waiting))
-                if not chunk:
-                    continue
-                for item in self._decoder.feed(chunk):
-                    if isinstance(item, proto.CorruptFrame):
-                        corrupt += 1
-                        self.counters.crc_errors += 1
-                    elif isinstance(item, proto.StatusPacket) and item.id in expect:
-                        got.setdefault(item.id, item)
-                    # instruction packets are our own echo; other statuses are strays
-            return got, corrupt
+                replies.take(chunk)
+            if not replies.complete:
+                replies.take_set_aside(_question(packet))
+            if replies.latency is not None:
+                self.latency.add(replies.latency)
+            return replies.got, replies.corrupt
         except (OSError, _TermiosError) as exc:  # serial.SerialException: unplugged mid-run
             detail = " ".join(str(exc).split()) or type(exc).__name__
             raise PortLostError(f"Dynamixel bus {self.port} failed: {detail}") from exc
+
+    def _settle(self, ser: SerialLike) -> None:
+        """Before a new request: wait for the replies still due to surplus requests (the
+        retries of a call already answered, or the first attempt of one answered by its retry)
+        up to ``SPARE_PATIENCE`` times as long as their attempts waited, take one last look at
+        what arrived, then forget those requests. Without it the count drifts: a retry whose
+        first attempt's reply had been lost leaves a request nobody will answer, and the next
+        call's reply is counted against it; a late first attempt leaves a reply that the next
+        call would count against its own request, one call behind for good (and the latency
+        learnt would be the calls' spacing, not the replies')."""
+        pending = _Replies(self, -1, {})
+        while True:
+            now = time.monotonic()
+            due = [
+                e
+                for q in self._expected.values()
+                for e in q
+                if e.spare and e.sent_at + SPARE_PATIENCE * (e.deadline - e.sent_at) > now
+            ]
+            if not due:
+                break
+            self.guard.check()
+            pending.take(ser.read(max(1, ser.in_waiting)))
+        if ser.in_waiting:  # a host late to look must not forget a reply sitting in its buffer
+            pending.take(ser.read(ser.in_waiting))
+        for queue in self._expected.values():
+            kept = [e for e in queue if not e.spare]
+            queue.clear()
+            queue.extend(kept)
+
+    def _register(
+        self,
+        expect: Mapping[int, int],
+        request_bytes: int,
+        sent_at: float,
+        deadline: float,
+        question: bytes,
+    ) -> None:
+        """Note the status packets a request just sent asks for (in reply order), awaited
+        by its attempt until ``deadline`` (monotonic s)."""
+        params: list[int] = []
+        for sid, n in expect.items():
+            params.append(n)
+            queue = self._expected.setdefault(sid, deque())
+            while queue and queue[0].expires < sent_at:
+                queue.popleft()  # older than any reply can be: it was lost
+            nominal = self._nominal(request_bytes, params)
+            horizon = max(self.latency.longest, MATCH_HORIZON_S)
+            expires = sent_at + nominal + horizon
+            queue.append(
+                _Expected(self._call_no, n, sent_at, nominal, expires, False, deadline, question)
+            )
+            while len(queue) > MAX_OUTSTANDING:
+                queue.popleft()  # a servo this far behind is not answering: forget the oldest
 
     def _call(
         self,
@@ -376,6 +701,7 @@ class DynamixelBus:
         with self.guard.hold():
             self.guard.check()
             self.counters.calls += 1
+            self._call_no += 1
             self.last_call_retries = 0
             pending = dict(expect)
             data: dict[int, bytes] = {}
@@ -387,7 +713,7 @@ class DynamixelBus:
                     if attempt:
                         self.counters.retries += 1
                         self.last_call_retries += 1
-                    got, corrupt = self._exchange(build(list(pending)), pending)
+                    got, corrupt = self._exchange(build(list(pending)), pending, attempt)
                     if not pending:
                         return {}
                     self._take(got, pending, data, alerts, what, check_alert)

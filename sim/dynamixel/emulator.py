@@ -443,8 +443,11 @@ class EmulatedSerial:
         self.written += data
         if self.echo:
             self._due.append((now, bytes(data)))
-        self._due += [(now + d, wire) for d, wire in self.emulator.handle_bytes(bytes(data))]
-        self._due.sort(key=lambda x: x[0])
+        # one wire: a reply never overtakes an earlier one (a late reply delays those behind)
+        last = max((t for t, _ in self._due), default=now)
+        for d, wire in self.emulator.handle_bytes(bytes(data)):
+            last = max(last, now + d)
+            self._due.append((last, wire))
         return len(data)
 
     def _ready(self) -> bytes:
@@ -472,7 +475,9 @@ class EmulatedSerial:
         pass
 
     def reset_input_buffer(self) -> None:
-        self._due.clear()
+        """Drop what has arrived (as ``tcflush``): a reply still on its way comes later."""
+        now = time.monotonic()
+        self._due = [(t, w) for t, w in self._due if t > now]
 
     def close(self) -> None:
         self.is_open = False

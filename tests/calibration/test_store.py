@@ -120,3 +120,39 @@ def test_joints_and_arena_validation(tmp_path):
         )
     with pytest.raises(CalibrationError, match="'camera_position'"):
         store.save("arena", "r", {**arena, "camera_position": [0, 0, -1]}, tmp_path)
+
+
+def arena_payload(camera: dict) -> dict:
+    return {
+        "camera_matrix": camera["camera_matrix"],
+        "dist_coeffs": camera["dist_coeffs"],
+        "image_size": camera["image_size"],
+        "homography": np.eye(3),
+        "centre": [0.0, 0.0],
+        "radius": 0.2,
+    }
+
+
+def test_an_arena_made_before_the_camera_was_recalibrated_is_refused(tmp_path):
+    store.save("camera", "r", camera_payload(), tmp_path)
+    store.save("arena", "r", arena_payload(camera_payload()), tmp_path)
+    assert store.load("arena", "r", tmp_path)["radius"] == 0.2  # the same intrinsics: fine
+    recalibrated = np.array([[612.5, 0, 321], [0, 611.0, 239], [0, 0, 1]])
+    store.save("camera", "r", camera_payload(camera_matrix=recalibrated), tmp_path)
+    for load in (
+        lambda: store.load("arena", "r", tmp_path),
+        lambda: store.load_arena_file(tmp_path / "r" / "arena.json"),
+    ):
+        with pytest.raises(CalibrationError) as err:
+            load()
+        msg = str(err.value)
+        assert "fx 600.00 in the arena file, 612.50 in camera.json" in msg, msg
+        assert "ergo calibrate arena --rig-id r" in msg and "\n" not in msg
+    store.save("camera", "r", camera_payload(dist_coeffs=[-0.1, 0.0, 0.0, 0.0, 0.0]), tmp_path)
+    with pytest.raises(CalibrationError, match="dist_coeffs differs"):
+        store.load("arena", "r", tmp_path)
+
+
+def test_an_arena_without_a_camera_file_beside_it_is_read_as_it_is(tmp_path):
+    path = store.save("arena", "r", arena_payload(camera_payload()), tmp_path)
+    assert store.load_arena_file(path)["radius"] == 0.2

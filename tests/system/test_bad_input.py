@@ -254,3 +254,92 @@ def test_a_broken_calibration_file_gets_one_line_and_is_left_alone(tmp_path, tex
         load_file(path, kind="joints")
     assert message in str(exc.value) and "\n" not in str(exc.value)
     assert path.read_bytes() == before
+
+
+def test_a_calibration_file_of_binary_garbage_gets_one_line(tmp_path, capsys, monkeypatch):
+    from calibration.store import CalibrationError, load_file
+
+    rig = tmp_path / "cal" / "r1"
+    rig.mkdir(parents=True)
+    garbage = bytes(range(0x80, 0x100)) * 3
+    for kind in ("joints", "arena"):
+        (rig / f"{kind}.json").write_bytes(garbage)
+    with pytest.raises(CalibrationError, match="binary data at byte 0") as exc:
+        load_file(rig / "joints.json", kind="joints")
+    assert "\n" not in str(exc.value)
+    monkeypatch.setenv("ERGO_CALIBRATION_DIR", str(tmp_path / "cal"))
+    main(["calibrate", "show", "--rig-id", "r1"])
+    out = capsys.readouterr()
+    assert "Traceback" not in out.err
+    assert "arena: INVALID" in out.out and "joints: INVALID" in out.out
+    # explore refuses a damaged arena file even for a strategy that needs no ball (a missing
+    # one only warns): nothing made, the file left alone
+    monkeypatch.chdir(tmp_path)
+    args = ["explore", "--rig", "dynamixel", "--rig-id", "r1", "--port", "/dev/ttyNOPE",
+            "--episodes", "1", "--out", "run", "--no-progress"]  # fmt: skip
+    code, err = _run_cli(args, capsys)
+    assert code == 2 and "binary data" in err and len(err.splitlines()) == 1, err
+    assert not (tmp_path / "run").exists()
+    assert (rig / "arena.json").read_bytes() == garbage
+
+
+def test_a_missing_port_is_named_before_the_camera_and_leaves_no_run(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("ERGO_CALIBRATION_DIR", str(tmp_path / "cal"))
+    args = ["explore", "--rig", "dynamixel", "--port", "/dev/ttyNOPE", "--episodes", "1",
+            "--out", "run", "--no-progress", "--rerun", "save"]  # fmt: skip
+    for _ in range(2):  # the same command, again: nothing left blocks it
+        code, err = _run_cli(args, capsys)
+        assert code == 2 and "/dev/ttyNOPE: no such port" in err, err
+        assert "camera" not in err and len(err.splitlines()) == 1, err
+        assert not (tmp_path / "run").exists()
+
+
+def test_a_second_run_on_a_busy_port_with_a_url_camera_is_refused_in_one_line(tmp_path):
+    """Was: `FATAL: exception not rethrown`, rc 134 (the camera's stream thread was running
+    when the busy port ended the process); the arm now connects before the camera."""
+    import os
+    import subprocess
+    import sys
+
+    import serial
+
+    from sim.dynamixel.emulator import DynamixelEmulator
+    from sim.dynamixel.server import PtyBusServer
+    from sim.mjpeg_server import MjpegServer, TwinFrames
+    from sim.twin import Twin
+
+    twin = Twin(render_size=(64, 64))
+    try:
+        with (
+            PtyBusServer(DynamixelEmulator(twin)) as server,
+            MjpegServer(TwinFrames(twin), fps=10) as camera,
+            serial.Serial(server.path, exclusive=True),  # the first run holds the port
+        ):
+            cmd = [sys.executable, "-m", "explore.cli", "explore", "--rig", "dynamixel",
+                   "--port", server.path, "--camera", camera.url, "--episodes", "1",
+                   "--out", str(tmp_path / "run"), "--no-progress", "--rerun", "off"]  # fmt: skip
+            env = {**os.environ, "ERGO_CALIBRATION_DIR": str(tmp_path / "cal")}
+            done = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=env)
+    finally:
+        twin.close()
+    last = done.stderr.strip().splitlines()[-1]
+    assert done.returncode == 2, done.stderr
+    assert "port busy" in last and server.path in last, done.stderr
+    assert not (tmp_path / "run").exists()
+
+
+def test_report_on_a_run_json_with_a_null_seed_gets_one_line(good_run, tmp_path, capsys):
+    run = _edited(good_run, tmp_path, lambda m: m["config"].update(seed=None))
+    before = _bytes_of(run)
+    code, err = _run_cli(["report", str(run)], capsys)
+    assert code == 2 and "config.seed" in err and len(err.splitlines()) == 1, err
+    assert _bytes_of(run) == before
+
+
+def test_out_under_a_regular_file_gets_one_line(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "afile").write_text("mine")
+    code, err = _run_cli(["explore", "--episodes", "1", "--out", "afile/run"], capsys)
+    assert code == 2 and "afile is a file" in err and len(err.splitlines()) == 1, err
+    assert (tmp_path / "afile").read_text() == "mine"

@@ -5,6 +5,7 @@ values against the runs' histories, and bad input refused in one line with nothi
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -16,7 +17,8 @@ import pytest
 from explore.cli import main
 from explore.export.episodes import ExportError
 from explore.export.lerobot import VIDEO_KEY, export_lerobot
-from explore.runs.store import read_frames, read_history, writer_lock
+from explore.runs.lock import run_lock
+from explore.runs.store import read_frames, read_history
 
 pa = pytest.importorskip("pyarrow")
 pq = pytest.importorskip("pyarrow.parquet")
@@ -215,11 +217,12 @@ def _one_line(args: list[str], capsys) -> str:
 
 
 def test_a_run_being_written_is_refused(runs, tmp_path, capsys):
-    with writer_lock(runs["goals"]):
+    with run_lock(runs["goals"]):
         err = _one_line(
             ["export", "lerobot", str(runs["goals"]), "--out", str(tmp_path / "o")], capsys
         )
     assert "is being written" in err and not (tmp_path / "o").exists()
+    assert f"pid {os.getpid()}" in err  # the holder named
 
 
 def test_a_damaged_history_is_refused_and_left_as_it_was(runs, tmp_path, capsys):

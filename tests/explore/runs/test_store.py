@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -124,7 +125,8 @@ def _unsynced_run(path, monkeypatch, n=6, synced_after=2):
     for k in range(n):
         s.append(make_record(k))
         now[0] += 1.0 if k + 1 < synced_after else 0.0
-    s._fh.close()  # a crash: no close(), no final sync
+    os.close(s._fd)  # a crash: no close(), no final sync
+    s._fd = None
     return (path / "history.bin").read_bytes(), store_module.read_synced(path)
 
 

@@ -93,13 +93,25 @@ def test_dmp_trajectory_is_followed(rig) -> None:
     theta = np.random.default_rng(3).uniform(-1, 1, 48)
     trajectory = Dmp(DmpConfig(lower=FREE_LOWER, upper=FREE_UPPER)).trajectory(theta)  # (40, 6)
     sent, measured = [], []
+    old_ticks = 0
     with make_arm(can) as arm:
         arm.set_torque(True)
         assert enabled(drives) == [1, 2, 3, 4, 5, 6] and twin.torque_enabled()
+        before = twin.joint_positions()
         for q in np.vstack([trajectory, np.repeat(trajectory[-1:], 40, axis=0)]):
             sent.append(arm.command(q))
             measured.append(arm.read().positions)
-            assert np.allclose(measured[-1], twin.joint_positions(), atol=1e-3)
+            now = twin.joint_positions()
+            fresh = np.isclose(measured[-1], now, atol=1e-3)
+            if not fresh.all():
+                # a loaded machine: a drive's TPDO came after the cycle's timeout (counted),
+                # and its position is then one cycle old (robot/canopen/arm.py), for a few
+                # cycles more when that late TPDO is taken for the next SYNC's: never older
+                assert arm.net.stats["late_cycles"] > 0
+                assert np.isclose(measured[-1], before, atol=1e-3)[~fresh].all()
+                old_ticks += 1
+            before = now
+    assert old_ticks < 40, f"{old_ticks} of 80 readings one cycle old"
     sent, measured = np.array(sent), np.array(measured)
     # the drives moved the twin where the commands went: settled at the end, close throughout
     # (SimArm on the same commands: 0.009 rad at the end, 0.004 rms holding, 0.09 max moving)

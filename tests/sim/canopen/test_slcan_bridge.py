@@ -69,3 +69,30 @@ def test_frames_left_by_a_client_that_died_with_the_channel_open_are_dropped(
     with serial.Serial(bridge.port, timeout=0.3) as second:
         second.write(b"C\r")
         assert read_until(second, 64) == b"\r"  # only the reply to C, no stale frame
+
+
+def test_open_bus_returns_once_the_bridge_has_handled_the_opening_commands(
+    bridge_and_bus, monkeypatch
+) -> None:
+    """The bridge drops what a dead client left queued when the next one sends C (a flush of
+    the pty). On a loaded machine it handled C after the new client's reader had started
+    (python-can writes C, S, O without reading): a flush between that reader's select() and
+    read() makes the read return nothing, and pyserial raises "device reports readiness to
+    read but returned no data". ``open_bus`` returns once the bridge has answered them, so no
+    reader runs before the flush is over."""
+    from robot.canopen.bus import open_bus
+
+    bridge, _ = bridge_and_bus
+    handle = bridge.adapter.handle
+
+    def late(line):  # a bridge thread that a busy machine schedules late
+        if line == b"C":
+            time.sleep(0.3)
+        return handle(line)
+
+    monkeypatch.setattr(bridge.adapter, "handle", late)
+    client = open_bus(f"slcan:{bridge.port}")
+    try:
+        assert bridge.adapter.is_open  # C, S, the empty command and O all handled
+    finally:
+        client.shutdown()

@@ -1,0 +1,76 @@
+"""``ergo runs check RUN`` and ``ergo runs salvage RUN``: what a run folder's history holds, and
+keeping every good record of a damaged one so that the run can resume
+(``explore/runs/repair.py``)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from explore.cli import CliError
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "runs",
+        help="check a run folder's history, or salvage a damaged one",
+        description="Check or salvage a run folder (nothing is ever deleted).",
+    )
+    cmds = p.add_subparsers(dest="runs_command", metavar="ACTION")
+    cmds.required = True
+    check = cmds.add_parser(
+        "check",
+        help="say what the history holds: good records, damage, missing episodes (exit 1 if "
+        "it cannot be resumed as it is)",
+    )
+    check.add_argument("run", type=Path, metavar="RUN")
+    check.set_defaults(func=run_check)
+    salvage = cmds.add_parser(
+        "salvage",
+        help="keep the history's good records in order, move the rest to RUN/salvage/N/, and "
+        "let the run resume",
+    )
+    salvage.add_argument("run", type=Path, metavar="RUN")
+    salvage.set_defaults(func=run_salvage)
+
+
+def run_check(args: argparse.Namespace) -> int:
+    from explore.runs.lock import describe_holder, holder_of
+    from explore.runs.repair import describe, survey
+    from explore.runs.store import RunStoreError
+
+    try:
+        s = survey(args.run)
+    except RunStoreError as exc:
+        raise CliError(str(exc)) from exc
+    print(f"{args.run}:")
+    holder = holder_of(args.run)
+    if holder is not None:
+        print(f"being written now by {describe_holder(holder)}")
+    for line in describe(args.run, s):
+        print(f"  {line}")
+    return 1 if s.needs_salvage else 0
+
+
+def run_salvage(args: argparse.Namespace) -> int:
+    from explore.runs.repair import salvage
+    from explore.runs.store import RunStoreError
+
+    try:
+        r = salvage(args.run)
+    except RunStoreError as exc:
+        raise CliError(str(exc)) from exc
+    if r.folder is None:
+        print(f"{args.run}: nothing to salvage: {r.kept} episode(s), all in order", file=sys.stderr)
+        return 0
+    print(
+        f"{args.run}: kept episodes 0..{r.kept - 1} ({r.kept}) as the history; moved "
+        f"{r.beyond} good record(s) that did not follow on and {r.damaged_bytes} damaged "
+        f"byte(s) to {r.folder}; resume with: ergo explore --resume {args.run}"
+        if r.kept
+        else f"{args.run}: no episode could be kept in order; moved {r.beyond} good record(s) "
+        f"and {r.damaged_bytes} damaged byte(s) to {r.folder}; start again with: ergo explore "
+        f"--resume {args.run}"
+    )
+    return 0

@@ -1,0 +1,331 @@
+"""Checking and salvaging a run's history (``ergo runs check RUN``, ``ergo runs salvage RUN``).
+
+``survey`` walks ``history.bin`` without trusting it (the framing is in
+``explore/runs/store.py``): at each offset, a record whose marker and checksum hold and whose
+payload decodes is good; anything else is damaged, up to the next offset where a good record
+starts (found by its marker, then its checksum: a payload holding the marker by chance fails
+its own checksum there). A damaged last record that runs to the end of the file is a torn
+tail (a crash mid-append), which opening the run cuts anyway. The run can resume from its
+longest prefix of good records numbered 0, 1, 2, ...
+
+``salvage`` (under the run's writer lock) keeps that prefix as the history and moves
+everything after it, without losing a byte, to ``RUN/salvage/N/`` (N = 1, 2, ...: a later
+salvage never overwrites an earlier one):
+
+- ``damaged.bin``: the bytes of the damaged spans (and a torn tail), one after the other;
+- ``kept.bin``: the good records after the first damage, framed as in ``history.bin``
+  (``iter_records`` reads them). They cannot be replayed without the episodes lost before
+  them, so the resumed run re-runs those episodes; on the deterministic twin it re-creates
+  them exactly;
+- ``salvage.json``: every piece of the old history (offsets, what it was, which file and
+  where it went now), the counts. Concatenating the pieces in order gives the old file back.
+
+How many episodes a run had stored is witnessed by ``metrics.csv``, which the writer appends
+after each stored episode (and rewrites from the history on resume): a history cut short,
+emptied or deleted shows as fewer episodes than it recorded (``Survey.missing``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+import zlib
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+from explore.runs.lock import run_lock
+from explore.runs.metrics import recorded_episodes
+from explore.runs.record import EpisodeRecord, RecordError
+from explore.runs.store import HEADER, MAGIC, RunStore, RunStoreError
+
+SALVAGE_DIR = "salvage"
+
+Kind = Literal["record", "damaged", "torn"]
+
+
+@dataclass(frozen=True)
+class Piece:
+    """A span of ``history.bin``: ``start``/``end`` byte offsets; ``episode`` of a good record;
+    ``why`` a damaged span is damaged."""
+
+    start: int
+    end: int
+    kind: Kind
+    episode: int | None = None
+    why: str = ""
+
+    @property
+    def size(self) -> int:
+        return self.end - self.start
+
+
+@dataclass
+class Survey:
+    """What ``history.bin`` holds.
+
+    Attributes:
+        size: bytes of the file (0 when missing).
+        pieces: the file cut into good records and damaged spans, in order, covering it all.
+        prefix: episodes 0..prefix-1 stored in order from the start, with nothing between.
+        prefix_end: byte offset where that prefix ends.
+        recorded: episodes the run had stored as ``metrics.csv`` says, None without it.
+        exists: whether ``history.bin`` exists.
+    """
+
+    size: int
+    pieces: list[Piece] = field(default_factory=list)
+    prefix: int = 0
+    prefix_end: int = 0
+    recorded: int | None = None
+    exists: bool = True
+
+    @property
+    def good(self) -> list[Piece]:
+        return [p for p in self.pieces if p.kind == "record"]
+
+    @property
+    def damaged(self) -> list[Piece]:
+        return [p for p in self.pieces if p.kind == "damaged"]
+
+    @property
+    def torn(self) -> Piece | None:
+        return next((p for p in self.pieces if p.kind == "torn"), None)
+
+    @property
+    def beyond(self) -> list[Piece]:
+        """Good records after the resumable prefix (after a damage, a gap or a duplicate)."""
+        return [p for p in self.good if p.start >= self.prefix_end]
+
+    @property
+    def missing(self) -> int:
+        """Episodes the run had stored that its resumable history lacks."""
+        return max(0, (self.recorded or 0) - self.prefix)
+
+    @property
+    def needs_salvage(self) -> bool:
+        """Whether the run cannot be resumed as it is (damage, or records that do not follow
+        on)."""
+        return bool(self.damaged or self.beyond)
+
+
+def _record_at(data: bytes, pos: int) -> tuple[int, int | None, str]:
+    """(end, episode, why) of the record at ``pos``: episode None and ``why`` when it is not
+    a good record; end is then where its header says it ends (may be past the data)."""
+    n = len(data)
+    if n - pos < HEADER.size:
+        return n, None, "torn header"
+    magic, length, crc = HEADER.unpack_from(data, pos)
+    if magic != MAGIC:
+        return pos + 1, None, "bad record marker"
+    start, end = pos + HEADER.size, pos + HEADER.size + length
+    if end > n:
+        return end, None, "record runs past the end of the file"
+    if zlib.crc32(data[start:end]) != crc:
+        return end, None, "checksum mismatch"
+    try:
+        rec = EpisodeRecord.from_bytes(data[start:end])
+    except RecordError as exc:
+        return end, None, f"undecodable record ({exc})"
+    return end, rec.episode, ""
+
+
+def _next_good(data: bytes, pos: int) -> int:
+    """Offset of the next good record after ``pos``, or ``len(data)``."""
+    at = pos
+    while True:
+        at = data.find(MAGIC, at + 1)
+        if at < 0:
+            return len(data)
+        if _record_at(data, at)[1] is not None:
+            return at
+
+
+def survey_bytes(data: bytes) -> Survey:
+    """Cut ``data`` (a ``history.bin``'s bytes) into pieces; no witness (see ``survey``)."""
+    s = Survey(size=len(data))
+    pos = 0
+    in_prefix = True
+    while pos < len(data):
+        end, episode, why = _record_at(data, pos)
+        if episode is not None:
+            s.pieces.append(Piece(pos, end, "record", episode))
+            if in_prefix and episode == s.prefix:
+                s.prefix += 1
+                s.prefix_end = end
+            else:
+                in_prefix = False
+            pos = end
+            continue
+        nxt = _next_good(data, pos)
+        torn = nxt == len(data) and why != "bad record marker" and end >= len(data)
+        s.pieces.append(Piece(pos, nxt, "torn" if torn else "damaged", why=why))
+        in_prefix = in_prefix and torn
+        pos = nxt
+    return s
+
+
+def survey(run: str | Path) -> Survey:
+    """Survey ``RUN/history.bin`` (read only: safe while another process writes the run)."""
+    run = Path(run)
+    RunStore.read_meta(run)  # a one-line error for a folder that holds no run
+    path = run / "history.bin"
+    try:
+        data = path.read_bytes()
+        s = survey_bytes(data)
+    except FileNotFoundError:
+        s = Survey(size=0, exists=False)
+    s.recorded = recorded_episodes(run)
+    return s
+
+
+def _episodes(pieces: list[Piece]) -> str:
+    eps = [p.episode for p in pieces if p.episode is not None]
+    if not eps:
+        return "none"
+    if eps == list(range(eps[0], eps[-1] + 1)):
+        return f"{eps[0]}..{eps[-1]}" if len(eps) > 1 else str(eps[0])
+    return ", ".join(map(str, eps[:8])) + (", ..." if len(eps) > 8 else "")
+
+
+def describe(run: Path, s: Survey) -> list[str]:
+    """The lines ``ergo runs check`` prints (the last one is the verdict)."""
+    lines = []
+    if not s.exists:
+        lines.append("history.bin: missing")
+    else:
+        dmg = s.damaged
+        where = ", ".join(f"{p.size} bytes at byte {p.start} ({p.why})" for p in dmg[:3])
+        lines.append(
+            f"history.bin: {s.size} bytes, {len(s.good)} good record(s), {len(dmg)} damaged "
+            f"span(s){': ' + where if dmg else ''}"
+            + (f"{'...' if len(dmg) > 3 else ''}" if dmg else "")
+            + (f", a torn tail of {s.torn.size} bytes (cut on resume)" if s.torn else "")
+        )
+    lines.append(f"resumable history: episodes {_episodes(s.good[: s.prefix])} ({s.prefix})")
+    if s.beyond:
+        lines.append(
+            f"good records after it: {len(s.beyond)} (episodes {_episodes(s.beyond)}); they do "
+            "not follow on and cannot be replayed"
+        )
+    if s.recorded is not None:
+        lines.append(
+            f"metrics.csv recorded {s.recorded} episode(s) stored: "
+            + (f"{s.missing} missing from the history" if s.missing else "none missing")
+        )
+    if s.needs_salvage:
+        lines.append(
+            f"damaged: `ergo runs salvage {run}` keeps episodes 0..{s.prefix - 1} as the "
+            "history, moves the rest aside (nothing deleted) and lets the run resume"
+            if s.prefix
+            else f"damaged: `ergo runs salvage {run}` moves the history aside (nothing "
+            "deleted) and lets the run start again from episode 0"
+        )
+    elif s.missing:
+        lines.append(
+            f"resumable, {s.missing} episode(s) short of what it had stored: "
+            f"`ergo explore --resume {run}` re-runs them"
+        )
+    else:
+        lines.append("ok: resumable as it is")
+    return lines
+
+
+@dataclass(frozen=True)
+class SalvageResult:
+    """What ``salvage`` did: ``folder`` where the rest went (None when nothing needed moving)."""
+
+    kept: int
+    beyond: int
+    damaged_bytes: int
+    folder: Path | None
+    missing: int
+
+
+def _fsync_write(path: Path, chunks: Iterator[bytes]) -> int:
+    n = 0
+    with open(path, "xb") as f:
+        for chunk in chunks:
+            f.write(chunk)
+            n += len(chunk)
+        f.flush()
+        os.fsync(f.fileno())
+    return n
+
+
+def _fsync_dir(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def salvage(run: str | Path) -> SalvageResult:
+    """Keep the resumable prefix of ``RUN/history.bin`` and move the rest to
+    ``RUN/salvage/N/`` (see the module's docstring). Takes the run's writer lock: refused
+    (``RunLockedError``) while another process writes the run."""
+    run = Path(run)
+    RunStore.read_meta(run)
+    with run_lock(run):
+        path = run / "history.bin"
+        data = path.read_bytes() if path.exists() else b""
+        s = survey_bytes(data)
+        s.recorded = recorded_episodes(run)
+        rest = [p for p in s.pieces if p.start >= s.prefix_end]
+        if not rest:
+            return SalvageResult(s.prefix, 0, 0, None, s.missing)
+        base = run / SALVAGE_DIR
+        base.mkdir(exist_ok=True)
+        k = 1
+        while (base / str(k)).exists():
+            k += 1
+        folder = base / str(k)
+        folder.mkdir()
+        damaged = [p for p in rest if p.kind != "record"]
+        kept = [p for p in rest if p.kind == "record"]
+        try:
+            _fsync_write(folder / "damaged.bin", (data[p.start : p.end] for p in damaged))
+            _fsync_write(folder / "kept.bin", (data[p.start : p.end] for p in kept))
+            placed: list[dict[str, object]] = []
+            offsets = {"damaged.bin": 0, "kept.bin": 0}
+            for p in s.pieces:
+                if p.start < s.prefix_end:
+                    to, at = "history.bin", p.start
+                else:
+                    to = "kept.bin" if p.kind == "record" else "damaged.bin"
+                    at = offsets[to]
+                    offsets[to] += p.size
+                placed.append(
+                    {"start": p.start, "end": p.end, "kind": p.kind, "episode": p.episode,
+                     "why": p.why, "file": to, "at": at}
+                )  # fmt: skip
+            report = {
+                "salvaged": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                "history_bytes_before": len(data),
+                "kept_in_history": s.prefix,
+                "good_records_moved": len(kept),
+                "damaged_bytes_moved": sum(p.size for p in damaged),
+                "recorded_in_metrics": s.recorded,
+                "pieces": placed,
+            }
+            _fsync_write(folder / "salvage.json", iter([json.dumps(report, indent=1).encode()]))
+            _fsync_dir(folder)
+            with open(path, "r+b") as f:  # the rest is safe on disk: cut it from the history
+                f.truncate(s.prefix_end)
+                os.fsync(f.fileno())
+        except OSError as exc:
+            raise RunStoreError(
+                f"cannot salvage {run}: {exc.strerror or exc}; history.bin left as it was"
+            ) from exc
+        return SalvageResult(s.prefix, len(kept), sum(p.size for p in damaged), folder, s.missing)
+
+
+def iter_records(path: str | Path) -> Iterator[EpisodeRecord]:
+    """The good records of a file framed as ``history.bin`` (e.g. a salvage's ``kept.bin``),
+    skipping anything damaged."""
+    data = Path(path).read_bytes()
+    for p in survey_bytes(data).good:
+        yield EpisodeRecord.from_bytes(data[p.start + HEADER.size : p.end])
