@@ -596,7 +596,8 @@ class DynamixelBus:
         wire = packet.encode()
         replies = _Replies(self, self._call_no, expect)
         try:
-            self._settle(ser)
+            if expect:
+                self._settle(ser, expect)
             replies.take(ser.read(ser.in_waiting) if ser.in_waiting else b"")
             ser.write(wire)
             ser.flush()
@@ -623,34 +624,44 @@ class DynamixelBus:
             detail = " ".join(str(exc).split()) or type(exc).__name__
             raise PortLostError(f"Dynamixel bus {self.port} failed: {detail}") from exc
 
-    def _settle(self, ser: SerialLike) -> None:
-        """Before a new request: wait for the replies still due to surplus requests (the
-        retries of a call already answered, or the first attempt of one answered by its retry)
-        up to ``SPARE_PATIENCE`` times as long as their attempts waited, take one last look at
-        what arrived, then forget those requests. Without it the count drifts: a retry whose
-        first attempt's reply had been lost leaves a request nobody will answer, and the next
-        call's reply is counted against it; a late first attempt leaves a reply that the next
-        call would count against its own request, one call behind for good (and the latency
-        learnt would be the calls' spacing, not the replies')."""
+    def _settle(self, ser: SerialLike, expect: Mapping[int, int]) -> None:
+        """Before a request that expects ``expect`` (id -> parameter bytes): wait for the
+        replies still due to surplus requests of the same servos and reply size (the retries
+        of a call already answered, or the first attempt of one answered by its retry) up to
+        ``SPARE_PATIENCE`` times as long as their attempts waited, take one last look at what
+        arrived, then forget those requests. Without it the count drifts: a retry whose first
+        attempt's reply had been lost leaves a request nobody will answer, and the next call's
+        reply is counted against it; a late first attempt leaves a reply that the next call
+        would count against its own request, one call behind for good (and the latency learnt
+        would be the calls' spacing, not the replies'). A request of another size waits for
+        nothing (a reply is matched by its size: a torque-off WRITE never waits behind a
+        READ's retries), nor does one that expects no reply (a broadcast)."""
+
+        def surplus() -> list[_Expected]:
+            return [
+                e
+                for sid, n in expect.items()
+                for e in self._expected.get(sid, ())
+                if e.spare and e.n_params == n
+            ]
+
         pending = _Replies(self, -1, {})
         while True:
             now = time.monotonic()
-            due = [
-                e
-                for q in self._expected.values()
-                for e in q
-                if e.spare and e.sent_at + SPARE_PATIENCE * (e.deadline - e.sent_at) > now
-            ]
-            if not due:
+            if not any(e.sent_at + SPARE_PATIENCE * (e.deadline - e.sent_at) > now
+                       for e in surplus()):  # fmt: skip
                 break
             self.guard.check()
             pending.take(ser.read(max(1, ser.in_waiting)))
         if ser.in_waiting:  # a host late to look must not forget a reply sitting in its buffer
             pending.take(ser.read(ser.in_waiting))
-        for queue in self._expected.values():
-            kept = [e for e in queue if not e.spare]
-            queue.clear()
-            queue.extend(kept)
+        gone = {id(e) for e in surplus()}
+        for sid in expect:
+            queue = self._expected.get(sid)
+            if queue:
+                kept = [e for e in queue if id(e) not in gone]
+                queue.clear()
+                queue.extend(kept)
 
     def _register(
         self,
