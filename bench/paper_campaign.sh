@@ -81,7 +81,7 @@ campaign "$OUT/stay" "$EPISODES" mge-vae,rge-online "${LEARNED[@]}"
 report "$OUT/stay"
 
 # ---- the exploration each training seed's model gives (the representation table) ---------------
-for kind in sae vae; do
+for kind in sae vae betavae; do
     for s in $(ls "$OUT/models/$kind" | sed -n 's/^seed-//p'); do
         "$ERGO" experiment --out "$OUT/per_model/$kind-$s" --strategies "rge-$kind" \
             --seeds 100-100 --episodes 1500 --jobs 1 --no-progress --no-report \

@@ -79,7 +79,8 @@ def rows_for(out: Path, name: str) -> list[str]:
         if distractor is not None:
             r2 += f" / {linear_r2(code, distractor, train, test):.3f}"
         crit = model.config.heldout_explained_variance
-        cells = final_cells(out / "per_model" / f"{kind}-{seed}" / f"rge-{kind}" / "seed-100")
+        # the exploration of this model (the campaign script's per_model/NAME-SEED/rge-NAME)
+        cells = final_cells(out / "per_model" / f"{name}-{seed}" / f"rge-{name}" / "seed-100")
         rows.append(
             f"| {name} | {seed}{' (chosen)' if seed == chosen else ''} | {r2} | {kl} | "
             f"{crit:.3f} | {'-' if cells is None else cells} |"
