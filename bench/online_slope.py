@@ -1,6 +1,7 @@
 """RGE-Online's slope after its switch against RPE's, per seed, from a campaign folder.
 
-    .venv/bin/python bench/online_slope.py runs/paper/stay [--switch 2000] [--end 5000]
+    .venv/bin/python bench/online_slope.py runs/paper/stay [--switch 2000] [--end 5000] \
+        [--figure docs/img/results_final_online.png]
 
 The slope is the ball cells gained per 1000 episodes from the switch (rge-online's bootstrap
 length, 2000 by default: its first episodes are RPE's with the same seed) to ``--end``, read
@@ -38,11 +39,46 @@ def slopes(strategy_dir: Path, switch: int, end: int) -> dict[str, float]:
     return out
 
 
+def curves(strategy_dir: Path, end: int) -> np.ndarray:
+    """Ball cells after each episode, shape (runs, end), of the runs that reach ``end``."""
+    out = []
+    for run in sorted(strategy_dir.glob("seed-*")):
+        with (run / "metrics.csv").open() as f:
+            cells = [int(row["ball_cells"]) for row in csv.DictReader(f)][:end]
+        if len(cells) == end:
+            out.append(cells)
+    return np.array(out, dtype=float)
+
+
+def figure(campaign: Path, switch: int, end: int, path: Path) -> None:
+    """Mean ± sd of the ball cells against episodes, RPE and RGE-Online, the switch marked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    x = np.arange(1, end + 1)
+    for name, colour in (("rpe", "tab:gray"), ("rge-online", "tab:purple")):
+        c = curves(campaign / name, end)
+        m, sd = c.mean(axis=0), c.std(axis=0, ddof=1)
+        ax.plot(x, m, color=colour, label=f"{name} ({len(c)} seeds)")
+        ax.fill_between(x, m - sd, m + sd, color=colour, alpha=0.2)
+    ax.axvline(switch, color="k", lw=0.8, ls="--", label="switch (VAE trained)")
+    ax.set_xlabel("episodes")
+    ax.set_ylabel("ball cells reached")
+    ax.legend(loc="upper left")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    print(f"figure: {path}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("campaign", type=Path)
     ap.add_argument("--switch", type=int, default=2000, help="rge-online's bootstrap length")
     ap.add_argument("--end", type=int, default=5000, help="the last episode counted")
+    ap.add_argument("--figure", type=Path, help="write the curves' figure there (PNG)")
     args = ap.parse_args()
     found = {}
     for name in ("rpe", "rge-online"):
@@ -56,6 +92,8 @@ def main() -> None:
     t = stats.ttest_ind(found["rge-online"], found["rpe"], equal_var=False, alternative="greater")
     ratio = found["rge-online"].mean() / found["rpe"].mean()
     print(f"rge-online / rpe: {ratio:.2f}x, Welch one-sided p = {t.pvalue:.2g}")
+    if args.figure:
+        figure(args.campaign, args.switch, args.end, args.figure)
 
 
 if __name__ == "__main__":
