@@ -20,37 +20,30 @@ import numpy as np
 from scipy import stats
 
 
-def cells_at(metrics: Path, episodes: int) -> int | None:
-    """Ball cells after the first ``episodes`` episodes, or None when the run is shorter."""
-    with metrics.open() as f:
-        for row in csv.DictReader(f):
-            if int(row["episode"]) == episodes - 1:
-                return int(row["ball_cells"])
-    return None
-
-
-def slopes(strategy_dir: Path, switch: int, end: int) -> dict[str, float]:
-    """seed folder name -> cells gained per 1000 episodes over [switch, end)."""
+def cells_per_run(strategy_dir: Path) -> dict[str, list[int]]:
+    """seed folder name -> ball cells after each episode (``metrics.csv``), in episode order."""
     out = {}
     for run in sorted(strategy_dir.glob("seed-*")):
-        a, b = cells_at(run / "metrics.csv", switch), cells_at(run / "metrics.csv", end)
-        if a is not None and b is not None:
-            out[run.name] = (b - a) * 1000.0 / (end - switch)
+        with (run / "metrics.csv").open() as f:
+            out[run.name] = [int(row["ball_cells"]) for row in csv.DictReader(f)]
     return out
 
 
-def curves(strategy_dir: Path, end: int) -> np.ndarray:
+def slopes(runs: dict[str, list[int]], switch: int, end: int) -> dict[str, float]:
+    """seed -> cells gained per 1000 episodes over [switch, end), for the runs that reach end."""
+    return {
+        seed: (cells[end - 1] - cells[switch - 1]) * 1000.0 / (end - switch)
+        for seed, cells in runs.items()
+        if len(cells) >= end
+    }
+
+
+def curves(runs: dict[str, list[int]], end: int) -> np.ndarray:
     """Ball cells after each episode, shape (runs, end), of the runs that reach ``end``."""
-    out = []
-    for run in sorted(strategy_dir.glob("seed-*")):
-        with (run / "metrics.csv").open() as f:
-            cells = [int(row["ball_cells"]) for row in csv.DictReader(f)][:end]
-        if len(cells) == end:
-            out.append(cells)
-    return np.array(out, dtype=float)
+    return np.array([cells[:end] for cells in runs.values() if len(cells) >= end], dtype=float)
 
 
-def figure(campaign: Path, switch: int, end: int, path: Path) -> None:
+def figure(runs: dict[str, dict[str, list[int]]], switch: int, end: int, path: Path) -> None:
     """Mean ± sd of the ball cells against episodes, RPE and RGE-Online, the switch marked."""
     import matplotlib
 
@@ -60,7 +53,7 @@ def figure(campaign: Path, switch: int, end: int, path: Path) -> None:
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
     x = np.arange(1, end + 1)
     for name, colour in (("rpe", "tab:gray"), ("rge-online", "tab:purple")):
-        c = curves(campaign / name, end)
+        c = curves(runs[name], end)
         m, sd = c.mean(axis=0), c.std(axis=0, ddof=1)
         ax.plot(x, m, color=colour, label=f"{name} ({len(c)} seeds)")
         ax.fill_between(x, m - sd, m + sd, color=colour, alpha=0.2)
@@ -80,9 +73,10 @@ def main() -> None:
     ap.add_argument("--end", type=int, default=5000, help="the last episode counted")
     ap.add_argument("--figure", type=Path, help="write the curves' figure there (PNG)")
     args = ap.parse_args()
-    found = {}
+    found, runs = {}, {}
     for name in ("rpe", "rge-online"):
-        s = slopes(args.campaign / name, args.switch, args.end)
+        runs[name] = cells_per_run(args.campaign / name)
+        s = slopes(runs[name], args.switch, args.end)
         if not s:
             raise SystemExit(f"{args.campaign / name}: no run reaches {args.end} episodes")
         v = np.array(list(s.values()))
@@ -93,7 +87,7 @@ def main() -> None:
     ratio = found["rge-online"].mean() / found["rpe"].mean()
     print(f"rge-online / rpe: {ratio:.2f}x, Welch one-sided p = {t.pvalue:.2g}")
     if args.figure:
-        figure(args.campaign, args.switch, args.end, args.figure)
+        figure(runs, args.switch, args.end, args.figure)
 
 
 if __name__ == "__main__":

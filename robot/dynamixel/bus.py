@@ -605,7 +605,8 @@ class DynamixelBus:
             if not expect:
                 return {}, 0
             deadline = sent_at + self.timeout_for(len(wire), list(expect.values()), attempt)
-            self._register(expect, len(wire), sent_at, deadline, _question(packet))
+            question = _question(packet)
+            self._register(expect, len(wire), sent_at, deadline, question)
             last_look = False
             while not replies.complete and not last_look:
                 # once past the deadline, one last look at what already arrived: a host that
@@ -616,7 +617,7 @@ class DynamixelBus:
                 chunk = ser.read(ser.in_waiting) if last_look else ser.read(max(1, ser.in_waiting))
                 replies.take(chunk)
             if not replies.complete:
-                replies.take_set_aside(_question(packet))
+                replies.take_set_aside(question)
             if replies.latency is not None:
                 self.latency.add(replies.latency)
             return replies.got, replies.corrupt
