@@ -11,6 +11,12 @@ Protocol 2.0 and SLCAN; a few hundred examples each in the suite)::
 from __future__ import annotations
 
 import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
 
 if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY"):
     os.environ["MUJOCO_GL"] = "egl"
@@ -35,3 +41,21 @@ def twin() -> Twin:
     t = Twin(render_size=(96, 96))
     yield t
     t.close()
+
+
+@pytest.fixture
+def explore_killed_at() -> Callable[..., None]:
+    """``kill(args, run, size)``: ``ergo explore ARGS --out RUN`` in a child process, killed
+    with SIGKILL once ``RUN/history.bin`` holds ``size`` bytes (or after 120 s): a crash in the
+    middle of a run, for the resume tests."""
+
+    def kill(args: list[str], run: Path, size: int) -> None:
+        cmd = [sys.executable, "-m", "explore.cli", "explore", *args, "--out", str(run)]
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        hist, deadline = run / "history.bin", time.monotonic() + 120
+        while time.monotonic() < deadline and (not hist.exists() or hist.stat().st_size < size):
+            time.sleep(0.005)
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+
+    return kill

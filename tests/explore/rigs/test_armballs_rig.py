@@ -4,12 +4,7 @@ published preset, determinism, resume after SIGKILL, what the records hold."""
 from __future__ import annotations
 
 import csv
-import os
 import shutil
-import signal
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -172,7 +167,9 @@ def test_a_run_is_deterministic_for_a_seed_and_resumes_identically_at_any_point(
         assert all(a.equals(b) for a, b in zip(ref, resumed, strict=True)), cut
 
 
-def test_a_run_killed_with_sigkill_or_a_power_cut_resumes_to_the_same_history(tmp_path):
+def test_a_run_killed_with_sigkill_or_a_power_cut_resumes_to_the_same_history(
+    tmp_path, explore_killed_at
+):
     """The history fsyncs at most once a second here (``SYNC_INTERVAL_S``). A SIGKILL loses
     nothing that was appended (it is in the page cache); a power cut may lose what was written
     after the last fsync, in any shape (``tests/explore/runs/test_store.py``): modelled here
@@ -184,14 +181,8 @@ def test_a_run_killed_with_sigkill_or_a_power_cut_resumes_to_the_same_history(tm
     ref = tmp_path / "ref"
     assert main(["explore", *args, "--out", str(ref)]) == 0
     out = tmp_path / "killed"
-    cmd = [sys.executable, "-m", "explore.cli", "explore", *args, "--out", str(out)]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    explore_killed_at(args, out, 600_000)
     hist = out / "history.bin"
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and (not hist.exists() or hist.stat().st_size < 600_000):
-        time.sleep(0.005)
-    os.kill(proc.pid, signal.SIGKILL)
-    proc.wait()
     data = hist.read_bytes()
     synced = read_synced(out)
     assert synced is not None and 0 < synced <= len(data)

@@ -2,11 +2,6 @@
 
 from __future__ import annotations
 
-import os
-import signal
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -56,18 +51,12 @@ def test_a_run_writes_history_metrics_and_a_coverage_curve(reference_run):
     assert rec.targets.shape == (40, 6) and rec.end_effector.shape == (40, 3)
 
 
-def test_a_run_killed_with_sigkill_resumes_to_the_same_history(reference_run, tmp_path):
+def test_a_run_killed_with_sigkill_resumes_to_the_same_history(
+    reference_run, tmp_path, explore_killed_at
+):
     out = tmp_path / "killed"
-    cmd = [sys.executable, "-m", "explore.cli", "explore", "--episodes", str(N), "--seed", "3",
-           "--out", str(out), "--no-progress"]  # fmt: skip
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    hist = out / "history.bin"
-    deadline = time.monotonic() + 120
     # kill at some point in the middle of the run (several records written)
-    while time.monotonic() < deadline and (not hist.exists() or hist.stat().st_size < 60_000):
-        time.sleep(0.01)
-    os.kill(proc.pid, signal.SIGKILL)
-    proc.wait()
+    explore_killed_at(["--episodes", str(N), "--seed", "3", "--no-progress"], out, 60_000)
     done = len(RunStore.open(out))
     assert 0 < done < N, f"kill landed outside the run ({done} episodes)"
     assert ergo("explore", "--resume", str(out)) == 0
