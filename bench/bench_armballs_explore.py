@@ -20,24 +20,9 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
+from vision.untrained import save_untrained_models
 
 STRATEGIES = ("rpe", "rge-efr", "mge-efr", "rge-vae", "mge-vae", "rge-sae", "mge-sae")
-
-
-def untrained_models(root: Path) -> dict[str, str]:
-    import torch
-
-    from vision.spatial_ae import SaeConfig, SpatialAutoencoder
-    from vision.vae import Vae, VaeConfig
-
-    torch.manual_seed(0)
-    vae = Vae(VaeConfig())
-    vae.config.kl_per_latent = [float(v) for v in np.arange(10)[::-1]]
-    sae = SpatialAutoencoder(SaeConfig())
-    k = sae.config.code_dim
-    sae.config.code_std, sae.config.code_corr = [0.5] * k, np.eye(k).tolist()
-    return {"vae": str(vae.save(root / "vae")), "sae": str(sae.save(root / "sae"))}
 
 
 def one_run(out: Path, strategy: str, episodes: int, models: dict[str, str]) -> tuple[float, float]:
@@ -70,7 +55,7 @@ def main() -> None:
     limit_threads(1)  # a campaign worker's share: one core each
     with tempfile.TemporaryDirectory(prefix="bench-armballs-") as tmp:
         root = Path(tmp)
-        models = untrained_models(root)
+        models = save_untrained_models(root)
         models.update({k: v for k, v in (("vae", args.vae), ("sae", args.sae)) if v})
         print(f"{'strategy':<12} {'episodes':>8} {'wall it/s':>10} {'CPU it/s':>9} "
               f"{'CPU ms/it':>9}")  # fmt: skip

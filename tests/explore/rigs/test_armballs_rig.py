@@ -33,17 +33,9 @@ BOOTSTRAP = 10
 def models(tmp_path_factory) -> dict[str, str]:
     """An untrained VAE (latents ranked by a made-up KL) and spatial autoencoder: enough to
     run the strategies; what they learn is not what is tested here."""
-    from vision.spatial_ae import SaeConfig, SpatialAutoencoder
-    from vision.vae import Vae, VaeConfig
+    from vision.untrained import save_untrained_models
 
-    root = tmp_path_factory.mktemp("models")
-    torch.manual_seed(0)
-    vae = Vae(VaeConfig())
-    vae.config.kl_per_latent = [float(v) for v in np.arange(10)[::-1]]
-    sae = SpatialAutoencoder(SaeConfig())
-    k = sae.config.code_dim
-    sae.config.code_std, sae.config.code_corr = [0.5] * k, np.eye(k).tolist()
-    return {"vae": str(vae.save(root / "vae")), "sae": str(sae.save(root / "sae"))}
+    return save_untrained_models(tmp_path_factory.mktemp("models"))
 
 
 def strategy_options(strategy: str, models: dict[str, str], preset: bool) -> dict:
