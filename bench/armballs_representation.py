@@ -87,8 +87,8 @@ def main() -> None:
     config = RigConfig("arm2balls")
     data = outcome_dataset(config, rig_options(config), args.n, seed=args.seed)
     images, ball, dis = data["images"], data["ball"], data["distractor"]
-    for path in [*args.vae, *args.betavae]:
-        vae = load_vae(path)
+    vaes = [(path, load_vae(path)) for path in [*args.vae, *args.betavae]]
+    for path, vae in vaes:
         kl = vae.config.kl_per_latent
         mu = vae.encode_bgr(images)
         modules = kl_ranked_modules(kl) if kl is not None else []
@@ -97,8 +97,7 @@ def main() -> None:
         import cv2
 
         shown = images[:6]
-        rows = [shown] + [(v := load_vae(p)).decode_bgr(v.encode_bgr(shown))
-                          for p in [*args.vae, *args.betavae]]  # fmt: skip
+        rows = [shown] + [vae.decode_bgr(vae.encode_bgr(shown)) for _, vae in vaes]
         picture = np.concatenate([np.concatenate(list(r), axis=1) for r in rows], axis=0)
         cv2.imwrite(args.reconstructions, cv2.resize(picture, None, fx=3, fy=3,
                                                      interpolation=cv2.INTER_NEAREST))  # fmt: skip
