@@ -33,12 +33,17 @@ from explore.rigs.rig import RigConfig, rig_options
 FACTORS = ("ball x", "ball y", "distractor x", "distractor y")
 
 
+def score(pred: np.ndarray, truth: np.ndarray) -> float:
+    """R^2 of predictions ``pred`` of ``truth`` (n, m), over all of its coordinates."""
+    return float(1 - ((pred - truth) ** 2).sum() / ((truth - truth.mean(axis=0)) ** 2).sum())
+
+
 def r2(x: np.ndarray, y: np.ndarray) -> float:
     """R^2 of the least-squares linear prediction (with intercept) of y (n, k) from x (n, d),
     over all of y's coordinates."""
     a = np.hstack([x, np.ones((len(x), 1))])
     w, *_ = np.linalg.lstsq(a, y, rcond=None)
-    return float(1 - ((a @ w - y) ** 2).sum() / ((y - y.mean(axis=0)) ** 2).sum())
+    return score(a @ w, y)
 
 
 def knn_r2(x: np.ndarray, y: np.ndarray, k: int = 5) -> float:
@@ -46,8 +51,7 @@ def knn_r2(x: np.ndarray, y: np.ndarray, k: int = 5) -> float:
     rows of x (n, d) among the first three quarters (Euclidean, in the code's own units)."""
     cut = len(x) * 3 // 4
     _, idx = cKDTree(x[:cut]).query(x[cut:], k)
-    pred, truth = y[:cut][idx.reshape(len(x) - cut, k)].mean(axis=1), y[cut:]
-    return float(1 - ((pred - truth) ** 2).sum() / ((truth - truth.mean(axis=0)) ** 2).sum())
+    return score(y[:cut][idx.reshape(len(x) - cut, k)].mean(axis=1), y[cut:])
 
 
 def describe(name: str, codes: np.ndarray, modules: list[np.ndarray], kl: list[float] | None,
