@@ -13,8 +13,8 @@ import numpy as np
 
 def save_untrained_models(root: Path, seed: int = 0) -> dict[str, str]:
     """An untrained VAE, its latents ranked by a made-up KL (9, 8, ..., 0 nats: MGE's modules
-    need a ranking), and an untrained spatial autoencoder with unit code statistics (sd 0.5,
-    uncorrelated), saved under ``root/vae`` and ``root/sae``. Returns {"vae": path, "sae":
+    need a ranking), and an untrained spatial autoencoder with made-up code statistics (sd
+    0.5, uncorrelated), saved under ``root/vae`` and ``root/sae``. Returns {"vae": path, "sae":
     path}, the strategies' ``vae`` and ``sae`` options."""
     import torch
 
