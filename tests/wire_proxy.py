@@ -11,9 +11,9 @@ Dynamixel packets: ``slcan_units``, ``dynamixel_units``) and each unit may be
 - delayed (``Faults.delay_rate``, ``Faults.delay_s``): held back, and everything behind it
   (the order is kept, as on a slow link);
 
-and random bytes can be written toward the host (``garbage(seconds)``, ``Faults.garbage_rate``
-bytes per second, interleaved between units): a noisy line, a wrong baud rate, a confused
-adapter.
+and random bytes can be written toward the host (``garbage(seconds)``: ``Faults.garbage_rate``
+bytes per second between units, and 1-8 random bytes before each unit, so that no unit comes
+through untouched): a noisy line, a wrong baud rate, a confused adapter.
 
 A test-only tool (tests/robot/contract, tests/system); run as a script it stands between a
 host and a device until interrupted, e.g. to reproduce a fault by hand::
@@ -184,6 +184,10 @@ class _Direction:
                     self.cond.wait(min(wait, POLL_S))
                     continue
                 self.queue.popleft()
+            if time.monotonic() < self.garbage_until:  # a noisy line: garbage in every unit
+                rng = self.proxy.rng
+                data = rng.randbytes(rng.randrange(1, 9)) + data
+                self.counts.garbage_bytes += len(data)
             self.write(data)
 
     def write(self, data: bytes) -> None:

@@ -443,6 +443,13 @@ class CanArm(Arm):
         more without confirmation (``DriveNetwork.blind_torque_off``), and
         ``torque_off_report`` says so; a failed exchange still raises (``CanNodeError``)."""
         net = self.net
+        if net.network is None:  # closed under the arm (a failed reconnection): blind only
+            said = self.torque_off_report is not None  # the stop said so already
+            self.torque_off_report = f"not confirmed: {net.blind_torque_off()}"
+            log.log(
+                logging.DEBUG if said else logging.WARNING, "torque off %s", self.torque_off_report
+            )
+            return
         self.torque_off_report = None
         with net.guard.hold():
             try:
