@@ -30,7 +30,7 @@ from explore.runs.explorer import Explorer, Progress
 from explore.runs.lock import LOCK_FILE, RunLock, remove_lock_if_free, run_lock
 from explore.runs.metrics import recorded_episodes
 from explore.runs.record import EpisodeRecord
-from explore.runs.store import RunStore, RunStoreError, make_run_dir
+from explore.runs.store import RunStore, RunStoreError, check_own_files, make_run_dir
 
 Mode = Literal["new", "resume", "auto"]
 log = logging.getLogger(__name__)
@@ -95,7 +95,8 @@ class OpenRun:
         out = []
         if self.store.truncated_bytes:
             out.append(
-                f"{self.path}: dropped a torn last record ({self.store.truncated_bytes} bytes)"
+                f"{self.path}: moved a torn last record ({self.store.truncated_bytes} bytes: a "
+                f"crash mid-append) aside to {self.store.moved_aside}; that episode is run again"
             )
         if self.missing:
             out.append(
@@ -184,6 +185,7 @@ def open_run(
         if resume:
             RunStore.read_meta(path)  # a one-line error for a folder that holds no run
             lock = held.enter_context(run_lock(path))
+            check_own_files(path)  # a received folder cannot make us write outside it
             store = RunStore.open(path)  # under the lock: no other writer is appending
             held.callback(store.close)  # unwinds first: the history closes before the lock
             run_config = RunConfig.from_dict(store.config, where=path / "run.json")

@@ -39,9 +39,17 @@ from typing import Literal
 from explore.runs.lock import run_lock
 from explore.runs.metrics import recorded_episodes
 from explore.runs.record import EpisodeRecord, RecordError
-from explore.runs.store import HEADER, MAGIC, RunStore, RunStoreError
-
-SALVAGE_DIR = "salvage"
+from explore.runs.store import (
+    HEADER,
+    MAGIC,
+    RunStore,
+    RunStoreError,
+    check_own_files,
+    fsync_dir,
+    fsync_write,
+    new_salvage_folder,
+    next_frame,
+)
 
 Kind = Literal["record", "damaged", "torn"]
 
@@ -135,12 +143,10 @@ def _record_at(data: bytes, pos: int) -> tuple[int, int | None, str]:
 def _next_good(data: bytes, pos: int) -> int:
     """Offset of the next good record after ``pos``, or ``len(data)``."""
     at = pos
-    while True:
-        at = data.find(MAGIC, at + 1)
-        if at < 0:
-            return len(data)
+    while (at := next_frame(data, at)) is not None:
         if _record_at(data, at)[1] is not None:
             return at
+    return len(data)
 
 
 def survey_bytes(data: bytes) -> Survey:
@@ -244,25 +250,6 @@ class SalvageResult:
     missing: int
 
 
-def _fsync_write(path: Path, chunks: Iterator[bytes]) -> int:
-    n = 0
-    with open(path, "xb") as f:
-        for chunk in chunks:
-            f.write(chunk)
-            n += len(chunk)
-        f.flush()
-        os.fsync(f.fileno())
-    return n
-
-
-def _fsync_dir(path: Path) -> None:
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
 def salvage(run: str | Path) -> SalvageResult:
     """Keep the resumable prefix of ``RUN/history.bin`` and move the rest to
     ``RUN/salvage/N/`` (see the module's docstring). Takes the run's writer lock: refused
@@ -270,6 +257,7 @@ def salvage(run: str | Path) -> SalvageResult:
     run = Path(run)
     RunStore.read_meta(run)
     with run_lock(run):
+        check_own_files(run)
         path = run / "history.bin"
         data = path.read_bytes() if path.exists() else b""
         s = survey_bytes(data)
@@ -277,18 +265,17 @@ def salvage(run: str | Path) -> SalvageResult:
         rest = [p for p in s.pieces if p.start >= s.prefix_end]
         if not rest:
             return SalvageResult(s.prefix, 0, 0, None, s.missing)
-        base = run / SALVAGE_DIR
-        base.mkdir(exist_ok=True)
-        k = 1
-        while (base / str(k)).exists():
-            k += 1
-        folder = base / str(k)
-        folder.mkdir()
+        try:
+            folder = new_salvage_folder(run)
+        except OSError as exc:
+            raise RunStoreError(
+                f"cannot salvage {run}: {exc.strerror or exc}; history.bin left as it was"
+            ) from exc
         damaged = [p for p in rest if p.kind != "record"]
         kept = [p for p in rest if p.kind == "record"]
         try:
-            _fsync_write(folder / "damaged.bin", (data[p.start : p.end] for p in damaged))
-            _fsync_write(folder / "kept.bin", (data[p.start : p.end] for p in kept))
+            fsync_write(folder / "damaged.bin", (data[p.start : p.end] for p in damaged))
+            fsync_write(folder / "kept.bin", (data[p.start : p.end] for p in kept))
             placed: list[dict[str, object]] = []
             offsets = {"damaged.bin": 0, "kept.bin": 0}
             for p in s.pieces:
@@ -311,8 +298,8 @@ def salvage(run: str | Path) -> SalvageResult:
                 "recorded_in_metrics": s.recorded,
                 "pieces": placed,
             }
-            _fsync_write(folder / "salvage.json", iter([json.dumps(report, indent=1).encode()]))
-            _fsync_dir(folder)
+            fsync_write(folder / "salvage.json", iter([json.dumps(report, indent=1).encode()]))
+            fsync_dir(folder)
             with open(path, "r+b") as f:  # the rest is safe on disk: cut it from the history
                 f.truncate(s.prefix_end)
                 os.fsync(f.fileno())
