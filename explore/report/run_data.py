@@ -4,6 +4,7 @@ still writing)."""
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -15,7 +16,9 @@ from explore.learner.scene import TWIN_ARENA, Scene
 from explore.report.recorder import recording_paths
 from explore.runs.config import RunConfig
 from explore.runs.metrics import MetricsLog
-from explore.runs.store import RunStore, iter_history
+from explore.runs.store import RunStore, read_history
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -112,7 +115,14 @@ def load_run(path: Path, goal_outcomes: bool = True) -> RunData:
         if goal_outcomes
         else None
     )
-    for rec in iter_history(path):
+    history = read_history(path)
+    if history.torn_bytes:
+        log.warning(
+            "%s: left out a torn last record (%d bytes: a crash mid-append, or an append in "
+            "progress); the report covers episodes 0..%d",
+            path, history.torn_bytes, len(history.records) - 1,
+        )  # fmt: skip
+    for rec in history.records:
         metrics.update(rec)
         cols["ball"].append(np.asarray(rec.ball, dtype=float))
         cols["context_ball"].append(np.asarray(rec.context_ball, dtype=float))
