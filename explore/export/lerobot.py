@@ -140,9 +140,8 @@ def _video_choice(sources: list[RunSource], video: bool) -> bool:
     if any(kept):
         missing = next(s.path for s, k in zip(sources, kept, strict=True) if not k)
         raise ExportError(
-            f"{missing} has no camera frames at the control rate for every episode (it ran "
-            "without --rig-option record_video=SIDE) while other runs have: export them apart, "
-            "or all with --no-video"
+            f"{missing} has no camera frames (it ran without --rig-option record_video=SIDE) "
+            "while other runs have: export them apart, or all with --no-video"
         )
     return False
 
@@ -181,7 +180,8 @@ def export_lerobot(runs: list[Path], out: Path, video: bool = True) -> ExportSum
     if tmp.exists():
         shutil.rmtree(tmp)  # what an earlier failed export left (never the dataset itself)
     try:
-        summary = _write(sources, tmp, fps, n_params, with_video)
+        left_out: list[str] = []
+        summary = _write(sources, tmp, fps, n_params, with_video, left_out)
         if out.exists():
             out.rmdir()  # empty, checked above
         tmp.rename(out)
@@ -189,7 +189,7 @@ def export_lerobot(runs: list[Path], out: Path, video: bool = True) -> ExportSum
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     summary.out = out
-    summary.warnings = warnings
+    summary.warnings = warnings + left_out
     return summary
 
 
@@ -208,7 +208,12 @@ class _Columns:
 
 
 def _write(
-    sources: list[RunSource], root: Path, fps: int, n_params: int, with_video: bool
+    sources: list[RunSource],
+    root: Path,
+    fps: int,
+    n_params: int,
+    with_video: bool,
+    left_out: list[str],
 ) -> ExportSummary:
     root.mkdir(parents=True)
     cols = _Columns()
@@ -220,7 +225,7 @@ def _write(
     index = 0
     try:
         for source in sources:
-            for ep in iter_episodes(source, with_video):
+            for ep in iter_episodes(source, with_video, left_out if with_video else None):
                 shape = (ep.goal.size, ep.context.size)
                 if dims is None:
                     dims = shape
@@ -249,7 +254,8 @@ def _write(
     finally:
         if writer is not None:
             writer.close()
-    assert dims is not None
+    if dims is None:
+        raise ExportError("no episode left to export: every one lacks its camera frames")
     feats = features(cols.array("observation.state").shape[1], n_params, *dims, side)
     _write_tables(root, cols, feats, tasks)
     stats = {key: _stats(cols.array(key)) for key in cols.frames}

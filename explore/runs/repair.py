@@ -40,6 +40,7 @@ from explore.runs.lock import run_lock
 from explore.runs.metrics import recorded_episodes
 from explore.runs.record import EpisodeRecord, RecordError
 from explore.runs.store import (
+    FRAMES_DIR,
     HEADER,
     MAGIC,
     RunStore,
@@ -49,6 +50,7 @@ from explore.runs.store import (
     fsync_write,
     new_salvage_folder,
     next_frame,
+    read_frames,
 )
 
 Kind = Literal["record", "damaged", "torn"]
@@ -81,6 +83,11 @@ class Survey:
         prefix_end: byte offset where that prefix ends.
         recorded: episodes the run had stored as ``metrics.csv`` says, None without it.
         exists: whether ``history.bin`` exists.
+        config_error: why ``run.json``'s config cannot be run (None: it can).
+        frames: for a run that keeps camera frames (``RUN/frames/``): episodes of the
+            resumable history with readable frames; None for a run without.
+        frames_missing, frames_bad: episodes without a frames file, and (episode, why) of
+            those whose file cannot be read.
     """
 
     size: int
@@ -89,6 +96,10 @@ class Survey:
     prefix_end: int = 0
     recorded: int | None = None
     exists: bool = True
+    config_error: str | None = None
+    frames: int | None = None
+    frames_missing: list[int] = field(default_factory=list)
+    frames_bad: list[tuple[int, str]] = field(default_factory=list)
 
     @property
     def good(self) -> list[Piece]:
@@ -111,6 +122,11 @@ class Survey:
     def missing(self) -> int:
         """Episodes the run had stored that its resumable history lacks."""
         return max(0, (self.recorded or 0) - self.prefix)
+
+    @property
+    def resumable(self) -> bool:
+        """Whether ``ergo explore --resume`` can continue the run as it is."""
+        return not self.needs_salvage and self.config_error is None
 
     @property
     def needs_salvage(self) -> bool:
@@ -175,15 +191,31 @@ def survey_bytes(data: bytes) -> Survey:
 
 def survey(run: str | Path) -> Survey:
     """Survey ``RUN/history.bin`` (read only: safe while another process writes the run)."""
+    from explore.runs.config import RunConfig
+
     run = Path(run)
-    RunStore.read_meta(run)  # a one-line error for a folder that holds no run
+    meta = RunStore.read_meta(run)  # a one-line error for a folder that holds no run
     path = run / "history.bin"
     try:
         data = path.read_bytes()
         s = survey_bytes(data)
     except FileNotFoundError:
         s = Survey(size=0, exists=False)
+    except OSError as exc:
+        raise RunStoreError(f"cannot read {path}: {exc.strerror or exc}") from exc
     s.recorded = recorded_episodes(run)
+    try:
+        RunConfig.from_dict(meta["config"], where=run / "run.json")
+    except RunStoreError as exc:
+        s.config_error = str(exc)
+    if (run / FRAMES_DIR).is_dir():
+        for episode in range(s.prefix):
+            try:
+                if read_frames(run, episode) is None:
+                    s.frames_missing.append(episode)
+            except RunStoreError as exc:
+                s.frames_bad.append((episode, str(exc)))
+        s.frames = s.prefix - len(s.frames_missing) - len(s.frames_bad)
     return s
 
 
@@ -221,6 +253,16 @@ def describe(run: Path, s: Survey) -> list[str]:
             f"metrics.csv recorded {s.recorded} episode(s) stored: "
             + (f"{s.missing} missing from the history" if s.missing else "none missing")
         )
+    if s.frames is not None:
+        line = f"frames: {s.frames} of {s.prefix} episode(s) with readable camera frames"
+        if s.frames_missing:
+            line += f"; missing: episode(s) {_list(s.frames_missing)}"
+        if s.frames_bad:
+            line += f"; unreadable: {'; '.join(why for _, why in s.frames_bad[:3])}"
+            line += "..." if len(s.frames_bad) > 3 else ""
+        lines.append(line)
+    if s.config_error is not None:
+        lines.append(f"run.json: {s.config_error}")
     if s.needs_salvage:
         lines.append(
             f"damaged: `ergo runs salvage {run}` keeps episodes 0..{s.prefix - 1} as the "
@@ -229,14 +271,26 @@ def describe(run: Path, s: Survey) -> list[str]:
             else f"damaged: `ergo runs salvage {run}` moves the history aside (nothing "
             "deleted) and lets the run start again from episode 0"
         )
+    elif s.config_error is not None:
+        lines.append("not resumable: run.json cannot be run (above); restore it from a copy")
     elif s.missing:
         lines.append(
             f"resumable, {s.missing} episode(s) short of what it had stored: "
             f"`ergo explore --resume {run}` re-runs them"
         )
+    elif s.frames_missing or s.frames_bad:
+        lost = len(s.frames_missing) + len(s.frames_bad)
+        lines.append(
+            f"resumable as it is, but {lost} episode(s) lack readable camera frames (above): "
+            "a video export leaves them out"
+        )
     else:
         lines.append("ok: resumable as it is")
     return lines
+
+
+def _list(episodes: list[int]) -> str:
+    return ", ".join(map(str, episodes[:8])) + (", ..." if len(episodes) > 8 else "")
 
 
 @dataclass(frozen=True)

@@ -52,6 +52,7 @@ import os
 import stat
 import struct
 import time
+import zipfile
 import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -583,8 +584,8 @@ def read_frames(run: str | Path, episode: int) -> np.ndarray | None:
     try:
         with np.load(path, allow_pickle=False) as z:
             frames = z["frames"]
-    except (OSError, ValueError, KeyError, zlib.error) as exc:
-        raise RunStoreError(f"{path} is not readable: {exc}") from exc
+    except (OSError, ValueError, KeyError, EOFError, zlib.error, zipfile.BadZipFile) as exc:
+        raise RunStoreError(f"{path} is not readable: {exc or type(exc).__name__}") from exc
     if frames.ndim != 4 or frames.shape[-1] != 3 or frames.dtype != np.uint8:
         raise RunStoreError(f"{path} holds frames of shape {frames.shape}, not (T, S, S, 3) uint8")
     return frames
