@@ -97,7 +97,7 @@ def _open_lock_file(path: Path, flags: int) -> int:
     try:
         fd = os.open(path, flags | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
     except OSError as exc:
-        if exc.errno == errno.ELOOP:
+        if exc.errno == errno.ELOOP and path.is_symlink():
             raise RunStoreError(
                 f"{path} is a symbolic link: a run folder must hold its own files (a folder "
                 "received from someone else?); remove it"
@@ -200,6 +200,8 @@ def _try_lock(run: str | os.PathLike[str], exclusive: bool) -> Iterator[tuple[in
     except FileNotFoundError:
         yield -1, True
         return
+    except OSError as exc:  # a loop of links on the way, a folder that cannot be read
+        raise RunStoreError(f"cannot open {path}: {exc.strerror or exc}") from exc
     try:
         try:
             fcntl.flock(fd, (fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH) | fcntl.LOCK_NB)
