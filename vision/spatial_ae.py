@@ -46,7 +46,9 @@ from vision.vae import (
     few_threads_for,
     load_state,
     read_config_json,
+    save_state,
     to_tensor,
+    write_text_atomically,
 )
 
 FEATURES = 8  # feature maps, a 16-D code (guess, tried: see docs/results.md)
@@ -231,12 +233,8 @@ class SpatialAutoencoder(nn.Module):
         """Write ``sae.pt`` and ``sae.json`` into ``folder``; returns the folder."""
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
-        tmp = folder / (MODEL_FILE + ".tmp")
-        torch.save(self.state_dict(), tmp)
-        tmp.replace(folder / MODEL_FILE)
-        tmp = folder / (CONFIG_FILE + ".tmp")
-        tmp.write_text(json.dumps(asdict(self.config), indent=2))
-        tmp.replace(folder / CONFIG_FILE)
+        save_state(self.state_dict(), folder / MODEL_FILE)
+        write_text_atomically(folder / CONFIG_FILE, json.dumps(asdict(self.config), indent=2))
         return folder
 
 

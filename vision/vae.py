@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import shutil
 import warnings
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
@@ -68,6 +69,37 @@ def load_state(path: Path, what: str) -> Any:
         raise VaeError(
             f"{path} is not a readable {what} ({detail}): damaged or truncated?"
         ) from exc
+
+
+def save_state(obj: Any, path: Path) -> None:
+    """``torch.save`` to ``path`` through a temporary file and a rename: a failure (a full
+    disk: torch reports it as a ``RuntimeError``) leaves ``path`` as it was and no temporary
+    file, and is a one-line ``VaeError``."""
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        torch.save(obj, tmp)
+        tmp.replace(path)
+    except (RuntimeError, OSError) as exc:
+        tmp.unlink(missing_ok=True)
+        detail = " ".join(str(exc).split())[:200]
+        with contextlib.suppress(OSError):  # torch's writer does not give the errno: look
+            if shutil.disk_usage(path.parent).free < (1 << 20):
+                detail = f"No space left on device: {detail}"
+        raise VaeError(f"cannot write {path} ({detail})") from exc
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def write_text_atomically(path: Path, text: str) -> None:
+    """``path.write_text`` through a temporary file and a rename (no half file on failure)."""
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        tmp.write_text(text)
+        tmp.replace(path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def check_statistics(values: Any, length: int, name: str, where: Path) -> None:
@@ -272,12 +304,8 @@ class Vae(nn.Module):
         """Write ``vae.pt`` and ``vae.json`` into ``folder``; returns the folder."""
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
-        tmp = folder / (MODEL_FILE + ".tmp")
-        torch.save(self.state_dict(), tmp)
-        tmp.replace(folder / MODEL_FILE)
-        tmp = folder / (CONFIG_FILE + ".tmp")
-        tmp.write_text(json.dumps(asdict(self.config), indent=2))
-        tmp.replace(folder / CONFIG_FILE)
+        save_state(self.state_dict(), folder / MODEL_FILE)
+        write_text_atomically(folder / CONFIG_FILE, json.dumps(asdict(self.config), indent=2))
         return folder
 
 

@@ -38,6 +38,7 @@ from vision.vae import (
     VaeError,
     limit_threads,
     load_state,
+    save_state,
     to_tensor,
 )
 
@@ -262,13 +263,11 @@ def _checkpoint(
     iteration: int,
     settings: dict[str, Any],
 ) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(
+    save_state(
         {"model": model.state_dict(), "optim": optim.state_dict(), "iteration": iteration,
          "model_config": settings},
-        tmp,
+        path,
     )  # fmt: skip
-    tmp.replace(path)
 
 
 def _append_log(path: Path, header: str, rows: list[str]) -> None:

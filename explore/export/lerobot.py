@@ -20,13 +20,18 @@ frames: ``episode.dmp_parameters`` (the 48 motor parameters), ``episode.goal``,
 ``episode.context`` and ``episode.outcome`` in the run's goal space (NaN where there is none).
 The ``task`` is what the strategy was doing ("motor babbling", "goal in module k"). Each episode
 row also names where it comes from (``ergo/run``, ``ergo/episode``, ``ergo/strategy``,
-``ergo/seed``). Every file goes into a temporary folder beside ``OUT``, renamed to ``OUT`` at
-the end: an export that fails leaves nothing.
+``ergo/seed``). Every file goes into a temporary folder beside ``OUT`` (``.OUT.partial-PID``:
+one per export, so that two exports to one ``OUT`` never remove each other's), renamed to
+``OUT`` at the end: an export that fails leaves nothing, and of two exports to one ``OUT`` the
+second to finish says so and leaves the first's dataset alone.
 """
 
 from __future__ import annotations
 
+import errno
+import glob
 import json
+import os
 import shutil
 import warnings
 from dataclasses import dataclass, field
@@ -146,6 +151,26 @@ def _video_choice(sources: list[RunSource], video: bool) -> bool:
     return False
 
 
+def _remove_dead_partials(out: Path) -> None:
+    """Remove what earlier exports to ``out`` left when they died (``.OUT.partial-PID`` of a
+    process that is gone); a running export's folder is its own, never touched."""
+    for tmp in out.parent.glob(f".{glob.escape(out.name)}.partial*"):
+        pid = tmp.name.rsplit("-", 1)[-1]
+        if pid.isdigit() and _alive(int(pid)):
+            continue
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
 def check_out(out: Path) -> None:
     """``--out`` must be new or an empty folder (an ``ExportError`` otherwise)."""
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
@@ -176,15 +201,20 @@ def export_lerobot(runs: list[Path], out: Path, video: bool = True) -> ExportSum
         for s in sources
         if s.torn_bytes
     ]
-    tmp = out.parent / f".{out.name}.partial"
-    if tmp.exists():
-        shutil.rmtree(tmp)  # what an earlier failed export left (never the dataset itself)
+    _remove_dead_partials(out)
+    tmp = out.parent / f".{out.name}.partial-{os.getpid()}"  # this export's own
     try:
         left_out: list[str] = []
         summary = _write(sources, tmp, fps, n_params, with_video, left_out)
-        if out.exists():
-            out.rmdir()  # empty, checked above
-        tmp.rename(out)
+        try:
+            os.rename(tmp, out)  # onto a missing or empty folder only (POSIX)
+        except OSError as exc:
+            if exc.errno not in (errno.ENOTEMPTY, errno.EEXIST, errno.ENOTDIR):
+                raise
+            raise ExportError(
+                f"{out} was written by another export meanwhile: this one wrote nothing (give "
+                "another --out)"
+            ) from None
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

@@ -15,6 +15,7 @@ comes from the config.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import logging
 from collections.abc import Callable
@@ -179,6 +180,7 @@ def open_run(
         check_resumed=check_resumed, rig=rig, strategy=strategy,
     )  # fmt: skip
     held = ExitStack()
+    made = False  # whether this call made the folder (removed again if the open fails)
     try:
         lock = None
         resume = mode == "resume" or (mode == "auto" and RunStore.is_run(path))
@@ -203,13 +205,20 @@ def open_run(
         the_strategy = strategy if strategy is not None else strategy_for(run_config, the_rig)
         _check_sees_ball(run_config, the_rig, the_strategy)
         if store is None:
+            made = not path.exists()
             make_run_dir(path)
             lock = held.enter_context(run_lock(path))
             if mode == "auto" and RunStore.is_run(path):
                 # another writer made the run between our look and our lock: resume it
                 held.close()
                 return again(mode="resume")
-            store = RunStore.create(path, run_config.to_dict())
+            try:
+                store = RunStore.create(path, run_config.to_dict())
+            except OSError as exc:  # a full disk, a read-only file system
+                raise RunStoreError(
+                    f"cannot create the run {path}: {exc.strerror or exc}"
+                    + (f" ({exc.filename})" if exc.filename else "")
+                ) from exc
             held.callback(store.close)
         store.sync_interval_s = the_rig.sync_interval_s
         missing = 0
@@ -220,6 +229,9 @@ def open_run(
         )
     except BaseException:
         held.close()
+        if made:  # a new run that could not be created (a full or read-only disk)
+            with contextlib.suppress(OSError, RunStoreError):
+                discard_empty_run(path)
         raise
 
 
@@ -227,6 +239,7 @@ def open_run(
 # only these, and only from a run that holds no episode).
 _NEW_RUN_FILES = (
     "history.bin", "metrics.csv", "faults.json", "trial.json", "recording.rrd", "run.json",
+    "run.json.tmp",
 )  # fmt: skip
 
 

@@ -27,8 +27,10 @@ emptied or deleted shows as fewer episodes than it recorded (``Survey.missing``)
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import shutil
 import time
 import zlib
 from collections.abc import Iterator
@@ -358,6 +360,9 @@ def salvage(run: str | Path) -> SalvageResult:
                 f.truncate(s.prefix_end)
                 os.fsync(f.fileno())
         except OSError as exc:
+            shutil.rmtree(folder, ignore_errors=True)  # a partial copy: history.bin has it all
+            with contextlib.suppress(OSError):
+                folder.parent.rmdir()  # salvage/ itself, if this made it and nothing else is in
             raise RunStoreError(
                 f"cannot salvage {run}: {exc.strerror or exc}; history.bin left as it was"
             ) from exc
