@@ -74,6 +74,11 @@ SLCAN_ANSWER_WAIT_S = 2.0
 # A longer run of bytes without a CR or BEL is garbage: dropped.
 MAX_SLCAN_LINE = 1 + 8 + 1 + 128 + 1
 
+# How long the SLCAN reader waits after an error of the port itself before it reads again, s
+# (a bound on the notifier thread's spinning on a dead port; the arm notices the loss on its
+# next send, within a control period).
+PORT_ERROR_PAUSE_S = 0.1
+
 # What to try when an interface fails to open (python-can and Linux SocketCAN docs).
 HINTS = {
     "socketcan": " (is the adapter plugged in and up? sudo ip link set can0 up type can bitrate"
@@ -227,7 +232,10 @@ def tolerant_slcan_bus() -> Any:
     such a line, as a CAN controller drops a frame that fails its CRC, and counts it
     (``garbled_lines``; ``garbled_at``: when the last one came, ``time.monotonic`` s): the
     frames lost with it are late or missing TPDOs, heartbeats and SDO answers, which the
-    arm's usual bounds deal with. Errors of the port itself (EIO: unplugged) still raise.
+    arm's usual bounds deal with. An error of the port itself (EIO: unplugged) is kept in
+    ``port_error`` and the reader waits ``PORT_ERROR_PAUSE_S`` before reading again, instead
+    of ending the notifier thread with a traceback: the next send on the dead port fails and
+    the arm takes that for a lost link (and reconnects).
 
     SLCAN has no checksum: garbage that happens to spell a valid line (``t``, three hex
     digits, a DLC digit, that many hex bytes, CR) is taken for a frame. Random bytes rarely do
@@ -242,6 +250,7 @@ def tolerant_slcan_bus() -> Any:
     class TolerantSlcanBus(slcanBus):
         garbled_lines = 0
         garbled_at = 0.0
+        port_error: BaseException | None = None
 
         def _garbled(self) -> tuple[None, bool]:
             self._buffer.clear()
@@ -257,7 +266,13 @@ def tolerant_slcan_bus() -> Any:
             except can.CanOperationError as exc:
                 if isinstance(exc.__cause__, UnicodeDecodeError):
                     return self._garbled()
-                raise
+                # the port itself failed (unplugged: EIO): say so to whoever looks, and let the
+                # reader thread wait rather than die with a traceback; the next send fails on
+                # the same port and the arm takes it for a lost link
+                self.port_error = exc.__cause__ or exc
+                time.sleep(min(timeout if timeout is not None else PORT_ERROR_PAUSE_S,
+                               PORT_ERROR_PAUSE_S))  # fmt: skip
+                return None, False
             except (ValueError, IndexError, KeyError):
                 return self._garbled()
             if msg is not None and not msg.is_remote_frame and len(msg.data) != msg.dlc:
