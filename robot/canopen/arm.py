@@ -433,7 +433,11 @@ class CanArm(Arm):
     def _set_torque(self, enabled: bool) -> None:
         if enabled:
             self._check()
-            self._drive_to(State.OPERATION_ENABLED)
+            try:
+                self._drive_to(State.OPERATION_ENABLED)
+            except CyclePreemptedError:
+                self._check()  # a safety stop preempted us: say so (SafetyStop)
+                raise
         else:
             self._torque_off()
 
@@ -451,15 +455,22 @@ class CanArm(Arm):
             )
             return
         self.torque_off_report = None
-        with net.guard.hold():
+        for attempt in range(2):
             try:
-                silent = self._drive_to(State.SWITCHED_ON)
+                with net.guard.hold():
+                    silent = self._drive_to(State.SWITCHED_ON)
+                break
             except CyclePreemptedError:
-                raise  # another thread is cutting torque
+                # another thread is cutting torque (a safety stop, a signal): once it is done,
+                # confirm it here (what a disconnect during a trip needs)
+                if attempt or not net.guard.wait_unpreempted(self.config.state_timeout_s):
+                    raise
             except BusError as exc:
-                sent = net.blind_torque_off()
+                with net.guard.hold():
+                    sent = net.blind_torque_off()
                 self.torque_off_report = f"not confirmed ({exc}): {sent}"
                 raise CanNodeError(f"torque off {self.torque_off_report}") from exc
+        with net.guard.hold():
             if silent:
                 names = ", ".join(net.who(i) for i in silent)
                 self.torque_off_report = (

@@ -294,6 +294,18 @@ WIRE_FAULTS = {
 WIRE_FAULT_S = 1.5  # how long the arm holds its pose under the fault, s
 
 
+def _limp_within(backend, seconds: float) -> bool:
+    """Whether the servos read back limp (from the emulator itself) within ``seconds``: the
+    emulator applies what reached it in its own threads, which wait for a CPU on a loaded
+    machine (a real servo applies it within microseconds)."""
+    deadline = time.monotonic() + seconds
+    while backend.torque().any():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.01)
+    return True
+
+
 @pytest.mark.filterwarnings("error::pytest.PytestUnhandledThreadExceptionWarning")
 @pytest.mark.parametrize("fault", list(WIRE_FAULTS))
 def test_wire_faults_end_with_the_arm_limp_and_at_most_one_line(backend, fault) -> None:
@@ -326,8 +338,8 @@ def test_wire_faults_end_with_the_arm_limp_and_at_most_one_line(backend, fault) 
             except RobotError as exc:
                 stop = exc
                 assert "\n" not in str(exc), str(exc)
-                if isinstance(exc, SafetyStop):
-                    assert not backend.torque().any(), str(exc)
+                if isinstance(exc, SafetyStop):  # limp as soon as the emulator has applied it
+                    assert _limp_within(backend, arms.LIMP_S), str(exc)
         counts = arm.fault_counts()
         faults = {k: v for k, v in proxy.to_host.counts.__dict__.items() if v}
     assert not backend.torque().any(), (stop, faults, counts)
