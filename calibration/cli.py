@@ -381,11 +381,35 @@ def _joints_impl(args: argparse.Namespace) -> int:
     from calibration import store
     from calibration.joints import calibrate_joints, interactive_prompt
 
-    store.check_rig_id(args.rig_id)
+    path = store.calibration_path("joints", args.rig_id, args.dir)
+    kept = f"{path} unchanged" if path.exists() else f"no {path.name} written"
     arm = _make_arm(args)
-    print("torque goes off: hold the arm. Move each joint as asked, then press Enter.")
-    with arm:
-        result = calibrate_joints(arm, interactive_prompt, joints=args.joints)
+    print("torque goes off: hold the arm. Move the joints as asked, then press Enter.")
+    at = ["before the first step"]
+
+    def prompt(step) -> None:
+        at[0] = (
+            "at the zero pose"
+            if step.target == "zero"
+            else f"at {step.joint}'s {step.target} limit"
+        )
+        interactive_prompt(step)
+
+    try:
+        with arm:
+            result = calibrate_joints(
+                arm, prompt, joints=args.joints, notify=lambda m: print(m, flush=True)
+            )
+    except EOFError:
+        print()
+        return _error(
+            f"stdin closed {at[0]}: the calibration needs a person pressing Enter; nothing "
+            f"saved ({kept})"
+        )
+    except KeyboardInterrupt:
+        print()
+        print(f"ergo: interrupted {at[0]}: nothing saved ({kept})", file=sys.stderr)
+        return 130
     path = store.save("joints", args.rig_id, result.to_dict(), args.dir)
     for i, name in enumerate(result.names):
         print(
@@ -405,9 +429,12 @@ def _show(args: argparse.Namespace) -> int:
 def _summary(kind: str, data: dict[str, Any]) -> str:
     if kind == "camera":
         k = data["camera_matrix"]
+        sd = data.get("std_px") or {}
+        pm = lambda name: f" +-{sd[name]:.1f}" if name in sd else ""  # noqa: E731
         return (
             f"{data['image_size'][0]}x{data['image_size'][1]}, {data['n_views']} views, RMS "
-            f"{data['rms_px']:.3f} px, fx {k[0][0]:.1f} fy {k[1][1]:.1f}"
+            f"{data['rms_px']:.3f} px, fx {k[0][0]:.1f}{pm('fx')} fy {k[1][1]:.1f}{pm('fy')} "
+            f"cx {k[0][2]:.1f}{pm('cx')} cy {k[1][2]:.1f}{pm('cy')} px"
         )
     if kind == "arena":
         c = data["centre"]
@@ -415,7 +442,27 @@ def _summary(kind: str, data: dict[str, Any]) -> str:
             f"centre ({c[0]:+.3f}, {c[1]:+.3f}) m, radius {data['radius']:.3f} m, ball ranges "
             f"{data.get('ball_hsv_ranges')}"
         )
-    return f"joints {', '.join(data['names'])}"
+    joints = []
+    for i, name in enumerate(data["names"]):
+        lo, hi = math.degrees(data["lower"][i]), math.degrees(data["upper"][i])
+        joints.append(
+            f"{name} {math.degrees(data['offsets'][i]):+.1f} deg {int(data['directions'][i]):+d} "
+            f"[{lo:+.0f}, {hi:+.0f}]"
+        )
+    return "offset, direction, range per joint: " + "; ".join(joints)
+
+
+def _age(created: Any) -> str:
+    """How long ago a calibration was made, in words ("3 h ago"), or "of unknown age"."""
+    from datetime import UTC, datetime
+
+    if created is None:
+        return "of unknown age"
+    seconds = (datetime.now(UTC) - created).total_seconds()
+    for unit, size in (("days", 86400), ("h", 3600), ("min", 60)):
+        if seconds >= size:
+            return f"made {seconds / size:.0f} {unit} ago"
+    return "made just now" if seconds >= -60 else "dated in the future (check the clock)"
 
 
 def _show_impl(args: argparse.Namespace) -> int:
@@ -428,12 +475,16 @@ def _show_impl(args: argparse.Namespace) -> int:
             print(f"{kind}: none ({path})")
             continue
         try:
-            data = store.load_arena_file(path) if kind == "arena" else store.load_file(path, kind)
+            doc = store.load_document(path, kind)
+            data = store.load_arena_file(path) if kind == "arena" else doc["data"]
         except store.CalibrationError as exc:
             print(f"{kind}: INVALID: {exc}")
             bad += 1
             continue
-        print(f"{kind}: {_summary(kind, data)} ({path})")
+        print(
+            f"{kind}: {_summary(kind, data)} ({path}, {_age(store.created_at(doc))}, "
+            f"sha256 {store.file_sha256(path)[:12]})"
+        )
     return 1 if bad else 0
 
 
