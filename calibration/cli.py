@@ -212,14 +212,25 @@ def _camera_impl(args: argparse.Namespace) -> int:
         raise store.CalibrationError("give --images FOLDER or --camera SOURCE (or --print-board)")
     result = charuco.calibrate(views, size, fit_k3=args.fit_k3, board=spec)
     path = store.save("camera", args.rig_id, result.to_dict(spec), args.dir)
-    k = result.camera_matrix
+    print(f"camera: {result.describe()}")
+    print(f"distortion (k1, k2, p1, p2, k3): {', '.join(f'{d:+.4f}' for d in result.dist_coeffs)}")
+    print("per view, RMS px fitted / held out: " + ", ".join(
+        f"{name or i} {a:.2f}/{b:.2f}"
+        for i, (name, a, b) in enumerate(
+            zip(result.view_names, result.per_view_rms_px, result.held_out_per_view_px, strict=True)
+        )
+    ))  # fmt: skip
+    if result.rms_px > charuco.GOOD_RMS_PX:
+        print(
+            f"warning: RMS above {charuco.GOOD_RMS_PX} px: check focus, motion blur and the "
+            "board's flatness"
+        )
     print(
-        f"camera: {result.n_views} views, RMS reprojection error {result.rms_px:.3f} px; "
-        f"fx {k[0, 0]:.1f} fy {k[1, 1]:.1f} cx {k[0, 2]:.1f} cy {k[1, 2]:.1f} px; "
-        f"dist {', '.join(f'{d:+.4f}' for d in result.dist_coeffs)}"
+        f"accepted: every intrinsic known to within {charuco.MAX_SD_OF_FOCAL:.1%} of the focal "
+        "length (1 sd)" + (", and for a better calibration:" if result.advice else "")
     )
-    if result.rms_px > 0.5:
-        print("warning: RMS above 0.5 px: check focus, motion blur and the board's flatness")
+    for item in result.advice:
+        print(f"advice: {item}")
     print(f"saved {path}")
     return 0
 

@@ -139,6 +139,12 @@ def _validate_camera(c: _Checker) -> None:
         c.fail("image_size", "must be two positive integers (width, height)")
     c.number("rms_px", 0.0, 100.0)
     c.number("n_views", 1, 10_000)
+    sd = c.get("std_px", optional=True)
+    if sd is not None and not (
+        isinstance(sd, dict) and all(_is_matrix(v, ()) and v >= 0 for v in sd.values())
+    ):
+        c.fail("std_px", "must map fx, fy, cx, cy to finite standard deviations >= 0, px")
+    c.number("held_out_rms_px", 0.0, 1e4, optional=True)
 
 
 def _validate_arena(c: _Checker) -> None:
