@@ -63,7 +63,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     arena = cal.add_parser("arena", help="arena plane, centre, radius and ball colour")
     common(arena)
-    asrc = arena.add_mutually_exclusive_group(required=True)
+    asrc = arena.add_mutually_exclusive_group()
     asrc.add_argument("--image", type=Path, help="a saved frame of the arena")
     asrc.add_argument("--camera", help="live camera: device index, URL or video file")
     arena.add_argument(
@@ -73,6 +73,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     arena.add_argument("--marker-size", type=float, default=None, help="marker side, m")
     arena.add_argument("--dictionary", default="DICT_4X4_50", help="cv2.aruco dictionary")
+    arena.add_argument(
+        "--print-markers", type=Path, metavar="OUT.png",
+        help="write the markers to print (A4, with where each goes) and stop unless --image or "
+        "--camera is given too",
+    )  # fmt: skip
+    arena.add_argument("--dpi", type=float, default=300.0, help="--print-markers resolution")
     arena.add_argument(
         "--corners",
         nargs=4,
@@ -319,12 +325,54 @@ def _intrinsics(args: argparse.Namespace, size: tuple[int, int]):
     )
 
 
+def _marker_layout(args: argparse.Namespace):
+    from calibration import arena as ar
+
+    return ar.MarkerLayout(
+        markers=ar.parse_markers(args.markers) if args.markers else dict(ar.DEFAULT_MARKERS),
+        size_m=args.marker_size or ar.DEFAULT_MARKER_SIZE_M,
+        dictionary=args.dictionary,
+    )
+
+
+def _print_markers(args: argparse.Namespace) -> None:
+    import cv2
+
+    from calibration import arena as ar
+    from calibration.store import CalibrationError
+
+    layout = _marker_layout(args)
+    radius = args.radius if args.radius is not None else ar.DEFAULT_RADIUS_M
+    page = ar.marker_sheet(layout, args.dpi, radius)
+    args.print_markers.parent.mkdir(parents=True, exist_ok=True)
+    if not cv2.imwrite(str(args.print_markers), page):
+        raise CalibrationError(f"cannot write {args.print_markers}")
+    where = ", ".join(
+        f"id {i} at ({x * 1000:+.0f}, {y * 1000:+.0f}) mm"
+        for i, (x, y) in sorted(layout.markers.items())
+    )
+    print(
+        f"wrote {args.print_markers}: {len(layout.markers)} {layout.dictionary} markers of "
+        f"{layout.size_m * 1000:g} mm on A4 at {args.dpi:g} dpi; print at 100% and check the "
+        f"50 mm bar; lay them flat on the floor, printed top edge towards +y (the top of the "
+        f"camera image), centres at: {where} (x to the image's right, origin at the arm's base)"
+    )
+
+
 def _arena_impl(args: argparse.Namespace) -> int:
     import numpy as np
 
     from calibration import arena as ar
     from calibration import store
 
+    if args.print_markers is not None:
+        _print_markers(args)
+        if args.image is None and args.camera is None:
+            return 0
+    elif args.image is None and args.camera is None:
+        raise store.CalibrationError(
+            "give --image FRAME or --camera SOURCE (or --print-markers OUT.png)"
+        )
     image = _read_frame(args)
     size = (image.shape[1], image.shape[0])
     k, dist, k_source = _intrinsics(args, size)
@@ -343,11 +391,7 @@ def _arena_impl(args: argparse.Namespace) -> int:
         fit = ar.arena_from_points(px, xy, k, dist, size, centre, radius)
         source = "clicked points"
     else:
-        layout = ar.MarkerLayout(
-            markers=ar.parse_markers(args.markers) if args.markers else dict(ar.DEFAULT_MARKERS),
-            size_m=args.marker_size or ar.DEFAULT_MARKER_SIZE_M,
-            dictionary=args.dictionary,
-        )
+        layout = _marker_layout(args)
         fit = ar.arena_from_markers(image, layout, k, dist, centre, radius)
         source = f"{len(layout.markers)} ArUco markers"
     ranges = None
