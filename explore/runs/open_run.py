@@ -201,19 +201,20 @@ def open_run(
                 check_resumed(run_config)
             if episodes is not None or rig_options:
                 run_config = run_config.with_overrides(episodes, rig_options).checked()
+            # the same calibrations and model as when it started, unless allowed: before
+            # anything is built (explore/runs/inputs.py)
+            note = check_inputs(store, run_config, allow_changed_inputs)
         else:
             if config is None:
                 raise RunStoreError(f"{path} holds no run and no config was given for a new one")
             run_config = config.with_overrides(episodes, rig_options).checked()
             store = None
+            note = None
         # rig and strategy before a new run folder exists: a bad name leaves nothing
         the_rig = rig if rig is not None else make_rig(run_config.rig)
         the_strategy = strategy if strategy is not None else strategy_for(run_config, the_rig)
         _check_sees_ball(run_config, the_rig, the_strategy)
-        note = None
-        if store is not None:  # a resume: the same calibrations and model, unless allowed
-            note = check_inputs(store, run_config, allow_changed_inputs)
-        else:
+        if store is None:
             make_run_dir(path)
             lock = held.enter_context(run_lock(path))
             if mode == "auto" and RunStore.is_run(path):
