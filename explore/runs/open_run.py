@@ -269,6 +269,8 @@ def discard_empty_run(run: Path) -> None:
         raise RunStoreError(f"{run} holds episodes: not removed")
     for name in _NEW_RUN_FILES:
         (run / name).unlink(missing_ok=True)
+    for tmp in run.glob("run.json.tmp*"):  # a create's own temporary file
+        tmp.unlink(missing_ok=True)
     left = [p.name for p in run.iterdir()]
     if left == [LOCK_FILE] and remove_lock_if_free(run):
         left = []

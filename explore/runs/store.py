@@ -51,6 +51,7 @@ import math
 import os
 import stat
 import struct
+import threading
 import time
 import zipfile
 import zlib
@@ -89,12 +90,13 @@ class RunStoreError(RuntimeError):
 
 def atomic_write_bytes(path: Path, data: bytes) -> None:
     """Write ``data`` to ``path`` via a temporary file and an atomic rename (fsync'ed). The
-    temporary file is made anew (whatever was at its name removed first, never written
-    through: a link there cannot redirect the write); on failure (a full disk) it is removed
-    and ``path`` is left as it was."""
-    tmp = path.with_name(path.name + ".tmp")
+    temporary file is this writer's own (``NAME.tmp-PID-THREAD``: two processes writing one
+    file, two ``ergo experiment`` writing ``campaign.json``, never rename each other's), made
+    anew (never written through: a link at its name cannot redirect the write); on failure (a
+    full disk) it is removed and ``path`` is left as it was."""
+    tmp = path.with_name(f"{path.name}.tmp-{os.getpid()}-{threading.get_ident()}")
     with contextlib.suppress(FileNotFoundError):
-        os.unlink(tmp)
+        os.unlink(tmp)  # a dead writer's, whose pid and thread id were the same
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | _NOFOLLOW, 0o644)
     try:
         try:
@@ -264,10 +266,10 @@ class RunStore:
         ``explore/runs/lock.py``, aside)."""
         path = Path(path)
         make_run_dir(path)
-        stale = path / "run.json.tmp"
         found = sorted(p.name for p in path.iterdir() if p.name != WRITER_LOCK_FILE)
-        if found == [stale.name]:
-            stale.unlink()  # a kill during a previous create's atomic write: nothing was made
+        if found and all(name.startswith("run.json.tmp") for name in found):
+            for name in found:  # a kill during a previous create's atomic write: nothing made
+                (path / name).unlink()
             found = []
         if found:
             raise RunStoreError(

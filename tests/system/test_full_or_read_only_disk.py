@@ -104,7 +104,7 @@ def test_one_line_and_nothing_lost(report, fs, i):
     for name in ("run/history.bin", "damaged/history.bin", "run/run.json", "d.npz"):
         assert after[name] == initial[name], name  # nothing stored was touched
     made = set(after) - set(initial)
-    assert not [p for p in made if ".partial" in p or p.endswith(".tmp") or ".tmp." in p], made
+    assert not [p for p in made if ".partial" in p or ".tmp" in p], made
     if c["args"][0] == "explore" and "--out" in c["args"]:
         assert not [p for p in after if p.startswith("new")], after  # nothing left behind
     if c["args"][:2] == ["runs", "salvage"]:
