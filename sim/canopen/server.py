@@ -198,8 +198,7 @@ def serve(args: argparse.Namespace) -> int:
 
     from sim.canopen.drives import EmulatedDrives
     from sim.realtime import RealtimeLoop
-    from sim.standin.hidden import StandinError
-    from sim.standin.served import open_served_rig, serve_until_interrupted
+    from sim.standin.served import StandinError, open_served_rig, serve_until_interrupted
 
     drop_rate = float(getattr(args, "drop_rate", 0.0) or 0.0)
     delay_ms = float(getattr(args, "delay_ms", 0.0) or 0.0)

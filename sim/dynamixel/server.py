@@ -125,8 +125,7 @@ def serve(args: argparse.Namespace) -> int:
     """Serve until interrupted; returns the exit code. Prints the pty path and the camera URL
     (one line each, flushed) so that a parent process can read them."""
     from sim.realtime import RealtimeLoop
-    from sim.standin.hidden import StandinError
-    from sim.standin.served import open_served_rig, serve_until_interrupted
+    from sim.standin.served import StandinError, open_served_rig, serve_until_interrupted
 
     try:
         faults = faults_from_args(args)

@@ -14,8 +14,10 @@ from __future__ import annotations
 
 import argparse
 import shutil
+import signal
 import sys
 import tempfile
+import threading
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -35,6 +37,14 @@ from sim.standin.hidden import (
 from sim.standin.lens import RenderPlan, ServedFrames, render_plan
 from sim.standin.scene import write_served_scene
 from sim.twin import Twin
+
+__all__ = [
+    "ServedRig",
+    "StandinError",
+    "open_served_rig",
+    "serve_until_interrupted",
+    "served_twin",
+]
 
 
 @dataclass
@@ -75,11 +85,13 @@ def open_served_rig(args: argparse.Namespace) -> ServedRig:
         except OSError as exc:
             raise StandinError(f"cannot write the hidden parameters to {path}: {exc}") from None
         lines.append(f"stand-in seed {seed}: hidden parameters in {path} (tests only)")
-    twin, plan = _served_twin(rig)
+    twin, plan = served_twin(rig)
     return ServedRig(twin, rig.directions.copy(), rig.offsets.copy(), plan, lines)
 
 
-def _served_twin(rig: HiddenRig) -> tuple[Twin, RenderPlan]:
+def served_twin(rig: HiddenRig) -> tuple[Twin, RenderPlan]:
+    """The twin of a served rig (its scene written to a temporary folder, compiled, removed)
+    and how its camera's frames are made."""
     plan = render_plan(rig.camera)
     folder = tempfile.mkdtemp(prefix="ergo-served-")
     try:
@@ -94,8 +106,8 @@ def serve_until_interrupted(rig: ServedRig, args: Any, announce: list[str]) -> i
     """The tail of ``ergo twin serve`` for every bus: print ``announce`` (the bus's lines),
     serve the camera (unless ``--no-camera``; ``--camera-port``) and the hands
     (``--hands-port``), print their addresses and the rig's own lines (one each, flushed, for
-    a parent process to read), then block until Ctrl-C or SIGTERM. Returns the exit code (2
-    when a port cannot be bound)."""
+    a parent process to read), then block until Ctrl-C or SIGTERM (both end it cleanly: exit
+    code 0). Returns the exit code (2 when a port cannot be bound)."""
     for line in announce:
         print(line, flush=True)
     frames = ServedFrames(rig.twin, rig.plan)
@@ -117,13 +129,22 @@ def serve_until_interrupted(rig: ServedRig, args: Any, announce: list[str]) -> i
         return 2
     for line in rig.lines:
         print(line, flush=True)
+    previous = None
+    if threading.current_thread() is threading.main_thread():  # SIGTERM stops as Ctrl-C does
+        previous = signal.signal(signal.SIGTERM, _interrupt)
     try:
         while True:
             time.sleep(1.0)
     except KeyboardInterrupt:
         pass
     finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
         hands_server.stop()
         if camera is not None:
             camera.stop()
     return 0
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
