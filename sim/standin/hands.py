@@ -191,6 +191,8 @@ class Hands:
 
     def tick(self) -> None:
         """Move every grip along its way; let go of a joint whose torque came on."""
+        if not self._grips:  # nothing held: leave the twin's lock to the bus and the physics
+            return
         with self.twin.lock, self._lock:
             now = self.twin.time
             powered = self.twin.torque_mask()
