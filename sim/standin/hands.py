@@ -369,6 +369,9 @@ class Hands:
 
     # ---- the protocol ----------------------------------------------------------------------
     def status(self) -> dict[str, Any]:
+        """What the hands hold now (their grips brought up to date first), and the notes of
+        what they did on their own since the last status."""
+        self.tick()
         with self._lock:
             notes, self.notes = self.notes, []
         return {"did": "nothing", "held": self.held(), "board": self._held_board, "notes": notes}

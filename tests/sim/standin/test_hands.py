@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import socket
+import time
 from collections.abc import Iterator
 
 import cv2
@@ -53,6 +54,16 @@ def limp(served):
     hands.put_board_away()
 
 
+def wait_simulated(twin, seconds: float) -> None:
+    """Until the twin's clock has advanced by ``seconds`` (bounded: 10000 naps)."""
+    end = twin.time + seconds
+    for _ in range(10000):
+        if twin.time >= end:
+            return
+        time.sleep(0.005)
+    raise AssertionError("the twin's clock stopped")
+
+
 def index(name: str) -> int:
     return ERGO_JR_JOINTS.index(name)
 
@@ -61,16 +72,12 @@ def test_hands_move_a_limp_joint_hold_it_and_let_go(limp):
     twin, hands, *_ = limp
     reply = hands.move({"m2": 0.6, "m3": -0.4})
     assert reply["held"] == {"m2": 0.6, "m3": -0.4}
-    t = twin.time
-    while twin.time < t + 0.5:  # half a second later (simulated), still held
-        pass
+    wait_simulated(twin, 0.5)  # half a second later, still held
     q = twin.joint_positions()
     assert abs(np.degrees(q[index("m2")] - 0.6)) < 0.05
     assert abs(np.degrees(q[index("m3")] + 0.4)) < 0.05
     assert "let go of m2, m3" in hands.release()["did"]
-    t = twin.time
-    while twin.time < t + 1.0:
-        pass
+    wait_simulated(twin, 1.0)
     # let go, the arm leaning forward falls under its own weight
     assert abs(twin.joint_positions()[index("m2")] - 0.6) > np.radians(2)
 

@@ -13,6 +13,7 @@ import subprocess
 import sys
 import threading
 import time
+import urllib.request
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -23,7 +24,8 @@ import pytest
 
 from robot.errors import SafetyStop
 from robot.spec import ERGO_JR_JOINTS
-from sim.standin.hands import HandsClient, HandsError
+from sim.standin.board import BoardGeometry
+from sim.standin.hands import HandsClient, HandsError, board_to_world
 from sim.standin.truth import read_hidden
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -81,6 +83,18 @@ def hidden_of(lines: dict[str, str]):
     return read_hidden(lines["stand-in"].split(" in ", 1)[1].split(" (")[0])
 
 
+def chessboard_corners(stream_url: str, squares: list[int]) -> np.ndarray | None:
+    """The inner corners (N, 2) of a chessboard in the served camera's latest frame, or None."""
+    import cv2
+
+    url = stream_url.replace("/stream.mjpg", "/snapshot.jpg")
+    with urllib.request.urlopen(url, timeout=10) as reply:
+        jpeg = np.frombuffer(reply.read(), np.uint8)
+    grey = cv2.imdecode(jpeg, cv2.IMREAD_GRAYSCALE)
+    found, corners = cv2.findChessboardCornersSB(grey, (squares[0] - 1, squares[1] - 1))
+    return corners.reshape(-1, 2) if found else None
+
+
 def expected_servo_angles(hidden, pose: dict[str, float]) -> np.ndarray:
     q = np.array([pose[j] for j in ERGO_JR_JOINTS])
     return hidden.directions * q + hidden.offsets
@@ -104,6 +118,26 @@ def test_dynamixel_raw_positions_follow_the_hidden_mounting(tmp_path):
                 steps = np.array([bus.read_register(i, "position") for i in range(1, 7)])
                 expected = 512 + expected_servo_angles(hidden, pose) / np.radians(300 / 1023)
                 assert np.abs(steps - expected).max() <= 1.0, (steps, expected)
+        # the board held up in the served stream (JPEG), where the hidden camera puts it
+        board = {"kind": "chessboard", "squares": [9, 7], "square_m": 0.02}
+        held = ((0.01, 0.02, 0.35), (15.0, -10.0, 20.0))
+        hands.show_board(board, *held)
+        found = None
+        for _ in range(50):  # bounded: the camera makes its renderer again for the new image
+            found = chessboard_corners(lines["camera"].split()[-1], board["squares"])
+            if found is not None:
+                break
+            time.sleep(0.1)
+        assert found is not None, "no chessboard in the served stream"
+        geometry = BoardGeometry.from_dict(board)
+        world = board_to_world(geometry, *held, geometry.object_corners())
+        expected = hidden.camera.project(world)
+        error = min(  # OpenCV may list a chessboard's corners from either end
+            np.linalg.norm(expected - found, axis=1).max(),
+            np.linalg.norm(expected[::-1] - found, axis=1).max(),
+        )
+        assert error < 2.0, error
+        hands.put_board_away()
         # an arm that knows nothing of the mounting reads the servos' angles
         with DynamixelArm(port, latency_s=0.05, retries=5) as arm:
             servo = arm.read().positions
