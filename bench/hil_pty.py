@@ -60,7 +60,7 @@ def main() -> int:
         port = serve.stdout.readline().split()[-1]
         camera = serve.stdout.readline().split()[-1]
         base = [*ERGO, "explore", "--no-progress", "--rerun", "off"]
-        new = [*base, "--rig", "dynamixel", "--port", port, "--camera", camera,
+        new = [*base, "--rig", "dynamixel", "--rig-id", "hil", "--port", port, "--camera", camera,
                "--strategy", args.strategy, "--episodes", str(args.episodes),
                "--out", str(run), *args.explore_args]  # fmt: skip
         resume = [*base, "--resume", str(run), "--rig-option", f"port={json.dumps(port)}",

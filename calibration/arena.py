@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from calibration.store import CalibrationError
-from sim.models.make_scene import ARENA_RADIUS, BALL_RADIUS
+from sim.models.make_scene import ARENA_RADIUS, BALL_RADIUS, INNER_RADIUS
 from vision.rectify import (
     ArenaModel,
     apply_homography,
@@ -259,19 +259,174 @@ def _check_residuals(fit: ArenaFit) -> None:
         )
 
 
+# ---- a sheet of the markers to print -------------------------------------------------------
+A4_MM = (210.0, 297.0)  # paper (width, height), mm (ISO 216)
+MM_PER_INCH = 25.4
+
+
+def marker_sheet(
+    layout: MarkerLayout,
+    dpi: float = 300.0,
+    radius_m: float = DEFAULT_RADIUS_M,
+    paper_mm: tuple[float, float] = A4_MM,
+) -> np.ndarray:
+    """An A4 page (grey, (H, W) uint8 at ``dpi``) holding the layout's markers to cut out, each
+    at its printed size with a one-cell white quiet zone and a cutting frame, labelled with its
+    id and where its centre goes, a map of the arena (seen from the camera: x to the right, y
+    up) showing where each marker lies and which way its top edge faces, and a 50 mm scale bar
+    to check that the page was printed at 100 %.
+
+    Raises:
+        CalibrationError: the markers do not fit on one page at that size.
+    """
+    import cv2
+
+    px_mm = dpi / MM_PER_INCH
+    w, h = round(paper_mm[0] * px_mm), round(paper_mm[1] * px_mm)
+    page = np.full((h, w), 255, np.uint8)
+    dico = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, layout.dictionary))
+    side = round(layout.size_m * 1000 * px_mm)
+    ids = sorted(layout.markers)
+    cols = 2
+    cell_w = w // cols
+    cell_h = round(side * 1.5 + 24 * px_mm)
+    rows = -(-len(ids) // cols)
+    top = round(30 * px_mm)
+    if side * 1.4 > cell_w or top + rows * cell_h > h * 0.6:
+        raise CalibrationError(
+            f"{len(ids)} markers of {layout.size_m * 1000:g} mm do not fit on one page: print "
+            "fewer or smaller markers (--markers, --marker-size)"
+        )
+    font, thick = cv2.FONT_HERSHEY_SIMPLEX, max(1, round(px_mm * 0.3))
+    scale = px_mm * 0.12
+
+    def text(s: str, x: int, y: int, size: float = 1.0) -> None:
+        cv2.putText(page, s, (x, y), font, scale * size, 0, thick, cv2.LINE_AA)
+
+    text(
+        f"arena markers: {layout.dictionary}, black square {layout.size_m * 1000:g} mm; "
+        "print at 100 %, cut out, lay flat, top edge (arrow) towards +y",
+        round(8 * px_mm), round(12 * px_mm), 0.8,
+    )  # fmt: skip
+    for n, marker_id in enumerate(ids):
+        cx = (n % cols) * cell_w + cell_w // 2
+        cy = top + (n // cols) * cell_h + side // 2 + round(4 * px_mm)
+        x0, y0 = cx - side // 2, cy - side // 2
+        page[y0 : y0 + side, x0 : x0 + side] = cv2.aruco.generateImageMarker(dico, marker_id, side)
+        quiet = side // 6 + round(3 * px_mm)  # the marker's one cell (4x4 + border: 1/6) and 3 mm
+        cv2.rectangle(
+            page, (x0 - quiet, y0 - quiet), (x0 + side + quiet, y0 + side + quiet), 160, 1
+        )
+        cv2.arrowedLine(page, (cx, y0 - quiet + 2), (cx, y0 - quiet - round(5 * px_mm)), 0, thick)
+        mx, my = layout.markers[marker_id]
+        text(
+            f"id {marker_id}: centre at x {mx * 1000:+.0f} mm, y {my * 1000:+.0f} mm",
+            x0 - quiet, y0 + side + quiet + round(6 * px_mm), 0.7,
+        )  # fmt: skip
+    # the map: the arena from above, as the camera sees it
+    span = max(radius_m, *(max(abs(x), abs(y)) + layout.size_m for x, y in layout.markers.values()))
+    box = min(w * 0.8, h * 0.33)
+    m_px = box / (2 * span)
+    ox, oy = w // 2, round(h - box / 2 - 25 * px_mm)
+
+    def at(x: float, y: float) -> tuple[int, int]:
+        return round(ox + x * m_px), round(oy - y * m_px)
+
+    cv2.circle(page, at(0, 0), round(radius_m * m_px), 0, thick)
+    cv2.circle(page, at(0, 0), max(2, round(0.02 * m_px)), 0, -1)
+    text("arm base (0, 0)", *at(0.025, -0.035), 0.7)
+    cv2.arrowedLine(page, at(0, 0), at(span * 0.5, 0), 0, thick)
+    cv2.arrowedLine(page, at(0, 0), at(0, span * 0.5), 0, thick)
+    text("x", *at(span * 0.52, -0.01))
+    text("+y (top of the camera image)", *at(0.01, span * 0.52))
+    for marker_id in ids:
+        mx, my = layout.markers[marker_id]
+        hs = layout.size_m / 2
+        cv2.rectangle(page, at(mx - hs, my + hs), at(mx + hs, my - hs), 0, -1)
+        cv2.arrowedLine(page, at(mx, my + hs), at(mx, my + hs + 0.02), 0, thick)
+        text(str(marker_id), *at(mx + hs + 0.005, my - hs))
+    text(
+        f"where they go (to scale; arena radius {radius_m * 1000:g} mm):",
+        round(8 * px_mm),
+        round(oy - box / 2 - 4 * px_mm),
+        0.7,
+    )
+    bar0 = (round(8 * px_mm), h - round(10 * px_mm))
+    cv2.line(page, bar0, (bar0[0] + round(50 * px_mm), bar0[1]), 0, max(2, thick))
+    text("50 mm", bar0[0], bar0[1] - round(2 * px_mm), 0.7)
+    return page
+
+
 # ---- the ball's colour -------------------------------------------------------------------
+GROW_HUE = 12  # hue units around the sampled mean when growing to the whole ball (guess)
+FLOOR_HUE_MARGIN = 15  # a blob's hue must differ from the floor's by more (guess)
+MIN_FAMILY_PIXELS = 20  # a hue family needs this many saturated pixels (guess: a ball > 2.5 px)
+MIN_FILL = 0.6  # a blob's area over its bounding circle's: a disc gives 0.79 (guess)
+# How far outside where the twin's ball can lie (its centre between the kerb and the wall,
+# sim/models/make_scene.py) a blob may map and still be taken for the ball, m: a real arena
+# built by hand differs by a centimetre or two (guess).
+PLACE_MARGIN_M = 0.02
+
+
+def hue_families(hues: np.ndarray) -> list[int]:
+    """The main hues among saturated pixels (OpenCV hues 0..179, a circle), most common first:
+    the peaks of their histogram (smoothed over 5 units) with at least ``MIN_FAMILY_PIXELS``
+    pixels, each the highest within ``GROW_HUE`` units around it. Two objects of different
+    colours that touch in the image (the ball against the arm's orange tool) are two
+    families."""
+    hist = np.bincount(np.asarray(hues, int).ravel() % 180, minlength=180).astype(float)
+    smooth = sum(np.roll(hist, k) for k in range(-2, 3))
+    peaks = []
+    for h in np.argsort(-smooth, kind="stable"):
+        if smooth[h] < MIN_FAMILY_PIXELS:
+            break
+        if all(min(abs(h - p), 180 - abs(h - p)) > GROW_HUE for p in peaks):
+            peaks.append(int(h))
+    return peaks
+
+
+def expected_ball_area(
+    model: ArenaModel, pixel: tuple[float, float], ball_radius_m: float
+) -> tuple[float, float] | None:
+    """Where a ball seen at ``pixel`` would lie and how big it would look: (its centre's
+    distance from the arena's centre, m; its image area, px^2), or None without the camera's
+    position. A sphere of radius R at distance D from the camera, seen at an angle t off the
+    optical axis, images as an ellipse of semi-axes f tan(a) / cos(t) and f tan(a) / cos^2(t),
+    sin(a) = R / D (pinhole; distortion ignored)."""
+    if model.camera_position is None:
+        return None
+    xy = pixels_to_arena(model, np.asarray([pixel], np.float64), height=ball_radius_m)[0]
+    d = float(np.linalg.norm(np.array([*xy, ball_radius_m]) - model.camera_position))
+    if d <= ball_radius_m:
+        return None
+    und = undistort_points(np.asarray([pixel], np.float64), model.camera_matrix, model.dist_coeffs)
+    ray = np.linalg.solve(model.camera_matrix, np.array([*und[0], 1.0]))
+    cos_t = 1.0 / float(np.linalg.norm(ray))
+    tan_a = ball_radius_m / np.sqrt(d**2 - ball_radius_m**2)
+    fx, fy = float(model.camera_matrix[0, 0]), float(model.camera_matrix[1, 1])
+    area = np.pi * fx * fy * tan_a**2 / cos_t**3
+    return float(np.linalg.norm(xy - model.centre)), float(area)
+
+
 def find_saturated_blob(
     image: np.ndarray,
     model: ArenaModel | None = None,
     ball_radius_m: float = BALL_RADIUS,
     min_saturation: int = 90,
 ) -> tuple[float, float]:
-    """Pixel (u, v) of the most ball-like saturated blob whose hue differs from the floor's.
+    """Pixel (u, v) of the ball: the most ball-like saturated blob whose hue differs from the
+    floor's.
 
-    The floor's hue is the most common hue among saturated pixels; a blob must differ from it
-    by more than 15 hue units (guess). With an arena model the blob whose area is closest to
-    the expected ball's is chosen (the arm's orange tip is smaller), else the largest round
-    one.
+    Saturated pixels whose hue differs from the floor's (the most common saturated hue) by
+    more than ``FLOOR_HUE_MARGIN`` are split into hue families (``hue_families``: each pixel
+    goes to the nearest family within ``GROW_HUE``), so that the ball and an object of another
+    colour touching it (the arm's orange tool) are separate blobs. Blobs that are not round
+    (fill under ``MIN_FILL``) are left out. With an arena model that knows the camera's
+    position, so are blobs where no ball can lie (a ball's centre between the kerb around the
+    arm's base and the wall: ``INNER_RADIUS`` + R .. radius - R, with ``PLACE_MARGIN_M``), and
+    the blob whose area is nearest a ball's there (``expected_ball_area``) is chosen: the
+    tool seen end-on from above is round too, but nearer the camera, hence larger. Without
+    one, the largest round blob.
     """
     import cv2
 
@@ -279,38 +434,48 @@ def find_saturated_blob(
     sat = (hsv[..., 1] >= min_saturation) & (hsv[..., 2] >= 60)
     if not sat.any():
         raise CalibrationError("no saturated colour in the frame: is the ball in view?")
-    hist = np.bincount(hsv[..., 0][sat].ravel(), minlength=180)
-    floor_hue = int(np.argmax(hist))
-    dh = np.abs(hsv[..., 0].astype(int) - floor_hue)
-    dh = np.minimum(dh, 180 - dh)
-    mask = (sat & (dh > 15)).astype(np.uint8) * 255
-    mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
-    n, _, stats, centroids = cv2.connectedComponentsWithStats(mask)
-    expected = None
-    if model is not None and model.camera_position is not None:
-        height = model.camera_position[2] - ball_radius_m
-        f = float(model.camera_matrix[0, 0])
-        expected = np.pi * (f * ball_radius_m / height) ** 2
+    hue = hsv[..., 0].astype(int)
+    floor_hue = int(np.argmax(np.bincount(hue[sat].ravel(), minlength=180)))
+    candidate = sat & (_hue_distance(hue, floor_hue) > FLOOR_HUE_MARGIN)
+    families = hue_families(hue[candidate])
+    if families:
+        distances = np.stack([_hue_distance(hue, p) for p in families])
+        nearest = np.argmin(distances, axis=0)
+        candidate &= np.min(distances, axis=0) <= GROW_HUE
     best, best_score = None, np.inf
-    for i in range(1, n):
-        area = float(stats[i, cv2.CC_STAT_AREA])
-        if area < 20:
-            continue
-        w, h = stats[i, cv2.CC_STAT_WIDTH], stats[i, cv2.CC_STAT_HEIGHT]
-        fill = area / (np.pi * (max(w, h) / 2) ** 2)
-        if fill < 0.6:
-            continue
-        score = abs(np.log(area / expected)) if expected else -area
-        if score < best_score:
-            best, best_score = i, score
+    for k in range(len(families)):
+        mask = (candidate & (nearest == k)).astype(np.uint8) * 255
+        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+        n, _, stats, centroids = cv2.connectedComponentsWithStats(mask)
+        for i in range(1, n):
+            area = float(stats[i, cv2.CC_STAT_AREA])
+            w, h = stats[i, cv2.CC_STAT_WIDTH], stats[i, cv2.CC_STAT_HEIGHT]
+            if area < MIN_FAMILY_PIXELS or area / (np.pi * (max(w, h) / 2) ** 2) < MIN_FILL:
+                continue
+            centre = (float(centroids[i][0]), float(centroids[i][1]))
+            expected = expected_ball_area(model, centre, ball_radius_m) if model else None
+            if expected is None:
+                score = -area
+            else:
+                r, ball_area = expected
+                inner = INNER_RADIUS + ball_radius_m - PLACE_MARGIN_M
+                if not inner <= r <= model.radius - ball_radius_m + PLACE_MARGIN_M:
+                    continue
+                score = abs(np.log(area / ball_area))
+            if score < best_score:
+                best, best_score = centre, score
     if best is None:
         raise CalibrationError(
-            f"no round saturated blob apart from the floor (hue {floor_hue}): give --ball-pixel"
+            f"no round saturated blob apart from the floor (hue {floor_hue}) where a ball can "
+            "lie: is the ball in view, between the kerb and the wall? Or give --ball-pixel U,V"
         )
-    return float(centroids[best][0]), float(centroids[best][1])
+    return best
 
 
-GROW_HUE = 12  # hue units around the sampled mean when growing to the whole ball (guess)
+def _hue_distance(hue: np.ndarray, ref: int) -> np.ndarray:
+    """Circular distance of OpenCV hues (0..179) from ``ref``, same shape, hue units."""
+    d = np.abs(np.asarray(hue, int) - int(ref))
+    return np.minimum(d, 180 - d)
 
 
 def _circular_mean_hue(hue: np.ndarray) -> int:

@@ -63,7 +63,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     arena = cal.add_parser("arena", help="arena plane, centre, radius and ball colour")
     common(arena)
-    asrc = arena.add_mutually_exclusive_group(required=True)
+    asrc = arena.add_mutually_exclusive_group()
     asrc.add_argument("--image", type=Path, help="a saved frame of the arena")
     asrc.add_argument("--camera", help="live camera: device index, URL or video file")
     arena.add_argument(
@@ -73,6 +73,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     arena.add_argument("--marker-size", type=float, default=None, help="marker side, m")
     arena.add_argument("--dictionary", default="DICT_4X4_50", help="cv2.aruco dictionary")
+    arena.add_argument(
+        "--print-markers", type=Path, metavar="OUT.png",
+        help="write the markers to print (A4, with where each goes) and stop unless --image or "
+        "--camera is given too",
+    )  # fmt: skip
+    arena.add_argument("--dpi", type=float, default=300.0, help="--print-markers resolution")
     arena.add_argument(
         "--corners",
         nargs=4,
@@ -212,14 +218,25 @@ def _camera_impl(args: argparse.Namespace) -> int:
         raise store.CalibrationError("give --images FOLDER or --camera SOURCE (or --print-board)")
     result = charuco.calibrate(views, size, fit_k3=args.fit_k3, board=spec)
     path = store.save("camera", args.rig_id, result.to_dict(spec), args.dir)
-    k = result.camera_matrix
+    print(f"camera: {result.describe()}")
+    print(f"distortion (k1, k2, p1, p2, k3): {', '.join(f'{d:+.4f}' for d in result.dist_coeffs)}")
+    print("per view, RMS px fitted / held out: " + ", ".join(
+        f"{name or i} {a:.2f}/{b:.2f}"
+        for i, (name, a, b) in enumerate(
+            zip(result.view_names, result.per_view_rms_px, result.held_out_per_view_px, strict=True)
+        )
+    ))  # fmt: skip
+    if result.rms_px > charuco.GOOD_RMS_PX:
+        print(
+            f"warning: RMS above {charuco.GOOD_RMS_PX} px: check focus, motion blur and the "
+            "board's flatness"
+        )
     print(
-        f"camera: {result.n_views} views, RMS reprojection error {result.rms_px:.3f} px; "
-        f"fx {k[0, 0]:.1f} fy {k[1, 1]:.1f} cx {k[0, 2]:.1f} cy {k[1, 2]:.1f} px; "
-        f"dist {', '.join(f'{d:+.4f}' for d in result.dist_coeffs)}"
+        f"accepted: every intrinsic known to within {charuco.MAX_SD_OF_FOCAL:.1%} of the focal "
+        "length (1 sd)" + (", and for a better calibration:" if result.advice else "")
     )
-    if result.rms_px > 0.5:
-        print("warning: RMS above 0.5 px: check focus, motion blur and the board's flatness")
+    for item in result.advice:
+        print(f"advice: {item}")
     print(f"saved {path}")
     return 0
 
@@ -308,12 +325,54 @@ def _intrinsics(args: argparse.Namespace, size: tuple[int, int]):
     )
 
 
+def _marker_layout(args: argparse.Namespace):
+    from calibration import arena as ar
+
+    return ar.MarkerLayout(
+        markers=ar.parse_markers(args.markers) if args.markers else dict(ar.DEFAULT_MARKERS),
+        size_m=args.marker_size or ar.DEFAULT_MARKER_SIZE_M,
+        dictionary=args.dictionary,
+    )
+
+
+def _print_markers(args: argparse.Namespace) -> None:
+    import cv2
+
+    from calibration import arena as ar
+    from calibration.store import CalibrationError
+
+    layout = _marker_layout(args)
+    radius = args.radius if args.radius is not None else ar.DEFAULT_RADIUS_M
+    page = ar.marker_sheet(layout, args.dpi, radius)
+    args.print_markers.parent.mkdir(parents=True, exist_ok=True)
+    if not cv2.imwrite(str(args.print_markers), page):
+        raise CalibrationError(f"cannot write {args.print_markers}")
+    where = ", ".join(
+        f"id {i} at ({x * 1000:+.0f}, {y * 1000:+.0f}) mm"
+        for i, (x, y) in sorted(layout.markers.items())
+    )
+    print(
+        f"wrote {args.print_markers}: {len(layout.markers)} {layout.dictionary} markers of "
+        f"{layout.size_m * 1000:g} mm on A4 at {args.dpi:g} dpi; print at 100% and check the "
+        f"50 mm bar; lay them flat on the floor, printed top edge towards +y (the top of the "
+        f"camera image), centres at: {where} (x to the image's right, origin at the arm's base)"
+    )
+
+
 def _arena_impl(args: argparse.Namespace) -> int:
     import numpy as np
 
     from calibration import arena as ar
     from calibration import store
 
+    if args.print_markers is not None:
+        _print_markers(args)
+        if args.image is None and args.camera is None:
+            return 0
+    elif args.image is None and args.camera is None:
+        raise store.CalibrationError(
+            "give --image FRAME or --camera SOURCE (or --print-markers OUT.png)"
+        )
     image = _read_frame(args)
     size = (image.shape[1], image.shape[0])
     k, dist, k_source = _intrinsics(args, size)
@@ -332,11 +391,7 @@ def _arena_impl(args: argparse.Namespace) -> int:
         fit = ar.arena_from_points(px, xy, k, dist, size, centre, radius)
         source = "clicked points"
     else:
-        layout = ar.MarkerLayout(
-            markers=ar.parse_markers(args.markers) if args.markers else dict(ar.DEFAULT_MARKERS),
-            size_m=args.marker_size or ar.DEFAULT_MARKER_SIZE_M,
-            dictionary=args.dictionary,
-        )
+        layout = _marker_layout(args)
         fit = ar.arena_from_markers(image, layout, k, dist, centre, radius)
         source = f"{len(layout.markers)} ArUco markers"
     ranges = None
@@ -381,11 +436,35 @@ def _joints_impl(args: argparse.Namespace) -> int:
     from calibration import store
     from calibration.joints import calibrate_joints, interactive_prompt
 
-    store.check_rig_id(args.rig_id)
+    path = store.calibration_path("joints", args.rig_id, args.dir)
+    kept = f"{path} unchanged" if path.exists() else f"no {path.name} written"
     arm = _make_arm(args)
-    print("torque goes off: hold the arm. Move each joint as asked, then press Enter.")
-    with arm:
-        result = calibrate_joints(arm, interactive_prompt, joints=args.joints)
+    print("torque goes off: hold the arm. Move the joints as asked, then press Enter.")
+    at = ["before the first step"]
+
+    def prompt(step) -> None:
+        at[0] = (
+            "at the zero pose"
+            if step.target == "zero"
+            else f"at {step.joint}'s {step.target} limit"
+        )
+        interactive_prompt(step)
+
+    try:
+        with arm:
+            result = calibrate_joints(
+                arm, prompt, joints=args.joints, notify=lambda m: print(m, flush=True)
+            )
+    except EOFError:
+        print()
+        return _error(
+            f"stdin closed {at[0]}: the calibration needs a person pressing Enter; nothing "
+            f"saved ({kept})"
+        )
+    except KeyboardInterrupt:
+        print()
+        print(f"ergo: interrupted {at[0]}: nothing saved ({kept})", file=sys.stderr)
+        return 130
     path = store.save("joints", args.rig_id, result.to_dict(), args.dir)
     for i, name in enumerate(result.names):
         print(
@@ -405,9 +484,12 @@ def _show(args: argparse.Namespace) -> int:
 def _summary(kind: str, data: dict[str, Any]) -> str:
     if kind == "camera":
         k = data["camera_matrix"]
+        sd = data.get("std_px") or {}
+        pm = lambda name: f" +-{sd[name]:.1f}" if name in sd else ""  # noqa: E731
         return (
             f"{data['image_size'][0]}x{data['image_size'][1]}, {data['n_views']} views, RMS "
-            f"{data['rms_px']:.3f} px, fx {k[0][0]:.1f} fy {k[1][1]:.1f}"
+            f"{data['rms_px']:.3f} px, fx {k[0][0]:.1f}{pm('fx')} fy {k[1][1]:.1f}{pm('fy')} "
+            f"cx {k[0][2]:.1f}{pm('cx')} cy {k[1][2]:.1f}{pm('cy')} px"
         )
     if kind == "arena":
         c = data["centre"]
@@ -415,7 +497,27 @@ def _summary(kind: str, data: dict[str, Any]) -> str:
             f"centre ({c[0]:+.3f}, {c[1]:+.3f}) m, radius {data['radius']:.3f} m, ball ranges "
             f"{data.get('ball_hsv_ranges')}"
         )
-    return f"joints {', '.join(data['names'])}"
+    joints = []
+    for i, name in enumerate(data["names"]):
+        lo, hi = math.degrees(data["lower"][i]), math.degrees(data["upper"][i])
+        joints.append(
+            f"{name} {math.degrees(data['offsets'][i]):+.1f} deg {int(data['directions'][i]):+d} "
+            f"[{lo:+.0f}, {hi:+.0f}]"
+        )
+    return "offset, direction, range per joint: " + "; ".join(joints)
+
+
+def _age(created: Any) -> str:
+    """How long ago a calibration was made, in words ("3 h ago"), or "of unknown age"."""
+    from datetime import UTC, datetime
+
+    if created is None:
+        return "of unknown age"
+    seconds = (datetime.now(UTC) - created).total_seconds()
+    for unit, size in (("days", 86400), ("h", 3600), ("min", 60)):
+        if seconds >= size:
+            return f"made {seconds / size:.0f} {unit} ago"
+    return "made just now" if seconds >= -60 else "dated in the future (check the clock)"
 
 
 def _show_impl(args: argparse.Namespace) -> int:
@@ -428,12 +530,16 @@ def _show_impl(args: argparse.Namespace) -> int:
             print(f"{kind}: none ({path})")
             continue
         try:
-            data = store.load_arena_file(path) if kind == "arena" else store.load_file(path, kind)
+            doc = store.load_document(path, kind)
+            data = store.load_arena_file(path) if kind == "arena" else doc["data"]
         except store.CalibrationError as exc:
             print(f"{kind}: INVALID: {exc}")
             bad += 1
             continue
-        print(f"{kind}: {_summary(kind, data)} ({path})")
+        print(
+            f"{kind}: {_summary(kind, data)} ({path}, {_age(store.created_at(doc))}, "
+            f"sha256 {store.file_sha256(path)[:12]})"
+        )
     return 1 if bad else 0
 
 

@@ -1,10 +1,13 @@
 """Joint offsets, directions and ranges, measured by hand through the ``robot.Arm`` interface.
 
-With torque off, the user moves each joint in turn to its zero mark, to its lower (negative)
-limit and to its upper (positive) limit; the arm is only *read* (``Arm.read().positions``).
-The arm must report raw servo angles (directions +1, offsets 0) so that the result can be given
-to the backend, e.g. ``DynamixelArm(directions=..., offsets=...)``, whose convention is the
-one used here::
+With torque off, the user puts the arm in its zero pose (every joint at its zero mark, one
+prompt), then moves each joint in turn to its lower (negative) and its upper (positive) limit;
+the arm is only *read* (``Arm.read().positions``). Each joint is checked as soon as its two
+limits are read: a joint that was not moved, or whose zero mark is not between its limits, is
+reported at once (``notify``) with the fix, and that joint is asked again (up to
+``MAX_ATTEMPTS`` times). The arm must report raw servo angles (directions +1, offsets 0) so
+that the result can be given to the backend, e.g. ``DynamixelArm(directions=...,
+offsets=...)``, whose convention is the one used here::
 
     servo_angle = direction * joint_angle + offset       joint_angle = direction * (servo - offset)
 
@@ -12,7 +15,12 @@ Differences of angles are wrapped to (-pi, pi], so a servo whose reading wraps b
 zero and a limit (lerobot issue #3586) still calibrates correctly.
 
 The procedure is a plain function driven by a ``prompt(step)`` callback: interactive on the
-command line (``input()``), scripted in tests (the callback moves the twin's joint).
+command line (``input()``), scripted in tests (the callback moves the twin's joint). Nothing is
+written here: the caller saves the result once the whole procedure has succeeded, so an
+interrupted calibration (stdin closed, Ctrl-C) leaves the previous file as it was.
+
+``load_joints_file`` reads a saved calibration for an arm, refusing (one line naming the file)
+one made for other joints or whose ranges miss the arm's.
 """
 
 from __future__ import annotations
@@ -20,11 +28,12 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 
-from calibration.store import CalibrationError
+from calibration.store import CalibrationError, load_file
 from robot.arm import Arm
 from robot.spec import ArmSpec
 
@@ -33,6 +42,9 @@ LIMIT_TOLERANCE_RAD = math.radians(5.0)  # measured limits may pass the spec's b
 MIN_RANGE_RAD = math.radians(20.0)  # a smaller measured range means the joint was not moved
 MAX_JITTER_RAD = math.radians(2.0)  # readings of one step must agree within this (held still)
 SAMPLES = 5  # readings averaged per step
+# How often one joint (or one step held unsteadily) is asked again before the procedure gives
+# up: a person fixes a slip on the second try; a script that never moves the joint must end.
+MAX_ATTEMPTS = 3
 
 
 @dataclass(frozen=True)
@@ -40,15 +52,30 @@ class Step:
     """One instruction to the user.
 
     Attributes:
-        joint: joint name; index: its position in the spec.
-        target: where to move it: its zero mark, or its lower or upper limit.
+        target: ``"zero"``: every joint of ``indices`` at its zero mark (the zero pose, all at
+            once); ``"lower"`` / ``"upper"``: the one joint of ``indices`` at that limit.
+        indices: the joints to move, as positions in the spec.
+        names: their names.
         message: the instruction in words.
+        attempt: 1 the first time; 2, 3... when the joint is asked again after a problem
+            (which ``notify`` was told just before).
     """
 
-    joint: str
-    index: int
     target: Target
+    indices: tuple[int, ...]
+    names: tuple[str, ...]
     message: str
+    attempt: int = 1
+
+    @property
+    def index(self) -> int:
+        """The joint of a limit step (the first of a zero step's)."""
+        return self.indices[0]
+
+    @property
+    def joint(self) -> str:
+        """Which joints, in words: ``m1``, or ``m1, m2, ...`` for a zero pose."""
+        return ", ".join(self.names)
 
 
 @dataclass(frozen=True)
@@ -102,47 +129,97 @@ def _wrap(angle: np.ndarray | float) -> np.ndarray:
     return np.pi - np.mod(np.pi - a, 2 * np.pi)
 
 
-def steps_for(spec: ArmSpec, joints: Sequence[str] | None = None) -> list[Step]:
-    """The instructions, in order, for the given joints (default: all)."""
+def _joint_indices(spec: ArmSpec, joints: Sequence[str] | None) -> list[int]:
     names = list(joints) if joints is not None else spec.names
-    out = []
     for name in names:
         if name not in spec.names:
             raise CalibrationError(f"unknown joint {name!r}; the arm has {', '.join(spec.names)}")
-        i = spec.names.index(name)
-        j = spec.joints[i]
-        lo, hi = math.degrees(j.lower), math.degrees(j.upper)
-        out += [
-            Step(
-                name, i, "zero", f"Move {name} to its zero mark (the rest pose), then press Enter"
-            ),
-            Step(
-                name,
-                i,
-                "lower",
-                f"Move {name} to its lower limit (negative way, about {lo:.0f} deg), then Enter",
-            ),
-            Step(
-                name,
-                i,
-                "upper",
-                f"Move {name} to its upper limit (positive way, about {hi:+.0f} deg), then Enter",
-            ),
-        ]
+    return [spec.names.index(name) for name in names]
+
+
+def zero_step(spec: ArmSpec, indices: Sequence[int], attempt: int = 1) -> Step:
+    """The step that puts the joints of ``indices`` at their zero marks (the zero pose)."""
+    names = tuple(spec.names[i] for i in indices)
+    if len(names) == spec.n:
+        what = "the arm in its zero pose (every joint at its zero mark, the rest pose)"
+    elif len(names) == 1:
+        what = f"{names[0]} at its zero mark"
+    else:
+        what = f"{', '.join(names)} at their zero marks"
+    return Step("zero", tuple(indices), names, f"Put {what}, then press Enter", attempt)
+
+
+def limit_step(spec: ArmSpec, index: int, target: Target, attempt: int = 1) -> Step:
+    """The step that moves one joint to its lower or upper limit."""
+    j = spec.joints[index]
+    if target == "lower":
+        words = f"lower limit (negative way, about {math.degrees(j.lower):.0f} deg)"
+    else:
+        words = f"upper limit (positive way, about {math.degrees(j.upper):+.0f} deg)"
+    message = f"Move {j.name} to its {words}, then press Enter"
+    return Step(target, (index,), (j.name,), message, attempt)
+
+
+def steps_for(spec: ArmSpec, joints: Sequence[str] | None = None) -> list[Step]:
+    """The instructions, in order, for the given joints (default: all) when nothing has to be
+    asked again: the zero pose once, then each joint's lower and upper limits."""
+    indices = _joint_indices(spec, joints)
+    out = [zero_step(spec, indices)]
+    for i in indices:
+        out += [limit_step(spec, i, "lower"), limit_step(spec, i, "upper")]
     return out
 
 
-def _read_still(arm: Arm, index: int, samples: int) -> float:
-    """Circular mean of ``samples`` readings of one joint; refuses a joint that moved."""
-    vals = np.array([arm.read().positions[index] for _ in range(samples)], float)
-    ref = vals[0]
-    d = _wrap(vals - ref)
-    if np.ptp(d) > MAX_JITTER_RAD:
-        raise CalibrationError(
-            f"joint {arm.spec.names[index]} moved by {math.degrees(np.ptp(d)):.1f} deg while "
-            "being read: hold it still and repeat"
+def _read_still(arm: Arm, indices: Sequence[int], samples: int) -> np.ndarray | str:
+    """Circular means of ``samples`` readings of the joints ``indices``, shape (len,), rad; or,
+    when one of them moved while being read, what to tell the user."""
+    idx = list(indices)
+    vals = np.array([arm.read().positions[idx] for _ in range(samples)], float)  # (samples, k)
+    d = _wrap(vals - vals[0])
+    spread = np.ptp(d, axis=0)
+    if np.any(spread > MAX_JITTER_RAD):
+        k = int(np.argmax(spread))
+        return (
+            f"joint {arm.spec.names[idx[k]]} moved by {math.degrees(spread[k]):.1f} deg while "
+            "being read: hold it still, then press Enter"
         )
-    return float(_wrap(ref + d.mean()))
+    return _wrap(vals[0] + d.mean(axis=0))
+
+
+def _check_joint(
+    spec: ArmSpec, i: int, zero: float, lower: float, upper: float, tolerance_rad: float
+) -> tuple[float, float, float] | tuple[str, bool]:
+    """A joint's readings (raw servo angles, rad) -> (direction, lower, upper) in the joint
+    frame, or (what is wrong with the fix, whether its zero mark must be taken again)."""
+    name = spec.names[i]
+    d_lo = float(_wrap(lower - zero))
+    d_hi = float(_wrap(upper - zero))
+    if abs(d_hi - d_lo) < MIN_RANGE_RAD:
+        return (
+            f"joint {name}: its limits are only {math.degrees(abs(d_hi - d_lo)):.0f} deg apart "
+            f"(need >= {math.degrees(MIN_RANGE_RAD):.0f}): was it moved? Torque is off: move "
+            f"{name} by hand all the way to each limit when asked",
+            False,
+        )
+    direction = 1.0 if d_hi > d_lo else -1.0
+    lo, hi = direction * d_lo, direction * d_hi
+    if not lo <= 0.0 <= hi:
+        return (
+            f"joint {name}: the zero mark is not between the limits "
+            f"({math.degrees(lo):.0f}..{math.degrees(hi):.0f} deg from it): put {name} at its "
+            "zero mark again, then at its limits",
+            True,
+        )
+    j = spec.joints[i]
+    if lo < j.lower - tolerance_rad or hi > j.upper + tolerance_rad:
+        return (
+            f"joint {name}: measured range {math.degrees(lo):.0f}..{math.degrees(hi):.0f} "
+            f"deg exceeds the spec's {math.degrees(j.lower):.0f}..{math.degrees(j.upper):.0f}"
+            f" deg by more than {math.degrees(tolerance_rad):.0f}: wrong zero mark? Put {name} "
+            "at its zero mark again, then at its limits",
+            True,
+        )
+    return direction, lo, hi
 
 
 def calibrate_joints(
@@ -151,64 +228,110 @@ def calibrate_joints(
     joints: Sequence[str] | None = None,
     samples: int = SAMPLES,
     tolerance_rad: float = LIMIT_TOLERANCE_RAD,
+    notify: Callable[[str], None] | None = None,
+    max_attempts: int = MAX_ATTEMPTS,
 ) -> JointCalibration:
     """Run the procedure on a connected arm; returns the calibration (not yet saved).
+
+    The zero pose is asked once for all the joints, then each joint's lower and upper limits.
+    A joint is checked as soon as its limits are read; a problem (not moved, zero mark not
+    between its limits, range past the spec's) is given to ``notify`` with its fix and the
+    joint is asked again (its zero mark too when that is what looks wrong); a step during
+    which a joint moved is asked again the same way.
 
     Args:
         arm: a connected ``robot.Arm`` reporting raw servo angles. Torque is turned off first
             and left off.
-        prompt: called with each ``Step``; returns when the joint is in place.
+        prompt: called with each ``Step``; returns when the joints are in place (an
+            ``EOFError`` or ``KeyboardInterrupt`` it raises ends the procedure, nothing saved).
         joints: joint names to calibrate (default all); the others keep offset 0, direction
             +1 and the spec's limits.
         samples: readings averaged per step.
         tolerance_rad: how far a measured limit may pass the spec's before it is refused.
+        notify: told each problem, one line with its fix, before the step is asked again
+            (default: not told).
+        max_attempts: tries per joint (and per step) before giving up.
 
     Raises:
-        CalibrationError: one line naming the joint and what is wrong.
+        CalibrationError: one line naming the joint and what is wrong, after
+            ``max_attempts`` tries.
     """
     spec = arm.spec
+    indices = _joint_indices(spec, joints)
+    tell = notify or (lambda message: None)
+
+    def ask(step: Step) -> np.ndarray:
+        while True:
+            prompt(step)
+            got = _read_still(arm, step.indices, samples)
+            if not isinstance(got, str):
+                return got
+            if step.attempt >= max_attempts:
+                raise CalibrationError(f"{got.split(':')[0]} (tried {step.attempt} times)")
+            tell(got)
+            step = Step(step.target, step.indices, step.names, step.message, step.attempt + 1)
+
     arm.set_torque(False)
     n = spec.n
     offsets = np.zeros(n)
     directions = np.ones(n)
     lower = spec.lower.copy()
     upper = spec.upper.copy()
-    readings: dict[tuple[int, str], float] = {}
-    for step in steps_for(spec, joints):
-        prompt(step)
-        readings[(step.index, step.target)] = _read_still(arm, step.index, samples)
-    done = sorted({i for i, _ in readings})
-    for i in done:
-        name = spec.names[i]
-        zero = readings[(i, "zero")]
-        d_lo = float(_wrap(readings[(i, "lower")] - zero))
-        d_hi = float(_wrap(readings[(i, "upper")] - zero))
-        if abs(d_hi - d_lo) < MIN_RANGE_RAD:
-            raise CalibrationError(
-                f"joint {name}: its limits are only {math.degrees(abs(d_hi - d_lo)):.0f} deg "
-                f"apart (need >= {math.degrees(MIN_RANGE_RAD):.0f}): was it moved?"
-            )
-        direction = 1.0 if d_hi > d_lo else -1.0
-        lo, hi = direction * d_lo, direction * d_hi
-        if not lo <= 0.0 <= hi:
-            raise CalibrationError(
-                f"joint {name}: the zero mark is not between the limits "
-                f"({math.degrees(lo):.0f}..{math.degrees(hi):.0f} deg)"
-            )
+    zero = dict(zip(indices, ask(zero_step(spec, indices)), strict=True))
+    for i in indices:
+        attempt = 1
+        while True:
+            lo_raw = float(ask(limit_step(spec, i, "lower", attempt))[0])
+            hi_raw = float(ask(limit_step(spec, i, "upper", attempt))[0])
+            checked = _check_joint(spec, i, zero[i], lo_raw, hi_raw, tolerance_rad)
+            if isinstance(checked[0], float):
+                break
+            problem, again_zero = checked
+            if attempt >= max_attempts:
+                raise CalibrationError(f"{problem} (tried {attempt} times)")
+            tell(f"{problem}; asking {spec.names[i]} again")
+            attempt += 1
+            if again_zero:
+                zero[i] = float(ask(zero_step(spec, [i], attempt))[0])
+        direction, lo, hi = checked
         j = spec.joints[i]
-        if lo < j.lower - tolerance_rad or hi > j.upper + tolerance_rad:
-            raise CalibrationError(
-                f"joint {name}: measured range {math.degrees(lo):.0f}..{math.degrees(hi):.0f} "
-                f"deg exceeds the spec's {math.degrees(j.lower):.0f}..{math.degrees(j.upper):.0f}"
-                f" deg by more than {math.degrees(tolerance_rad):.0f}: wrong zero mark?"
-            )
-        offsets[i] = zero
+        offsets[i] = zero[i]
         directions[i] = direction
         lower[i] = max(lo, j.lower)
         upper[i] = min(hi, j.upper)
     return JointCalibration(tuple(spec.names), offsets, directions, lower, upper)
 
 
+def load_joints_file(path: str | Path, spec: ArmSpec) -> JointCalibration:
+    """A saved joint calibration for the arm ``spec`` describes.
+
+    Raises:
+        CalibrationMissing: there is no file (not a bad one).
+        CalibrationError: one line naming the file: damaged or of another version
+            (``calibration.store.load_file``), made for other joints, or a joint whose range
+            misses the spec's.
+    """
+    path = Path(path)
+    data = load_file(path, "joints")
+    if list(data["names"]) != spec.names:
+        raise CalibrationError(
+            f"{path}: calibrates joints {', '.join(data['names'])}, the arm has "
+            f"{', '.join(spec.names)}: calibrate it again (ergo calibrate joints --rig-id "
+            f"{path.parent.name} ...)"
+        )
+    cal = JointCalibration.from_dict(data)
+    for j, lo, hi in zip(spec.joints, cal.lower, cal.upper, strict=True):
+        if not max(lo, j.lower) < min(hi, j.upper):
+            raise CalibrationError(
+                f"{path}: joint {j.name}'s range {math.degrees(lo):.0f}.."
+                f"{math.degrees(hi):.0f} deg lies outside the arm's "
+                f"{math.degrees(j.lower):.0f}..{math.degrees(j.upper):.0f} deg: calibrate it "
+                "again"
+            )
+    return cal
+
+
 def interactive_prompt(step: Step) -> None:
-    """Ask on the terminal and wait for Enter."""
-    input(f"[{step.joint}] {step.message}: ")
+    """Ask on the terminal and wait for Enter (``EOFError`` when stdin is closed)."""
+    again = f" (try {step.attempt})" if step.attempt > 1 else ""
+    input(f"[{step.joint}]{again} {step.message}: ")

@@ -13,6 +13,7 @@ then ``os.replace``.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
@@ -138,6 +139,12 @@ def _validate_camera(c: _Checker) -> None:
         c.fail("image_size", "must be two positive integers (width, height)")
     c.number("rms_px", 0.0, 100.0)
     c.number("n_views", 1, 10_000)
+    sd = c.get("std_px", optional=True)
+    if sd is not None and not (
+        isinstance(sd, dict) and all(_is_matrix(v, ()) and v >= 0 for v in sd.values())
+    ):
+        c.fail("std_px", "must map fx, fy, cx, cy to finite standard deviations >= 0, px")
+    c.number("held_out_rms_px", 0.0, 1e4, optional=True)
 
 
 def _validate_arena(c: _Checker) -> None:
@@ -172,6 +179,8 @@ def _validate_joints(c: _Checker) -> None:
     names = c.get("names")
     if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
         c.fail("names", "must be a non-empty list of joint names")
+    if len(set(names)) != len(names):
+        c.fail("names", f"must name each joint once, got {names}")
     n = len(names)
     for key in ("offsets", "lower", "upper"):
         c.matrix(key, (n,))
@@ -306,6 +315,32 @@ def load(kind: str, rig_id: str, directory: str | Path | None = None) -> dict[st
 
 def load_file(path: str | Path, kind: str | None = None) -> dict[str, Any]:
     """Read and validate one calibration file; ``kind`` None accepts any kind."""
+    return load_document(path, kind)["data"]
+
+
+def file_sha256(path: str | Path) -> str:
+    """The SHA-256 of a file's bytes, hex (what ``run.json`` records of each input file and
+    ``ergo calibrate show`` prints)."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def created_at(doc: dict[str, Any]) -> datetime | None:
+    """When a calibration document (``load_document``) was made, or None when its ``created``
+    field is not an ISO-8601 time with a zone."""
+    try:
+        when = datetime.fromisoformat(str(doc.get("created")))
+    except ValueError:
+        return None
+    return when if when.tzinfo is not None else None
+
+
+def load_document(path: str | Path, kind: str | None = None) -> dict[str, Any]:
+    """Read and validate one calibration file; returns the whole document (``schema``,
+    ``kind``, ``version``, ``rig_id``, ``created``, ``data``)."""
     path = Path(path)
     try:
         text = path.read_text()
@@ -340,4 +375,5 @@ def load_file(path: str | Path, kind: str | None = None) -> dict[str, Any]:
             f"is {version}, newer than this program reads ({VERSIONS[file_kind]}): upgrade",
         )
     top.string("rig_id")
-    return validate(file_kind, top.get("data"), where=f"{where}: data")
+    validate(file_kind, top.get("data"), where=f"{where}: data")
+    return doc

@@ -36,6 +36,16 @@ settings.register_profile(
 )
 
 
+@pytest.fixture(autouse=True)
+def _own_calibration_dir(tmp_path_factory: pytest.TempPathFactory, monkeypatch) -> Path:
+    """Every test (and the commands it starts) finds calibration files in an empty folder of
+    its own, never the developer's (~/.config/ergo-explore/calibration): physical rigs read
+    their joint and arena calibrations by rig id."""
+    folder = tmp_path_factory.mktemp("calibration")
+    monkeypatch.setenv("ERGO_CALIBRATION_DIR", str(folder))
+    return folder
+
+
 @pytest.fixture
 def twin() -> Twin:
     t = Twin(render_size=(96, 96))

@@ -149,8 +149,9 @@ def run_campaign(
     "sae") -> model path, for the strategies that need one; ``preset``: a named preset of
     strategy options (``explore.learner.presets``), under ``options``. Raises
     ``CampaignError``."""
-    from calibration.store import CalibrationError, check_rig_id
     from explore.learner.strategies import STRATEGIES
+    from explore.rigs.hardware import check_rig_id
+    from explore.rigs.rig import RigError
 
     for name in strategies:
         if name not in STRATEGIES:
@@ -165,8 +166,8 @@ def run_campaign(
     rig = RigConfig().to_dict() if rig is None else rig
     if is_physical(rig):
         try:
-            check_rig_id(rig["rig_id"])
-        except CalibrationError as exc:
+            check_rig_id(RigConfig(rig["name"], rig["rig_id"], dict(rig.get("options", {}))))
+        except RigError as exc:
             raise CampaignError(str(exc)) from exc
         if backend == "local" and (jobs or 1) > 1:
             raise CampaignError(

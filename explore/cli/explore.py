@@ -96,6 +96,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--resume-or-new", action="store_true",
         help="with --out: continue the run there if it exists, else start it",
     )  # fmt: skip
+    p.add_argument(
+        "--allow-changed-inputs", action="store_true",
+        help="resume even though the run's calibration files or goal-space model changed "
+        "since it started (run.json keeps the old record)",
+    )  # fmt: skip
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_rerun_arguments(p)
     p.set_defaults(func=run_explore)
@@ -171,6 +176,7 @@ def run_explore(args: argparse.Namespace) -> int:
                 args.resume, mode="resume", episodes=args.episodes,
                 rig_options=rig_options(args),  # ports change between sessions
                 check_resumed=_refuse_changes(args),
+                allow_changed_inputs=args.allow_changed_inputs,
             )  # fmt: skip
         else:
             config = _new_config(args)  # checked by open_run before anything is made
@@ -182,6 +188,7 @@ def run_explore(args: argparse.Namespace) -> int:
                 out, config, mode="auto" if args.resume_or_new else "new",
                 episodes=args.episodes, rig_options=rig_options(args),
                 check_resumed=_refuse_changes(args),
+                allow_changed_inputs=args.allow_changed_inputs,
             )  # fmt: skip
     except (RunStoreError, RigError, StrategyError) as exc:
         raise CliError(str(exc)) from exc

@@ -6,9 +6,18 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from explore.rigs.ball import rig_ball_locator
 from explore.rigs.clock import RealClock
-from explore.rigs.hardware import HardwareOptions, per_joint, rig_camera, scene
+from explore.rigs.hardware import (
+    HardwareOptions,
+    check_rig_id,
+    joint_setup,
+    per_joint,
+    rig_camera,
+    scene,
+)
 from explore.rigs.rig import Rig, RigConfig, RigError
 from explore.rigs.video import camera_video_frame
 
@@ -45,6 +54,13 @@ class Options(HardwareOptions):
     heartbeat_ms: int | None = None
 
 
+def can_offsets(directions: np.ndarray, servo_offsets: np.ndarray) -> np.ndarray:
+    """A joint calibration's offsets (servo angle at joint zero, rad: ``calibration.joints``,
+    ``servo = direction * joint + offset``) as ``CanArm`` takes them (the joint angle at drive
+    position 0, ``joint = offset + direction * drive``): ``-direction * offset``, shape (n,)."""
+    return -np.asarray(directions, float) * np.asarray(servo_offsets, float)
+
+
 def make_rig(config: RigConfig, options: Options) -> Rig:
     """Build (not connect) the rig; bad or missing options are one-line ``RigError``s."""
     from robot.canopen.arm import CanArm, CanArmConfig
@@ -56,11 +72,13 @@ def make_rig(config: RigConfig, options: Options) -> Rig:
             "rig 'canopen' needs option can: INTERFACE:CHANNEL, e.g. --can socketcan:can0 or "
             "--can slcan:/dev/ttyACM0"
         )
+    check_rig_id(config)
     n = len(ERGO_JR_JOINTS)
+    joints = joint_setup(config, options, can_offsets)
     arm_config = {
         "node_ids": per_joint(options, "node_ids", n, config.name),
-        "directions": per_joint(options, "directions", n, config.name),
-        "offsets": per_joint(options, "offsets", n, config.name),
+        "directions": joints.directions,
+        "offsets": joints.offsets,
         "heartbeat_ms": options.heartbeat_ms,
         "pdo_timeout_s": options.pdo_timeout_s,
         "following_error_window": options.following_error_window,
@@ -70,9 +88,9 @@ def make_rig(config: RigConfig, options: Options) -> Rig:
         arm_config["heartbeat_ms"] = PTY_HEARTBEAT_MS
     camera = rig_camera(options, config.name)
     try:
-        spec = parse_can_spec(options.can, options.bitrate)
+        bus_spec = parse_can_spec(options.can, options.bitrate)
         given = {k: v for k, v in arm_config.items() if v is not None}
-        arm = CanArm(spec, config=CanArmConfig(**given))
+        arm = CanArm(bus_spec, spec=joints.spec, config=CanArmConfig(**given))
     except (CanBusError, ValueError) as exc:
         raise RigError(f"rig 'canopen': {exc}") from exc
     locator, why = rig_ball_locator(config)

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from explore.options import BadOption
 from explore.rigs.ball import rig_ball_locator
 from explore.rigs.clock import RealClock
-from explore.rigs.hardware import HardwareOptions, per_joint, rig_camera, scene
+from explore.rigs.hardware import HardwareOptions, check_rig_id, joint_setup, rig_camera, scene
 from explore.rigs.rig import Rig, RigConfig, RigError
 from explore.rigs.video import camera_video_frame
 from robot.bus_flags import DEFAULT_BAUD
@@ -46,17 +46,18 @@ class Options(HardwareOptions):
 
 
 def make_rig(config: RigConfig, options: Options) -> Rig:
-    """Build (not connect) the rig (see ``Options``)."""
+    """Build (not connect) the rig (see ``Options``); its arm clamps to the joint calibration's
+    limits (``explore.rigs.hardware.joint_setup``)."""
     from robot.dynamixel.arm import DynamixelArm
     from robot.errors import BusError
-    from robot.spec import ERGO_JR_JOINTS
 
     if not options.port:
         raise RigError(
             "dynamixel rig needs options.port, the serial port of the servos (e.g. /dev/ttyUSB0, "
             "or the pty printed by `ergo twin serve --bus dynamixel`)"
         )
-    n = len(ERGO_JR_JOINTS)
+    check_rig_id(config)
+    joints = joint_setup(config, options)  # DynamixelArm: servo = direction * joint + offset
     bus = {}
     if options.latency_s is not None:
         bus["latency_s"] = options.latency_s
@@ -66,9 +67,10 @@ def make_rig(config: RigConfig, options: Options) -> Rig:
         arm = DynamixelArm(
             options.port,
             options.baud,
+            spec=joints.spec,
             model=options.model,
-            directions=per_joint(options, "directions", n, config.name),
-            offsets=per_joint(options, "offsets", n, config.name),
+            directions=joints.directions,
+            offsets=joints.offsets,
             **bus,
         )
     except (ValueError, KeyError, TypeError, BusError) as exc:

@@ -27,6 +27,7 @@ from explore.learner.strategies import Strategy, make_strategy
 from explore.rigs.rig import Rig, RigError, is_physical, make_rig
 from explore.runs.config import RunConfig
 from explore.runs.explorer import Explorer, Progress
+from explore.runs.inputs import check_inputs, record_inputs
 from explore.runs.lock import LOCK_FILE, RunLock, remove_lock_if_free, run_lock
 from explore.runs.metrics import recorded_episodes
 from explore.runs.record import EpisodeRecord
@@ -51,6 +52,7 @@ class OpenRun:
         created: whether this open made the folder's run (not a resume).
         missing: episodes the run had stored (``metrics.csv`` says) that its history no
             longer holds (cut short, emptied or deleted): they will be run again.
+        inputs_note: what checking the run's input files found worth saying on resume.
     """
 
     config: RunConfig
@@ -62,6 +64,8 @@ class OpenRun:
     created: bool = False
     missing: int = 0
     _held: ExitStack = field(default_factory=ExitStack, repr=False)
+    #: what the check of the input files found worth saying on resume (``explore.runs.inputs``)
+    inputs_note: str | None = None
 
     @property
     def path(self) -> Path:
@@ -107,6 +111,8 @@ class OpenRun:
         takeover = self.lock.describe_takeover() if self.lock is not None else None
         if takeover:
             out.append(takeover)
+        if self.inputs_note:
+            out.append(self.inputs_note)
         return out
 
     def close(self) -> None:
@@ -149,6 +155,7 @@ def open_run(
     check_resumed: Callable[[RunConfig], None] | None = None,
     rig: Rig | None = None,
     strategy: Strategy | None = None,
+    allow_changed_inputs: bool = False,
 ) -> OpenRun:
     """Create the run ``config`` describes in ``path``, or reopen the one there, holding the
     folder's writer lock (``explore/runs/lock.py``) until ``close``.
@@ -164,6 +171,8 @@ def open_run(
         check_resumed: called with a resumed run's config before anything is built (a CLI
             refusing flags that would change it).
         rig, strategy: use these instead of building them from the config.
+        allow_changed_inputs: resume a run whose input files (calibrations, goal-space model:
+            ``explore/runs/inputs.py``) changed since it started; else that is refused.
 
     Raises:
         RunStoreError (a ``RunLockedError`` when another process writes the run, a
@@ -176,6 +185,7 @@ def open_run(
     again = functools.partial(
         open_run, path, config, episodes=episodes, rig_options=rig_options,
         check_resumed=check_resumed, rig=rig, strategy=strategy,
+        allow_changed_inputs=allow_changed_inputs,
     )  # fmt: skip
     held = ExitStack()
     try:
@@ -191,11 +201,15 @@ def open_run(
                 check_resumed(run_config)
             if episodes is not None or rig_options:
                 run_config = run_config.with_overrides(episodes, rig_options).checked()
+            # the same calibrations and model as when it started, unless allowed: before
+            # anything is built (explore/runs/inputs.py)
+            note = check_inputs(store, run_config, allow_changed_inputs)
         else:
             if config is None:
                 raise RunStoreError(f"{path} holds no run and no config was given for a new one")
             run_config = config.with_overrides(episodes, rig_options).checked()
             store = None
+            note = None
         # rig and strategy before a new run folder exists: a bad name leaves nothing
         the_rig = rig if rig is not None else make_rig(run_config.rig)
         the_strategy = strategy if strategy is not None else strategy_for(run_config, the_rig)
@@ -209,13 +223,15 @@ def open_run(
                 return again(mode="resume")
             store = RunStore.create(path, run_config.to_dict())
             held.callback(store.close)
+            record_inputs(store, run_config)
         store.sync_interval_s = the_rig.sync_interval_s
         missing = 0
         if resume:
             missing = max(0, (recorded_episodes(path) or 0) - len(store))
         return OpenRun(
-            run_config, store, the_rig, the_strategy, len(store), lock, not resume, missing, held
-        )
+            run_config, store, the_rig, the_strategy, len(store), lock, not resume, missing, held,
+            inputs_note=note,
+        )  # fmt: skip
     except BaseException:
         held.close()
         raise

@@ -48,10 +48,10 @@ def marker_twin(tmp_path_factory):
     t.close()
 
 
-def ideal_intrinsics(twin: Twin) -> tuple[np.ndarray, np.ndarray]:
+def ideal_intrinsics(twin: Twin, size: tuple[int, int] = SIZE) -> tuple[np.ndarray, np.ndarray]:
     """From the MJCF camera's fovy and the image size only (no access to the twin's truth)."""
     fovy = float(twin.model.cam("overhead").fovy[0])
-    return ideal_camera_matrix(fovy, SIZE), np.zeros(5)
+    return ideal_camera_matrix(fovy, size), np.zeros(5)
 
 
 def ball_errors_mm(twin, cam, model, tracker):
@@ -277,3 +277,91 @@ def test_full_chain_charuco_then_markers_then_tracker(marker_twin):
     fit = arena_from_markers(cam.read().image, LAYOUT, intr.camera_matrix, intr.dist_coeffs)
     err = ball_errors_mm(marker_twin, cam, fit.model, BallTracker(arena=fit.model))
     assert err.max() < 5.0
+
+
+# ---- as `ergo twin serve` shows it: 240 x 240, the arm's orange tool in view ----------------
+SERVED = (240, 240)  # the twin's default render size, which `ergo twin serve` streams
+TOUCHING_POSE = np.array([0.0507, -0.3795, -0.0283, 0.7790, 0.8681, -0.2844])  # rad
+TOUCHING_BALL = (-0.1111, 0.0674)  # m, on the ring (r 0.13), beside the tool in the image
+
+
+def _hue(rgb: tuple[float, float, float]) -> int:
+    """OpenCV hue (0..179) of an MJCF rgba's colour."""
+    bgr = np.uint8([[[round(255 * rgb[2]), round(255 * rgb[1]), round(255 * rgb[0])]]])
+    return int(cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV)[0, 0, 0])
+
+
+@pytest.fixture(scope="module")
+def served_twin(tmp_path_factory):
+    scene = write_marker_scene(tmp_path_factory.mktemp("served"), LAYOUT.markers, LAYOUT.size_m)
+    t = Twin(scene=scene, render_size=SERVED)
+    t.reset(ball_xy=TOUCHING_BALL)
+    t.set_torque(True)
+    t.set_targets(TOUCHING_POSE)
+    t.step(1.0)
+    yield t
+    t.close()
+
+
+def test_the_ball_colour_comes_from_the_ball_not_the_orange_tool_touching_it(served_twin):
+    """The tool (hue 12) touches the ball (hue 36) in the image. Was: one blob of both, whose
+    colour range (hue 8-40) took in the tool, so the tracker followed the arm. Now each hue
+    family is its own blob and the one of the ball's size where a ball can lie is taken."""
+    cam = SimCamera(served_twin, size=SERVED)
+    cam.connect()
+    image = cam.read().image
+    k, d = ideal_intrinsics(served_twin, SERVED)
+    fit = arena_from_markers(image, LAYOUT, k, d)
+    truth = served_twin.ball_position()
+    pixel = find_saturated_blob(image, fit.model, BALL_R)
+    assert np.linalg.norm(np.array(pixel) - cam.project(truth[None])[0]) < 2.0
+    tool = _hue(tuple(served_twin.model.geom("tool").rgba[:3]))
+    ball = _hue(tuple(served_twin.model.geom("ball").rgba[:3]))
+    ranges = sample_ball_hsv(image, pixel)
+    assert any(r.lower[0] <= ball <= r.upper[0] for r in ranges)
+    assert not any(r.lower[0] <= tool <= r.upper[0] for r in ranges), (tool, ranges)
+    obs = BallTracker(TrackerConfig(ranges=tuple(ranges)), fit.model).track(image)
+    assert obs.seen and np.linalg.norm(np.asarray(obs.xy) - truth[:2]) < 0.005
+
+
+def test_arena_from_a_live_camera_needs_no_hand_computed_flag(served_twin, tmp_path, capsys):
+    """`ergo calibrate arena --rig-id X --camera URL` on the served twin's stream with the
+    markers in the scene and the rig's camera.json: no --fovy, --corners or --ball-pixel."""
+    from explore.cli import main
+    from sim.mjpeg_server import MjpegServer, TwinFrames
+
+    k, d = ideal_intrinsics(served_twin, SERVED)
+    camera = {"camera_matrix": k, "dist_coeffs": d, "image_size": [240, 240], "rms_px": 0.1,
+              "n_views": 15}  # fmt: skip
+    store.save("camera", "live", camera, tmp_path)
+    with MjpegServer(TwinFrames(served_twin), fps=10) as server:
+        rc = main(["calibrate", "arena", "--rig-id", "live", "--dir", str(tmp_path), "--camera",
+                   server.url])  # fmt: skip
+    out = capsys.readouterr()
+    assert rc == 0, out.err
+    data = store.load("arena", "live", tmp_path)
+    assert data["camera_position"][2] == pytest.approx(0.55, abs=0.01)
+    assert data["source"].startswith("4 ArUco markers; camera calibration")
+    tool = _hue(tuple(served_twin.model.geom("tool").rgba[:3]))
+    assert not any(lo[0] <= tool <= hi[0] for lo, hi in data["ball_hsv_ranges"])
+    m = re.search(r"arena \(([-+\d.]+), ([-+\d.]+)\) mm", out.out)
+    assert m and np.hypot(float(m.group(1)) / 1000 - TOUCHING_BALL[0],
+                          float(m.group(2)) / 1000 - TOUCHING_BALL[1]) < 0.005  # fmt: skip
+
+
+def test_the_printed_marker_sheet_holds_the_markers_calibrate_arena_looks_for(tmp_path, capsys):
+    from explore.cli import main
+
+    out = tmp_path / "markers.png"
+    assert main(["calibrate", "arena", "--print-markers", str(out), "--dpi", "200"]) == 0
+    said = capsys.readouterr().out
+    assert "id 0 at (-190, +190) mm" in said and "30 mm" in said and "top edge towards +y" in said
+    page = cv2.imread(str(out), cv2.IMREAD_GRAYSCALE)
+    assert page.shape == (round(297 / 25.4 * 200), round(210 / 25.4 * 200))  # A4
+    dico = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, LAYOUT.dictionary))
+    corners, ids, _ = cv2.aruco.ArucoDetector(dico).detectMarkers(page)
+    assert sorted(np.asarray(ids).ravel().tolist()) == sorted(LAYOUT.markers)
+    px_per_mm = 200 / 25.4
+    for c in corners:
+        side_mm = np.linalg.norm(c[0][1] - c[0][0]) / px_per_mm
+        assert side_mm == pytest.approx(LAYOUT.size_m * 1000, rel=0.02)  # within 0.6 mm

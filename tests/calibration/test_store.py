@@ -4,6 +4,7 @@ payload never replacing a good file, and where files live."""
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -156,3 +157,27 @@ def test_an_arena_made_before_the_camera_was_recalibrated_is_refused(tmp_path):
 def test_an_arena_without_a_camera_file_beside_it_is_read_as_it_is(tmp_path):
     path = store.save("arena", "r", arena_payload(camera_payload()), tmp_path)
     assert store.load_arena_file(path)["radius"] == 0.2
+
+
+def test_calibrate_show_gives_each_file_with_its_age_and_hash(tmp_path, capsys):
+    from explore.cli import main
+
+    camera = camera_payload(std_px={"fx": 1.2, "fy": 1.1, "cx": 0.5, "cy": 0.4})
+    paths = {
+        "camera": store.save("camera", "r", camera, tmp_path),
+        "arena": store.save("arena", "r", arena_payload(camera_payload()), tmp_path),
+        "joints": store.save("joints", "r", {
+            "names": ["m1", "m2"], "offsets": [0.1, -0.2], "directions": [1, -1],
+            "lower": [-1.0, -1.5], "upper": [1.0, 2.0],
+        }, tmp_path),
+    }  # fmt: skip
+    doc = json.loads(paths["joints"].read_text())
+    doc["created"] = "2020-01-01T00:00:00+00:00"  # an old calibration
+    paths["joints"].write_text(json.dumps(doc))
+    assert main(["calibrate", "show", "--rig-id", "r", "--dir", str(tmp_path)]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert [line.split(":")[0] for line in lines] == ["camera", "arena", "joints"]
+    for line, path in zip(lines, paths.values(), strict=True):
+        assert f"({path}, made " in line and f"sha256 {store.file_sha256(path)[:12]})" in line
+    assert "made just now" in lines[0] and "fx 600.0 +-1.2" in lines[0]
+    assert re.search(r"made \d+ days ago", lines[2]) and "m2 -11.5 deg -1 [-86, +115]" in lines[2]

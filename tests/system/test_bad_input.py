@@ -286,8 +286,8 @@ def test_a_calibration_file_of_binary_garbage_gets_one_line(tmp_path, capsys, mo
 def test_a_missing_port_is_named_before_the_camera_and_leaves_no_run(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     monkeypatch.setenv("ERGO_CALIBRATION_DIR", str(tmp_path / "cal"))
-    args = ["explore", "--rig", "dynamixel", "--port", "/dev/ttyNOPE", "--episodes", "1",
-            "--out", "run", "--no-progress", "--rerun", "save"]  # fmt: skip
+    args = ["explore", "--rig", "dynamixel", "--rig-id", "r1", "--port", "/dev/ttyNOPE",
+            "--episodes", "1", "--out", "run", "--no-progress", "--rerun", "save"]  # fmt: skip
     for _ in range(2):  # the same command, again: nothing left blocks it
         code, err = _run_cli(args, capsys)
         assert code == 2 and "/dev/ttyNOPE: no such port" in err, err
@@ -317,8 +317,9 @@ def test_a_second_run_on_a_busy_port_with_a_url_camera_is_refused_in_one_line(tm
             serial.Serial(server.path, exclusive=True),  # the first run holds the port
         ):
             cmd = [sys.executable, "-m", "explore.cli", "explore", "--rig", "dynamixel",
-                   "--port", server.path, "--camera", camera.url, "--episodes", "1",
-                   "--out", str(tmp_path / "run"), "--no-progress", "--rerun", "off"]  # fmt: skip
+                   "--rig-id", "r1", "--port", server.path, "--camera", camera.url,
+                   "--episodes", "1", "--out", str(tmp_path / "run"), "--no-progress",
+                   "--rerun", "off"]  # fmt: skip
             env = {**os.environ, "ERGO_CALIBRATION_DIR": str(tmp_path / "cal")}
             done = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=env)
     finally:

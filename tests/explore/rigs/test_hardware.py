@@ -11,7 +11,7 @@ from explore.rigs.rig import RigConfig, RigError, make_rig
 
 def test_rig_needs_a_port() -> None:
     with pytest.raises(RigError, match=r"options\.port"):
-        make_rig(RigConfig(name="dynamixel", options={}))
+        make_rig(RigConfig(name="dynamixel", rig_id="bench", options={}))
 
 
 @pytest.mark.parametrize(
@@ -27,12 +27,16 @@ def test_rig_needs_a_port() -> None:
 )
 def test_rig_options_errors(options, message) -> None:
     with pytest.raises(RigError, match=message):
-        make_rig(RigConfig("canopen", options=options))
+        make_rig(RigConfig("canopen", "bench", options=options))
 
 
 def test_rig_builds_unconnected() -> None:
     rig = make_rig(
-        RigConfig("canopen", options={"can": "slcan:/dev/pts/99", "camera": "0", "bitrate": 500000})
+        RigConfig(
+            "canopen",
+            "bench",
+            options={"can": "slcan:/dev/pts/99", "camera": "0", "bitrate": 500000},
+        )
     )
     assert rig.twin is None and not rig.arm.is_connected
     assert str(rig.arm.bus_spec) == "slcan:/dev/pts/99" and rig.arm.bus_spec.bitrate == 500000
