@@ -67,6 +67,7 @@ SETTLE_S = 1.5
 # Wall-clock bound on one move, whatever the simulation does (the twin might not be running), s.
 MOVE_WALL_BOUND_S = 120.0
 TICK_S = 0.01  # how often the hands update their grips, wall s
+IDLE_S = 0.5  # how often idle hands look up (a move wakes them at once), wall s
 MAX_LINE = 1 << 16  # bytes of one request line
 
 
@@ -157,6 +158,7 @@ class Hands:
         self.notes: list[str] = []  # things the hands did on their own (let go of a joint)
         self._lock = threading.Lock()  # the grips and notes (under the twin's lock too)
         self._stop = threading.Event()
+        self._wake = threading.Event()  # a grip was added
         self._thread: threading.Thread | None = None
 
     # ---- lifecycle -------------------------------------------------------------------------
@@ -168,6 +170,7 @@ class Hands:
 
     def stop(self) -> None:
         self._stop.set()
+        self._wake.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
             self._thread = None
@@ -182,6 +185,10 @@ class Hands:
     def _run(self) -> None:
         said = None
         while not self._stop.wait(TICK_S):
+            if not self._grips:  # nothing held: sleep until a move (or stop) wakes the hands
+                self._wake.wait(IDLE_S)
+                self._wake.clear()
+                continue
             try:
                 self.tick()
             except Exception as exc:  # keep trying; say why once, not every tick
@@ -246,6 +253,7 @@ class Hands:
                 self._grips[j] = _Grip(start, goal, now)
                 self.twin.model.eq_data[self._eq[j], 0] = start
                 self.twin.data.eq_active[self._eq[j]] = 1
+            self._wake.set()
             deadline = max(g.done_at() for j, g in self._grips.items() if j in goals) + SETTLE_S
         names = ", ".join(ERGO_JR_JOINTS[j] for j in goals)
         wall_deadline = time.monotonic() + MOVE_WALL_BOUND_S
