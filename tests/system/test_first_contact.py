@@ -164,3 +164,33 @@ def test_the_coverage_figure_is_drawn_before_the_recording_is_closed(tmp_path, m
     code, _, err = _cli(_explore_spawn(out, "--rerun", "save"), capsys)
     assert code != 0 and "interrupted" in err
     assert (out / "coverage.png").is_file()
+
+
+@pytest.mark.parametrize(
+    "args, hint",
+    [
+        (["explore", "--strategy", "rge-erf", "--episodes", "1"], "'rge-efr'"),
+        (["experiment", "--strategies", "rpe,rge-erf", "--episodes", "1"], "'rge-efr'"),
+        (["explore", "--rig", "simm"], "'sim'"),  # an argparse choice
+        (["explre"], "'explore'"),  # a command
+        (["explore", "--strategy", "rge-efr", "--strategy-option", "bootstrp=3"], "'bootstrap'"),
+        (
+            ["explore", "--strategy", "rge-efr", "--strategy-option", 'goals="unifrom"'],
+            "'uniform'",
+        ),
+    ],
+)
+def test_a_mistyped_name_gets_did_you_mean_in_one_line(args, hint, tmp_path, capsys):
+    out = tmp_path / "run"
+    code, _, err = _cli([*args, "--out", str(out)], capsys)
+    assert code == 2 and len(err.splitlines()) == 1
+    assert f"(did you mean {hint}?)" in err
+    assert not out.exists()
+
+
+def test_no_hint_for_a_name_close_to_nothing(capsys):
+    from robot.registry import did_you_mean
+
+    assert did_you_mean("zzz", ["rpe", "rge-efr"]) == ""
+    code, _, err = _cli(["explore", "--rig", "qqqq"], capsys)
+    assert code == 2 and "did you mean" not in err
