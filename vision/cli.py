@@ -115,12 +115,14 @@ def _error(message: str) -> int:
 def _find_cameras(args: argparse.Namespace) -> int:
     import cv2
 
-    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+    from vision.opencv_camera import opencv_errors_only
+
     found = 0
     for index in range(args.max_index):
-        cap = cv2.VideoCapture(index, cv2.CAP_V4L2)
-        if not cap.isOpened():
-            cap = cv2.VideoCapture(index)
+        with opencv_errors_only():
+            cap = cv2.VideoCapture(index, cv2.CAP_V4L2)
+            if not cap.isOpened():
+                cap = cv2.VideoCapture(index)
         if not cap.isOpened():
             continue
         ok, image = cap.read()
