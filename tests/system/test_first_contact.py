@@ -106,6 +106,39 @@ def test_the_readme_says_how_to_reach_ergo_after_make_run():
     assert "source .venv/bin/activate" in readme and ".venv/bin/ergo" in readme
 
 
+def _readme_commands() -> list[str]:
+    """Every ``ergo ...`` command of the README's sh blocks (continuations joined, comments and
+    ``;`` split off), but those with placeholders (``...``, ``[runs/B ...]``)."""
+    import re
+    import shlex
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    commands = []
+    for block in re.findall(r"```sh\n(.*?)```", readme, re.S):
+        for line in block.replace("\\\n", " ").splitlines():
+            for part in line.split("#")[0].split(";"):
+                words = shlex.split(part)
+                if words[:1] == ["ergo"] and not any("..." in w for w in words):
+                    commands.append(part.strip())
+    return commands
+
+
+def test_every_ergo_command_of_the_readme_parses_as_written():
+    """Parsed by ``ergo``'s own parser (nothing is run): `ergo calibrate camera|arena|joints`
+    did not."""
+    import shlex
+
+    from explore.cli import build_parser
+
+    commands = _readme_commands()
+    assert len(commands) > 20 and any(c.startswith("ergo calibrate joints") for c in commands)
+    for command in commands:
+        try:
+            build_parser().parse_args(shlex.split(command)[1:])
+        except SystemExit as exc:
+            assert exc.code == 0, command  # --help
+
+
 def _explore_spawn(out: Path, *extra: str) -> list[str]:
     return ["explore", "--rig", "sim", "--strategy", "rpe", "--episodes", "2", "--seed", "0",
             "--out", str(out), "--no-progress", *extra]  # fmt: skip
