@@ -10,13 +10,16 @@ Units: metres, radians, seconds. Images are BGR uint8 (OpenCV order).
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import threading
+from collections import deque
 from pathlib import Path
 
 from robot.spec import ERGO_JR_JOINTS
 from sim import RENDER_QUALITIES
 from sim.headless import ensure_fork_safe_software_gl, ensure_headless_gl
+from sim.servo_model import ServoModel, read_model, write_model
 
 ensure_headless_gl()
 ensure_fork_safe_software_gl()
@@ -57,6 +60,9 @@ class Twin:
             casting shadows, the floor drawn on a 1 cm grid; about 15x slower a frame on a
             software renderer, for reproducing figures measured on those images: the same
             pixels). Physics is the same with either.
+        servos: the servos' dynamics (``sim.servo_model.ServoModel``; default: the scene's
+            own, ``sim.servo_model.NOMINAL`` for the committed scenes). A model with a
+            ``delay_s`` holds each command that long before the actuators see it.
     """
 
     def __init__(
@@ -64,6 +70,7 @@ class Twin:
         scene: str | Path = SCENE,
         render_size: tuple[int, int] = (240, 240),
         render_quality: str = "chosen",
+        servos: ServoModel | None = None,
     ) -> None:
         if render_quality not in RENDER_QUALITIES:
             raise TwinError(
@@ -94,8 +101,16 @@ class Twin:
         ids = [i for i in range(m.nbody) if m.body(i).name == "distractor"]
         self._distractor = int(m.body(ids[0]).mocapid[0]) if ids else None
         self._tip_site = m.site("tip").id
+        if servos is not None:
+            write_model(self.model, self._act_idx, self._qvel_idx, servos)
+        self.servos = read_model(self.model, self._act_idx, self._qvel_idx).replace(
+            delay_s=servos.delay_s if servos is not None else 0.0
+        )
         self._kp = self.model.actuator_gainprm[self._act_idx, 0].copy()
         self._bias = self.model.actuator_biasprm[self._act_idx, :3].copy()
+        # Commands not yet seen by the actuators (a servo model with a transport delay):
+        # (simulated time they arrive, s; targets, shape (6,), rad), oldest first.
+        self._pending: deque[tuple[float, np.ndarray]] = deque()
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
         self._renderers_pid = os.getpid()  # the process whose GL contexts they are
         self.render_size = render_size
@@ -117,6 +132,7 @@ class Twin:
         """Back to the ``home`` keyframe (arm at rest); ball placed at ``ball_xy`` (m) if given."""
         with self.lock:
             self.set_torque(True)
+            self._pending.clear()
             mujoco.mj_resetDataKeyframe(self.model, self.data, self.model.key("home").id)
             if ball_xy is not None:
                 self.data.qpos[self._ball_qpos : self._ball_qpos + 2] = ball_xy
@@ -161,21 +177,28 @@ class Twin:
             return state
 
     def set_state(self, state: np.ndarray) -> None:
-        """Restore a state from ``get_state`` exactly (same model only)."""
+        """Restore a state from ``get_state`` exactly (same model only). Commands still held
+        by a transport delay are not part of a state: they are dropped."""
         spec = mujoco.mjtState.mjSTATE_INTEGRATION
         size = mujoco.mj_stateSize(self.model, spec)
         state = np.asarray(state, dtype=float)
         if state.shape != (size,):
             raise TwinError(f"twin state has shape {state.shape}, expected ({size},): other model?")
         with self.lock:
+            self._pending.clear()
             mujoco.mj_setState(self.model, self.data, state, spec)
             mujoco.mj_forward(self.model, self.data)
 
     # ---- actuation -------------------------------------------------------------------------
     def set_targets(self, q: np.ndarray) -> None:
-        """Position targets of the six actuators, shape (6,), rad."""
+        """Position targets of the six actuators, shape (6,), rad; the actuators see them
+        ``servos.delay_s`` of simulated time later."""
         with self.lock:
-            self.data.ctrl[self._act_idx] = q
+            if self.servos.delay_s <= 0.0:
+                self.data.ctrl[self._act_idx] = q
+            else:
+                due = self.time + self.servos.delay_s
+                self._pending.append((due, np.array(q, dtype=float).reshape(len(JOINTS))))
 
     def set_torque(self, enabled: bool) -> None:
         """Servo power of all joints: off zeroes the position actuators' gains, so the arm is
@@ -194,14 +217,39 @@ class Twin:
         return bool(np.all(self.model.actuator_gainprm[self._act_idx, 0] > 0))
 
     def targets(self) -> np.ndarray:
-        """Current position targets, shape (6,), rad."""
+        """The latest position targets given, shape (6,), rad (with a transport delay, the
+        actuators may still hold older ones: ``applied_targets``)."""
+        with self.lock:
+            if self._pending:
+                return self._pending[-1][1].copy()
+            return self.data.ctrl[self._act_idx]
+
+    def applied_targets(self) -> np.ndarray:
+        """The targets the actuators hold now, shape (6,), rad."""
         return self.data.ctrl[self._act_idx]
 
     def step(self, seconds: float | None = None) -> None:
-        """Advance physics by ``seconds`` (rounded to whole steps; one step if None)."""
+        """Advance physics by ``seconds`` (rounded to whole steps; one step if None); a
+        delayed command reaches the actuators at the first step that starts at or after its
+        arrival time."""
         n = 1 if seconds is None else max(1, round(seconds / self.timestep))
         with self.lock:
-            mujoco.mj_step(self.model, self.data, nstep=n)
+            while n > 0 and self._pending:
+                self._apply_due()
+                if not self._pending:
+                    break
+                ahead = self._pending[0][0] - self.time
+                k = min(n, max(1, math.ceil(ahead / self.timestep - 1e-9)))
+                mujoco.mj_step(self.model, self.data, nstep=k)
+                n -= k
+            self._apply_due()
+            if n > 0:
+                mujoco.mj_step(self.model, self.data, nstep=n)
+
+    def _apply_due(self) -> None:
+        # 1e-9 s: simulated time is a sum of float steps (guess, far below one 5 ms step).
+        while self._pending and self._pending[0][0] <= self.time + 1e-9:
+            self.data.ctrl[self._act_idx] = self._pending.popleft()[1]
 
     # ---- queries (index arrays: every one returns a new array) ------------------------------
     def joint_positions(self) -> np.ndarray:

@@ -343,6 +343,8 @@ class DynamixelEmulator:
         goal = servo.model.reg("goal")
         if goal.address < address + len(data) and address < goal.end:
             self._apply_goal(servo)
+        if servo.id not in self.servos:  # its ID register was written: it answers as the new id
+            self.servos = {s.id: s for s in self.servos.values()}
         return 0
 
     def _reboot(self, servo: EmulatedServo) -> None:
