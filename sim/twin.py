@@ -216,6 +216,10 @@ class Twin:
     def torque_enabled(self) -> bool:
         return bool(np.all(self.model.actuator_gainprm[self._act_idx, 0] > 0))
 
+    def torque_mask(self) -> np.ndarray:
+        """Servo power per joint, shape (6,) bool (True = torque on)."""
+        return self.model.actuator_gainprm[self._act_idx, 0] > 0
+
     def targets(self) -> np.ndarray:
         """The latest position targets given, shape (6,), rad (with a transport delay, the
         actuators may still hold older ones: ``applied_targets``)."""
