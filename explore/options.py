@@ -20,6 +20,8 @@ import types
 import typing
 from typing import Any, Literal, TypeVar, Union, get_args, get_origin
 
+from robot.registry import did_you_mean
+
 T = TypeVar("T")
 
 
@@ -66,7 +68,11 @@ def parse_options(cls: type[T], given: Any, where: str) -> T:
     known = known_options(cls)
     unknown = sorted(set(given) - set(known))
     if unknown:
-        raise OptionsError(where, unknown[0], f"is unknown; known: {', '.join(known)}")
+        raise OptionsError(
+            where,
+            unknown[0],
+            f"is unknown{did_you_mean(unknown[0], known)}; known: {', '.join(known)}",
+        )
     hints = typing.get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls)}
     values = {}
@@ -74,7 +80,8 @@ def parse_options(cls: type[T], given: Any, where: str) -> T:
         ok, converted = _convert(hints[key], value)
         if not ok:
             expected = fields[key].metadata.get("expected") or _describe(hints[key])
-            raise OptionsError(where, key, f"must be {expected}, got {value!r}")
+            hint = did_you_mean(value, get_args(hints[key])) if isinstance(value, str) else ""
+            raise OptionsError(where, key, f"must be {expected}, got {value!r}{hint}")
         values[key] = converted
     try:
         return cls(**values)

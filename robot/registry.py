@@ -14,7 +14,7 @@ the others (docs/architecture.md); it imports nothing of the project.
 from __future__ import annotations
 
 import importlib
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from typing import Any
 
 # Import name of an optional or heavy dependency -> how to install it.
@@ -34,6 +34,18 @@ INSTALL: dict[str, str] = {
     "av": "pip install 'ergo-explore[export]'",
     "gymnasium": "pip install 'ergo-explore[gym]'",
 }
+
+
+def did_you_mean(name: object, choices: Iterable[object]) -> str:
+    """`` (did you mean 'X'?)`` for the known name closest to a mistyped one (difflib's
+    similarity ratio at least 0.6, its default), or "" when none is close: the hint every
+    "must be one of" message of the project appends (strategies, rigs, presets, options, the
+    choices of ``ergo``'s flags)."""
+    import difflib
+
+    names = [str(c) for c in choices]
+    close = difflib.get_close_matches(str(name), names, n=1)
+    return f" (did you mean {close[0]!r}?)" if close else ""
 
 
 class RegistryError(LookupError):
@@ -68,7 +80,10 @@ class LazyTable(Mapping[str, str]):
 
     def unknown(self, name: object) -> Exception:
         """The error for a name that is not in the table."""
-        return self.error(f"unknown {self.kind} {name!r}; choose one of {', '.join(self)}")
+        return self.error(
+            f"unknown {self.kind} {name!r}{did_you_mean(name, self)}; "
+            f"choose one of {', '.join(self)}"
+        )
 
     def load(self, name: str, missing_ok: bool = False) -> Any:
         """Import what ``name`` stands for and return it.

@@ -41,18 +41,24 @@ def ideal_camera_matrix(fovy_deg: float, size: tuple[int, int]) -> np.ndarray:
 
 
 def distortion_maps(
-    camera_matrix: np.ndarray, dist_coeffs: np.ndarray, size: tuple[int, int]
+    camera_matrix: np.ndarray,
+    dist_coeffs: np.ndarray,
+    size: tuple[int, int],
+    ideal_matrix: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Remap tables that turn an ideal (pinhole) image into the distorted one.
 
     For every pixel of the distorted output, the ideal pixel that the lens maps there: the
     output pixel is undistorted (OpenCV's iterative inverse of the distortion model) and
-    re-projected with the same camera matrix.
+    re-projected with the ideal image's camera matrix.
 
     Args:
-        camera_matrix: shape (3, 3), pixels.
+        camera_matrix: of the distorted output, shape (3, 3), pixels.
         dist_coeffs: OpenCV coefficients ``(k1, k2, p1, p2[, k3])``, shape (4,) or (5,).
-        size: (height, width), pixels.
+        size: (height, width) of the output, pixels.
+        ideal_matrix: of the ideal image, shape (3, 3), pixels (default ``camera_matrix``: the
+            same size and focal length; another lets a larger render with MuJoCo's centred,
+            square pixels stand for any camera matrix, ``sim.standin.lens``).
 
     Returns:
         (map_x, map_y), each shape (H, W), float32: source column and row in the ideal image.
@@ -64,7 +70,8 @@ def distortion_maps(
     pts = np.stack([u.ravel(), v.ravel()], axis=1).reshape(-1, 1, 2)
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)
     dist = np.asarray(dist_coeffs, dtype=np.float64)
-    ideal = cv2.undistortPoints(pts, camera_matrix, dist, None, None, camera_matrix, criteria)
+    target = camera_matrix if ideal_matrix is None else np.asarray(ideal_matrix, np.float64)
+    ideal = cv2.undistortPoints(pts, camera_matrix, dist, None, None, target, criteria)
     ideal = ideal.reshape(h, w, 2)
     return ideal[..., 0].astype(np.float32), ideal[..., 1].astype(np.float32)
 

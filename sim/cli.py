@@ -51,6 +51,21 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="with --overload-servo: seconds of torque before the alert (default 2)",
     )  # fmt: skip
     serve.add_argument("--seed", type=int, default=0, help="fault injection seed")
+    serve.add_argument(
+        "--stand-in", type=int, default=None, metavar="SEED",
+        help="serve a rig the software has never seen: servo offsets and directions, the "
+        "camera's pose and lens, the servos' dynamics and the ball drawn from SEED "
+        "(docs/standin.md)",
+    )  # fmt: skip
+    serve.add_argument(
+        "--hidden", type=Path, default=None, metavar="PATH",
+        help="with --stand-in: write the hidden parameters here (default: a file per seed in "
+        "the temporary folder; for tests, never read by a calibration)",
+    )  # fmt: skip
+    serve.add_argument(
+        "--hands-port", type=int, default=0,
+        help="port of the hands' control channel on 127.0.0.1 (0: any free; docs/standin.md)",
+    )  # fmt: skip
     serve.set_defaults(func=_serve)
 
 

@@ -15,7 +15,7 @@ import time
 from collections.abc import Callable
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -240,43 +240,3 @@ class MjpegServer:
                     pass  # the client went away
 
         return Handler
-
-
-def start_twin_camera(twin: Twin, args: Any) -> MjpegServer | None:
-    """Serve the twin's overhead camera for ``ergo twin serve`` (``--camera-port``,
-    ``--no-camera``) with its own renderer (``TwinFrames``) and print its URL.
-
-    Returns the started server, or None with ``--no-camera``. Raises OSError when the port
-    cannot be bound.
-    """
-    if getattr(args, "no_camera", False):
-        return None
-    camera = MjpegServer(TwinFrames(twin), port=int(getattr(args, "camera_port", 0) or 0))
-    camera.start()
-    print(f"camera on {camera.url}", flush=True)
-    return camera
-
-
-def serve_until_interrupted(twin: Twin, args: Any, announce: list[str]) -> int:
-    """The tail of ``ergo twin serve`` for every bus: print ``announce`` (the bus's lines, one
-    each, flushed, for a parent process to read), start the twin's camera
-    (``start_twin_camera``), then block until Ctrl-C or SIGTERM. Returns the exit code (2 when
-    the camera's port cannot be bound)."""
-    import sys
-
-    for line in announce:
-        print(line, flush=True)
-    try:
-        camera = start_twin_camera(twin, args)
-    except OSError as exc:
-        print(f"ergo: error: {exc}", file=sys.stderr)
-        return 2
-    try:
-        while True:
-            time.sleep(1.0)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        if camera is not None:
-            camera.stop()
-    return 0

@@ -11,16 +11,18 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
 import threading
 from collections import deque
 from pathlib import Path
 
 from robot.spec import ERGO_JR_JOINTS
 from sim import RENDER_QUALITIES
-from sim.headless import ensure_headless_gl
+from sim.headless import ensure_fork_safe_software_gl, ensure_headless_gl
 from sim.servo_model import ServoModel, read_model, write_model
 
 ensure_headless_gl()
+ensure_fork_safe_software_gl()
 
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
@@ -34,6 +36,12 @@ JOINTS = ERGO_JR_JOINTS  # the MJCF's joint and actuator names (sim/models/ergo_
 LEGACY_SHADOW_SIZE = 4096  # px
 LEGACY_OFFSAMPLES = 4
 LEGACY_FLOOR_GRID = 0.01  # m, the floor's render grid before 2026-12-01 (shadows show it)
+
+
+# Renderers a forked child inherited from its parent: their GL contexts belong to the parent's
+# driver state, so the child never draws with, frees or garbage-collects them (freeing one
+# calls into the driver, which can block in a child). Kept referenced until the child exits.
+_INHERITED_RENDERERS: list[mujoco.Renderer] = []
 
 
 class TwinError(RuntimeError):
@@ -104,6 +112,7 @@ class Twin:
         # (simulated time they arrive, s; targets, shape (6,), rad), oldest first.
         self._pending: deque[tuple[float, np.ndarray]] = deque()
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
+        self._renderers_pid = os.getpid()  # the process whose GL contexts they are
         self.render_size = render_size
         self.reset()
 
@@ -207,6 +216,10 @@ class Twin:
     def torque_enabled(self) -> bool:
         return bool(np.all(self.model.actuator_gainprm[self._act_idx, 0] > 0))
 
+    def torque_mask(self) -> np.ndarray:
+        """Servo power per joint, shape (6,) bool (True = torque on)."""
+        return self.model.actuator_gainprm[self._act_idx, 0] > 0
+
     def targets(self) -> np.ndarray:
         """The latest position targets given, shape (6,), rad (with a transport delay, the
         actuators may still hold older ones: ``applied_targets``)."""
@@ -284,6 +297,7 @@ class Twin:
         """Render a named camera, shape (H, W, 3), BGR uint8."""
         h, w = size or self.render_size
         with self.lock:
+            self._leave_inherited_renderers()
             renderer = self._renderers.get((h, w))
             if renderer is None:
                 renderer = mujoco.Renderer(self.model, h, w)
@@ -293,8 +307,18 @@ class Twin:
         rgb = renderer.render()
         return np.ascontiguousarray(rgb[:, :, ::-1])
 
+    def _leave_inherited_renderers(self) -> None:
+        """In a process forked after this twin rendered (``multiprocessing``'s default on
+        Linux, e.g. Gymnasium's ``AsyncVectorEnv``), set the parent's renderers aside untouched;
+        this process makes its own on its next render."""
+        if self._renderers_pid != os.getpid():
+            _INHERITED_RENDERERS.extend(self._renderers.values())
+            self._renderers = {}
+            self._renderers_pid = os.getpid()
+
     def close(self) -> None:
-        """Free the renderers' GL contexts."""
+        """Free the renderers' GL contexts (only those this process made)."""
+        self._leave_inherited_renderers()
         for r in self._renderers.values():
             r.close()
         self._renderers.clear()

@@ -115,12 +115,14 @@ def _error(message: str) -> int:
 def _find_cameras(args: argparse.Namespace) -> int:
     import cv2
 
-    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+    from vision.opencv_camera import opencv_errors_only
+
     found = 0
     for index in range(args.max_index):
-        cap = cv2.VideoCapture(index, cv2.CAP_V4L2)
-        if not cap.isOpened():
-            cap = cv2.VideoCapture(index)
+        with opencv_errors_only():
+            cap = cv2.VideoCapture(index, cv2.CAP_V4L2)
+            if not cap.isOpened():
+                cap = cv2.VideoCapture(index)
         if not cap.isOpened():
             continue
         ok, image = cap.read()
@@ -167,9 +169,20 @@ def _vae_train(args: argparse.Namespace) -> int:
         return _error(str(exc))
     kl = ", ".join(f"{v:.2f}" for v in vae.config.kl_per_latent or [])
     print(f"{args.out}: VAE saved (trained on {resolve_device(args.device)}); "
-          f"KL per latent (nats): {kl}; held-out explained pixel variance "
-          f"{vae.config.heldout_explained_variance:.3f}")  # fmt: skip
+          f"KL per latent (nats): {kl}; "
+          f"{_explained(vae.config.heldout_explained_variance)}")  # fmt: skip
     return 0
+
+
+def _explained(value: float) -> str:
+    """The held-out explained pixel variance in words (vision.representation_quality)."""
+    what = f"held-out explained pixel variance {value:.3f}"
+    if value < 0:
+        return (
+            f"{what}: WORSE than the mean training image (0 = the mean image, 1 = perfect); "
+            "this model's code carries nothing usable: train longer or on more images"
+        )
+    return f"{what} (0 = no better than the mean training image, 1 = perfect)"
 
 
 def _sae_train(args: argparse.Namespace) -> int:
@@ -196,7 +209,8 @@ def _sae_train(args: argparse.Namespace) -> int:
     except (VaeError, ValueError) as exc:
         return _error(str(exc))
     kept = distinct_features(sae.config.code_std, sae.config.code_corr)
-    print(f"{args.out}: spatial autoencoder saved; distinct moving features (the goal space's "
-          f"modules): {', '.join(map(str, kept))} of {sae.config.features}; held-out explained "
-          f"pixel variance {sae.config.heldout_explained_variance:.3f}")  # fmt: skip
+    print(f"{args.out}: spatial autoencoder saved; {len(kept)} of its {sae.config.features} "
+          f"features move and follow distinct things (feature{'s' * (len(kept) > 1)} "
+          f"{', '.join(map(str, kept))}: one goal-space module each); "
+          f"{_explained(sae.config.heldout_explained_variance)}")  # fmt: skip
     return 0

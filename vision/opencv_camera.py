@@ -12,12 +12,34 @@ import logging
 import os
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from vision.camera import Camera, CameraError, Frame
+
+
+@contextmanager
+def opencv_errors_only() -> Iterator[None]:
+    """OpenCV's own log at ERROR while opening captures, unless the user set
+    ``OPENCV_LOG_LEVEL``: a device that does not open made OpenCV print WARN lines first (V4L2
+    "can't open camera by index", FFMPEG "should be configured with libavdevice"), before the
+    one line that says so."""
+    import cv2
+
+    if "OPENCV_LOG_LEVEL" in os.environ:
+        yield
+        return
+    level = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+    try:
+        yield
+    finally:
+        cv2.utils.logging.setLogLevel(level)
+
 
 log = logging.getLogger(__name__)
 
@@ -201,7 +223,8 @@ class OpenCVCamera(Camera):
             log.warning("camera %r ignored a setting: %s", self.source, msg)
 
     def _connect(self) -> None:
-        cap = self._open_capture()
+        with opencv_errors_only():
+            cap = self._open_capture()
         try:
             self._apply_settings(cap)
             deadline = time.monotonic() + self.open_timeout_s

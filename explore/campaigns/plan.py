@@ -27,6 +27,7 @@ from explore.campaigns.trial import (
     trial_resources,
 )
 from explore.rigs.rig import RigConfig
+from robot.registry import did_you_mean
 
 # strategies that need a representation trained beforehand, and the flag that gives it (the
 # key of ``run_campaign``'s ``models``, of ``MAKE_VAE`` and the ergo experiment flag)
@@ -155,7 +156,10 @@ def run_campaign(
 
     for name in strategies:
         if name not in STRATEGIES:
-            raise CampaignError(f"unknown strategy {name!r}; choose among {', '.join(STRATEGIES)}")
+            raise CampaignError(
+                f"unknown strategy {name!r}{did_you_mean(name, STRATEGIES)}; "
+                f"choose among {', '.join(STRATEGIES)}"
+            )
     for key in options or {}:
         target, _ = option_target(key)
         if target is not None and target not in strategies:

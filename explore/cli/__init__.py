@@ -7,8 +7,9 @@ import argparse
 import errno
 import logging
 import sys
+from typing import Any
 
-from robot.registry import LazyTable, RegistryError
+from robot.registry import LazyTable, RegistryError, did_you_mean
 
 # Each package's ``register(subparsers) -> None``, in the order of ``ergo --help``. Each module
 # must import quickly (no torch or MuJoCo at module level) so that ``ergo --help`` stays fast.
@@ -37,6 +38,17 @@ class OneLineParser(argparse.ArgumentParser):
 
     def error(self, message: str) -> None:  # type: ignore[override]
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+    def _check_value(self, action: argparse.Action, value: Any) -> None:
+        """argparse's check of a value against ``choices`` (commands too), with the hint for a
+        mistyped one (Python 3.14's argparse has its own; this one works from 3.11)."""
+        if action.choices is not None and value not in action.choices:
+            choices = ", ".join(map(repr, action.choices))
+            raise argparse.ArgumentError(
+                action,
+                f"invalid choice: {value!r}{did_you_mean(value, action.choices)} "
+                f"(choose from {choices})",
+            )
 
 
 def _user_errors() -> tuple[type[BaseException], ...]:

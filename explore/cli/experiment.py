@@ -76,8 +76,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument(
         "--no-report", action="store_true",
-        help="skip CAMPAIGN/report (coverage curves, scatter plots, summary.md with the Welch "
-        "test), written at the end by default; `ergo report CAMPAIGN` writes it any time",
+        help="skip CAMPAIGN/report (coverage curves, summary.md with the Welch test, from the "
+        "runs' metrics.csv: seconds), written at the end by default; `ergo report CAMPAIGN "
+        "[--scatter]` writes it any time",
     )  # fmt: skip
     add_rig_arguments(p)
     p.set_defaults(func=run_experiment)

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from explore.cli import CliError
-from explore.cli.rerun_flags import add_rerun_arguments
+from explore.cli.rerun_flags import add_rerun_arguments, check_viewer
 from explore.rigs.rig import RIGS
 from robot.bus_flags import add_bus_arguments, bus_flags
 
@@ -170,6 +170,7 @@ def run_explore(args: argparse.Namespace) -> int:
         raise CliError("give either --resume RUN or --out DIR, not both")
     if args.resume_or_new and not args.out:
         raise CliError("--resume-or-new needs --out DIR")
+    check_viewer(args)  # before any run folder is made
     try:
         if args.resume is not None:
             run = open_run(
@@ -238,7 +239,8 @@ def run_explore(args: argparse.Namespace) -> int:
                 f"ergo explore --resume {store.path}{also}"
             ) from exc
         raise
-    for line in closer.close() + _coverage_curve(store.path, len(store)):
+    # the figure first: it needs only metrics.csv, and closing a viewer's stream can take time
+    for line in _coverage_curve(store.path, len(store)) + closer.close():
         print(f"not written: {line}", file=sys.stderr)
     last = explorer.metrics.rows[-1] if explorer.metrics.rows else None
     cells = last["ball_cells"] if last else 0

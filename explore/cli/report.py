@@ -6,7 +6,6 @@ from __future__ import annotations
 import argparse
 import os
 import shlex
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -19,10 +18,17 @@ def register(sub: argparse._SubParsersAction) -> None:
         "report",
         help="figures and a one-page summary (Markdown, HTML) of a run or a campaign",
         description="Write PNG figures (960x640 px) and summary.md / summary.html for a run "
-        "folder, or for a campaign folder CAMPAIGN/STRATEGY/RUN/ (mean and spread over seeds).",
+        "folder, or for a campaign folder CAMPAIGN/STRATEGY/RUN/ (mean and spread over seeds, "
+        "from the runs' metrics.csv: seconds).",
     )
     p.add_argument("path", type=Path, metavar="RUN|CAMPAIGN")
     p.add_argument("--out", type=Path, help="output folder (default PATH/report)")
+    p.add_argument(
+        "--scatter",
+        action="store_true",
+        help="campaigns: also campaign_scatter.png, every episode's positions (reads every "
+        "record: minutes for 100k episodes)",
+    )
     p.set_defaults(func=run_report)
 
     p = sub.add_parser(
@@ -53,7 +59,7 @@ def run_report(args: argparse.Namespace) -> int:
     if not args.path.is_dir():
         raise CliError(f"{args.path} is not a folder")
     try:
-        written = report(args.path, args.out)
+        written = report(args.path, args.out, args.scatter)
     except RunStoreError as exc:
         raise CliError(str(exc)) from exc
     for p in written:
@@ -70,9 +76,9 @@ def has_display() -> bool:
 
 def viewer_command(files: list[Path]) -> list[str]:
     """The ``rerun`` viewer command for ``files`` (this environment's executable if any)."""
-    local = Path(sys.executable).parent / "rerun"
-    exe = str(local) if local.exists() else (shutil.which("rerun") or "rerun")
-    return [exe, *(str(f.resolve()) for f in files)]
+    from explore.report.recorder import viewer_executable
+
+    return [viewer_executable() or "rerun", *(str(f.resolve()) for f in files)]
 
 
 def run_replay(args: argparse.Namespace) -> int:

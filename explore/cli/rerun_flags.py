@@ -38,6 +38,31 @@ def add_rerun_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def check_viewer(args: argparse.Namespace) -> None:
+    """Before anything is made: ``--rerun spawn`` needs a viewer to start and a display for
+    it. Without a display, the recording is saved instead (one line says so); without a viewer
+    executable, a ``CliError`` in one line (no run folder is made)."""
+    if getattr(args, "rerun", "save") != "spawn" or getattr(args, "rerun_connect", None):
+        return
+    import sys
+
+    from explore.cli.report import has_display
+    from explore.report.recorder import viewer_executable
+
+    if not has_display():
+        print(
+            "no display here (DISPLAY and WAYLAND_DISPLAY unset): --rerun spawn would open no "
+            "viewer; saving RUN/recording.rrd instead (`ergo replay RUN` where there is one)",
+            file=sys.stderr,
+        )
+        args.rerun = "save"
+    elif viewer_executable() is None:
+        raise CliError(
+            f"--rerun spawn: no rerun viewer beside {sys.executable} nor on PATH (it comes with "
+            "pip install rerun-sdk); or --rerun save and `ergo replay RUN` later"
+        )
+
+
 def make_recorder(
     args: argparse.Namespace,
     run_path: Path,

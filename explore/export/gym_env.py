@@ -1,9 +1,12 @@
 """The twin as Gymnasium environments (importing this module registers them):
 
 - ``ergo_explore/ArmBall-v0`` (``ArmBallEnv``): per-tick control at 40 Hz. The action is the
-  six joint position targets, rad, sent through the same ``robot.Arm`` safety as every
-  exploration (clamped to the joint limits and to 0.15 rad from the previous command); one step
-  is one control tick. 200 steps (5 s) an episode.
+  six joint position targets, sent through the same ``robot.Arm`` safety as every exploration
+  (clamped to the joint limits and to 0.15 rad from the previous command); one step is one
+  control tick. 200 steps (5 s) an episode. By default the targets are in radians, as the arm
+  takes them (what v0 always meant); ``gym.make(..., normalized_actions=True)`` takes them in
+  [-1, 1] instead, mapped linearly onto each joint's range (-1 the lower limit, +1 the upper),
+  the box RL libraries expect.
 - ``ergo_explore/ArmBallDmp-v0`` (``ArmBallDmpEnv``): one step is one exploration episode, the
   IMGEP's own view: the action is the 48 DMP parameters in [-1, 1], played from the rest pose,
   then back to rest and the ball left to settle; the episode ends after that step.
@@ -13,7 +16,9 @@ relabelling works): ``observation`` the joints read, (6,) rad; ``image`` the 64 
 observation, RGB uint8; ``achieved_goal`` the ball's centre (x, y), m (the twin's ground truth);
 ``desired_goal`` a ball position drawn on the ring at reset. ``compute_reward(achieved_goal,
 desired_goal, info)`` is -1 until the ball is within ``DISTANCE_THRESHOLD`` of the goal, then
-0, for single goals or batches. ``render_mode="rgb_array"`` gives the overhead camera. Seeding
+0, for single goals or batches; ``compute_terminated`` and ``compute_truncated`` give what
+``step`` returns, as gymnasium-robotics' GoalEnvs do. ``render_mode="rgb_array"`` gives the
+overhead camera. Seeding
 ``reset`` makes a rollout deterministic: the twin is, and the ball's start and the goal are
 drawn from the environment's generator.
 
@@ -61,6 +66,8 @@ class _TwinGoalEnv(gym.Env):
         "render_modes": ["rgb_array"],
         "render_fps": CONTROL_RATE_HZ,
     }
+    # whether every step ends the episode (the goal does not: reaching it ends nothing)
+    TERMINATES_EVERY_STEP: ClassVar[bool] = False
 
     def __init__(self, render_mode: str | None = None) -> None:
         if render_mode not in (None, "rgb_array"):
@@ -88,8 +95,23 @@ class _TwinGoalEnv(gym.Env):
         """-1 where the ball is farther than ``DISTANCE_THRESHOLD`` from the goal, else 0; shapes
         (..., 2) m -> (...)."""
         d = np.linalg.norm(np.asarray(achieved_goal) - np.asarray(desired_goal), axis=-1)
-        reward = -(d > DISTANCE_THRESHOLD).astype(np.float32)
+        reward = np.where(d > DISTANCE_THRESHOLD, -1.0, 0.0).astype(np.float32)  # 0.0, not -0.0
         return float(reward) if reward.ndim == 0 else reward
+
+    def compute_terminated(
+        self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any = None
+    ) -> bool | np.ndarray:
+        """The ``terminated`` that ``step`` returns for these goals; shapes (..., 2) -> (...)."""
+        done = np.full(np.shape(achieved_goal)[:-1], self.TERMINATES_EVERY_STEP)
+        return bool(done) if done.ndim == 0 else done
+
+    def compute_truncated(
+        self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any = None
+    ) -> bool | np.ndarray:
+        """Always False, shapes (..., 2) -> (...): the time limit is Gymnasium's ``TimeLimit``
+        wrapper's (``max_episode_steps``), as in gymnasium-robotics' Fetch tasks."""
+        done = np.zeros(np.shape(achieved_goal)[:-1], dtype=bool)
+        return bool(done) if done.ndim == 0 else done
 
     # ---- gym.Env ---------------------------------------------------------------------------
     def reset(
@@ -124,36 +146,69 @@ class _TwinGoalEnv(gym.Env):
             "desired_goal": self.goal.astype(np.float32),
         }
 
+    def _step_result(
+        self, obs: dict[str, np.ndarray], info: dict[str, Any]
+    ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        """``step``'s tuple, from the GoalEnv methods (so they always agree)."""
+        achieved, desired = obs["achieved_goal"], obs["desired_goal"]
+        return (
+            obs,
+            float(self.compute_reward(achieved, desired, info)),
+            bool(self.compute_terminated(achieved, desired, info)),
+            bool(self.compute_truncated(achieved, desired, info)),
+            info,
+        )
+
     def _info(self, obs: dict[str, np.ndarray]) -> dict[str, Any]:
         reached = self.compute_reward(obs["achieved_goal"], obs["desired_goal"]) == 0.0
         return {"is_success": bool(reached)}
 
 
 class ArmBallEnv(_TwinGoalEnv):
-    """Per-tick control of the twin: the action is the joint position targets, (6,) rad."""
+    """Per-tick control of the twin: the action is the joint position targets, (6,): rad by
+    default, or in [-1, 1] over each joint's range with ``normalized_actions=True``.
 
-    def __init__(self, render_mode: str | None = None) -> None:
+    Radians stay the default so that ``ArmBall-v0`` keeps the one meaning it was published
+    with (a policy or a dataset of v0 actions still means the same commands); RL libraries
+    with Gaussian policies want ``normalized_actions=True``, on which Gymnasium's checker has
+    nothing to remark."""
+
+    def __init__(self, render_mode: str | None = None, normalized_actions: bool = False) -> None:
         super().__init__(render_mode)
         spec = self.spec_arm
-        self.action_space = spaces.Box(
-            spec.lower.astype(np.float32), spec.upper.astype(np.float32), dtype=np.float32
-        )
+        self.normalized_actions = bool(normalized_actions)
+        if self.normalized_actions:
+            self.action_space = spaces.Box(-1.0, 1.0, shape=(spec.n,), dtype=np.float32)
+        else:
+            self.action_space = spaces.Box(
+                spec.lower.astype(np.float32), spec.upper.astype(np.float32), dtype=np.float32
+            )
         self.dt = 1.0 / CONTROL_RATE_HZ
+
+    def joint_targets(self, action: np.ndarray) -> np.ndarray:
+        """The joint targets an action asks for, (6,) rad (before the Arm's clamps): the action
+        itself, or with ``normalized_actions`` [-1, 1] (clipped) mapped onto [lower, upper]."""
+        action = np.asarray(action, dtype=float)
+        if not self.normalized_actions:
+            return action
+        spec = self.spec_arm
+        return spec.lower + (np.clip(action, -1.0, 1.0) + 1.0) / 2.0 * (spec.upper - spec.lower)
 
     def step(
         self, action: np.ndarray
     ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
-        sent = self.rig.arm.command(np.asarray(action, dtype=float))  # clamped by the Arm
+        sent = self.rig.arm.command(self.joint_targets(action))  # clamped by the Arm
         self.rig.clock.advance(self.dt)
         obs = self._observe()
         info = self._info(obs)
         info["command_sent"] = sent
-        reward = self.compute_reward(obs["achieved_goal"], obs["desired_goal"], info)
-        return obs, float(reward), False, False, info
+        return self._step_result(obs, info)
 
 
 class ArmBallDmpEnv(_TwinGoalEnv):
     """One exploration episode per step: the action is the 48 DMP parameters in [-1, 1]."""
+
+    TERMINATES_EVERY_STEP: ClassVar[bool] = True
 
     def __init__(self, render_mode: str | None = None) -> None:
         super().__init__(render_mode)
@@ -169,9 +224,11 @@ class ArmBallDmpEnv(_TwinGoalEnv):
         obs = self._observe()
         info = self._info(obs)
         info.update(ball_moved=result.ball_moved, settle_s=result.settle_s)
-        reward = self.compute_reward(obs["achieved_goal"], obs["desired_goal"], info)
-        return obs, float(reward), True, False, info
+        return self._step_result(obs, info)
 
 
-gym.register("ergo_explore/ArmBall-v0", entry_point=ArmBallEnv, max_episode_steps=MAX_TICKS)
-gym.register("ergo_explore/ArmBallDmp-v0", entry_point=ArmBallDmpEnv)
+# Entry points as "module:Class" strings, so that ``env.spec.to_json()`` can write them.
+gym.register(
+    "ergo_explore/ArmBall-v0", entry_point=f"{__name__}:ArmBallEnv", max_episode_steps=MAX_TICKS
+)
+gym.register("ergo_explore/ArmBallDmp-v0", entry_point=f"{__name__}:ArmBallDmpEnv")

@@ -20,7 +20,8 @@ frames: ``episode.dmp_parameters`` (the 48 motor parameters), ``episode.goal``,
 ``episode.context`` and ``episode.outcome`` in the run's goal space (NaN where there is none).
 The ``task`` is what the strategy was doing ("motor babbling", "goal in module k"). Each episode
 row also names where it comes from (``ergo/run``, ``ergo/episode``, ``ergo/strategy``,
-``ergo/seed``). Every file goes into a temporary folder beside ``OUT`` (``.OUT.partial-PID``:
+``ergo/seed``; ``ergo/run`` is the run's name, never a path of the exporting machine: see
+``run_names``). Every file goes into a temporary folder beside ``OUT`` (``.OUT.partial-PID``:
 one per export, so that two exports to one ``OUT`` never remove each other's), renamed to
 ``OUT`` at the end: an export that fails leaves nothing, and of two exports to one ``OUT`` the
 second to finish says so and leaves the first's dataset alone.
@@ -171,6 +172,16 @@ def _alive(pid: int) -> bool:
     return True
 
 
+def run_names(paths: list[Path]) -> list[str]:
+    """What the dataset calls each run (``ergo/run``): its folder relative to the folder that
+    holds every exported run, e.g. ``"A"`` for ``runs/A`` alone, ``"rge-efr/seed-0"`` for trials
+    of a campaign. Never an absolute path: the user's file system would be published with a
+    dataset pushed to the Hub."""
+    resolved = [Path(p).resolve() for p in paths]
+    common = Path(os.path.commonpath([p.parent for p in resolved]))
+    return [p.relative_to(common).as_posix() for p in resolved]
+
+
 def check_out(out: Path) -> None:
     """``--out`` must be new or an empty folder (an ``ExportError`` otherwise)."""
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
@@ -253,8 +264,9 @@ def _write(
     writer = None
     image_stats = _ImageStats()
     index = 0
+    names = run_names([s.path for s in sources])
     try:
-        for source in sources:
+        for source, name in zip(sources, names, strict=True):
             for ep in iter_episodes(source, with_video, left_out if with_video else None):
                 shape = (ep.goal.size, ep.context.size)
                 if dims is None:
@@ -279,7 +291,7 @@ def _write(
                 else:
                     span = None
                 task = tasks.setdefault(ep.task, len(tasks))
-                _add_episode(cols, ep, len(cols.episodes), index, task, fps, span, source)
+                _add_episode(cols, ep, len(cols.episodes), index, task, fps, span, source, name)
                 index += ep.length
     finally:
         if writer is not None:
@@ -328,6 +340,7 @@ def _add_episode(
     fps: int,
     span: tuple[float, float] | None,
     source: RunSource,
+    run_name: str,
 ) -> None:
     t = ep.length
     frame = np.arange(t)
@@ -361,7 +374,7 @@ def _add_episode(
         row[f"videos/{VIDEO_KEY}/to_timestamp"] = span[1]
     row["meta/episodes/chunk_index"] = 0
     row["meta/episodes/file_index"] = 0
-    row["ergo/run"] = str(source.path)
+    row["ergo/run"] = run_name
     row["ergo/episode"] = ep.episode
     row["ergo/strategy"] = source.config.strategy.name
     row["ergo/seed"] = source.config.seed

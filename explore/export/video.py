@@ -4,7 +4,8 @@ LeRobot's default video encoder (huggingface/lerobot ``lerobot/configs/video.py`
 ``VideoEncoderConfig``, read 2026-12-01): AV1 by ``libsvtav1``, pixel format ``yuv420p``, a key
 frame every 2 frames (``g``), constant rate factor 30, preset 12 (SVT-AV1 4.x runs it as its
 preset 11). The same settings here, so that what reads LeRobot videos reads these: rerun's viewer
-decodes AV1 itself (no ffmpeg needed) and PyAV, torchcodec and browsers decode it too.
+decodes AV1 itself (no ffmpeg needed); PyAV, torchcodec and torchvision's VideoReader (up to
+0.25) decode it to the same frames (measured: docs/ecosystem.md, bench/bench_video_readers.py).
 """
 
 from __future__ import annotations

@@ -37,6 +37,7 @@ from __future__ import annotations
 from typing import Any
 
 from explore.learner.strategies.base import STRATEGIES, StrategyError
+from robot.registry import did_you_mean
 
 CORL2018_COMMON: dict[str, Any] = {
     "sigma": 0.05,
@@ -72,7 +73,10 @@ def preset_options(preset: str, strategy: str) -> dict[str, Any]:
     from explore.learner.strategies.online import OnlineLatentGoalExploration
 
     if preset not in PRESETS:
-        raise StrategyError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")
+        raise StrategyError(
+            f"unknown preset {preset!r}{did_you_mean(preset, PRESETS)}; "
+            f"choose one of {', '.join(PRESETS)}"
+        )
     cls = STRATEGIES.load(strategy)
     if not issubclass(cls, GoalExploration):
         return {}

@@ -44,6 +44,8 @@ from __future__ import annotations
 import logging
 import os
 import re
+import shutil
+import sys
 import uuid
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -74,6 +76,10 @@ QUIET_FILE_SINK = (
 RECORDING_NAME = "recording"  # RUN/recording.rrd, then RUN/recording-2.rrd, ... on resumes
 JOINT_NAMES = ERGO_JR_JOINTS
 BATCH_FLUSH_S = 1.0  # latency of a live viewer, s
+# How long closing waits for a viewer (spawned or connected) to take the last data, s (a guess:
+# a live viewer on loopback takes a run's backlog in well under a second). rerun's default
+# waits forever: a viewer that never came up (no display) kept `ergo explore` from ending.
+VIEWER_FLUSH_S = 10.0
 JPEG_QUALITY = 80  # 64x64 frames: about 2 kB each
 
 # Entity paths every recording has (the documented layout; docs/viewing.md).
@@ -105,6 +111,13 @@ GOAL_COLOR = (220, 40, 40)
 REACHED_COLOR = (40, 170, 60)
 MISS_COLOR = (200, 200, 200)
 GOAL_RADIUS_UI = -5.0  # goal-space points: 5 UI points whatever the space's scale
+
+
+def viewer_executable() -> str | None:
+    """The rerun viewer to start: the one installed beside this Python (a venv's ``bin/``, also
+    when the venv is not activated: ``.venv/bin/ergo``), else the one on PATH; None if neither."""
+    local = Path(sys.executable).parent / ("rerun.exe" if os.name == "nt" else "rerun")
+    return str(local) if local.is_file() else shutil.which("rerun")
 
 
 # ---- run folder helpers --------------------------------------------------------------------
@@ -202,6 +215,7 @@ class Recorder:
         self.reset_s = reset_s
         self.outcome_of = outcome_of
         self.path = Path(path) if path is not None else None
+        self.sink = sink
         self.scene = scene
         self.ball_cells = CellCounter(scene.ball_half_width)
         self.ee_cells = CellCounter(scene.hand_half_width)
@@ -225,7 +239,7 @@ class Recorder:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self.rec.save(self.path, default_blueprint=bp)
         elif sink == "spawn":
-            self.rec.spawn(default_blueprint=bp)
+            rr.spawn(executable_path=viewer_executable(), recording=self.rec, default_blueprint=bp)
         elif sink == "connect":
             self.rec.connect_grpc(url, default_blueprint=bp)
         else:
@@ -391,12 +405,18 @@ class Recorder:
         self.rec.log(f"series/{name}", self._rr.Scalars(float(value)))
 
     def close(self) -> None:
-        """Flush and close the sink (the ``.rrd`` is complete afterwards)."""
+        """Flush and close the sink (the ``.rrd`` is complete afterwards; a viewer gets
+        ``VIEWER_FLUSH_S`` to take the last data, after which rerun raises)."""
         if self._closed:
             return
         self._closed = True
-        self.rec.flush()
-        self.rec.disconnect()
+        try:
+            if self.sink == "save":
+                self.rec.flush()
+            else:
+                self.rec.flush(timeout_sec=VIEWER_FLUSH_S)
+        finally:
+            self.rec.disconnect()
 
     def __enter__(self) -> Recorder:
         return self

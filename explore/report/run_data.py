@@ -1,9 +1,15 @@
 """What a report reads of a run folder (``RunData``, ``load_run``) and of a campaign folder
 (``find_campaign_runs``). Runs are read without modifying them (safe while an exploration is
-still writing)."""
+still writing).
+
+Two depths: the per-episode metrics (cells reached, ball moved, kind, settle time) come from
+``RUN/metrics.csv``, which exploration derived as it went (``records=False``: milliseconds a
+run); the positions and goals of each episode need every record of the history decoded
+(``records=True``: the history's size, minutes for a campaign of 100k episodes)."""
 
 from __future__ import annotations
 
+import csv
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -15,7 +21,7 @@ from explore.learner.goal_outcomes import goal_outcome_of
 from explore.learner.scene import TWIN_ARENA, Scene
 from explore.report.recorder import recording_paths
 from explore.runs.config import RunConfig
-from explore.runs.metrics import MetricsLog
+from explore.runs.metrics import METRICS_FILE, MetricsLog, read_metrics
 from explore.runs.store import RunStore, read_history
 
 log = logging.getLogger(__name__)
@@ -27,7 +33,9 @@ class RunData:
 
     Attributes:
         episode, ball_cells, ee_cells, settle_s: (N,) per episode (cells reached so far).
-        ball_moved: (N,) bool. kind: (N,) str. module: (N,) int.
+        ball_moved: (N,) bool. kind: (N,) str.
+        The rest is read from the records, None when only the metrics were read
+        (``load_run(records=False)``): module: (N,) int.
         ball, context_ball: (N, 2) m, ball after / before each episode (NaN when not seen).
         ee_final: (N, 2) m, tool tip (x, y) at the end of each movement.
         goals: (N, g) goals, g = 0 when the strategy sets none (NaN-padded: a goal has the
@@ -46,17 +54,22 @@ class RunData:
     settle_s: np.ndarray
     ball_moved: np.ndarray
     kind: np.ndarray
-    module: np.ndarray
-    ball: np.ndarray
-    context_ball: np.ndarray
-    ee_final: np.ndarray
-    goals: np.ndarray
+    module: np.ndarray | None = None
+    ball: np.ndarray | None = None
+    context_ball: np.ndarray | None = None
+    ee_final: np.ndarray | None = None
+    goals: np.ndarray | None = None
     reached: np.ndarray | None = None
     recordings: list[Path] = field(default_factory=list)
 
     @property
     def config(self) -> dict[str, Any]:
         return self.meta["config"]
+
+    @property
+    def has_records(self) -> bool:
+        """Whether the per-episode positions and goals were read (``load_run(records=True)``)."""
+        return self.ball is not None
 
     @property
     def n(self) -> int:
@@ -96,16 +109,22 @@ def run_scene(config: dict[str, Any]) -> Scene:
     return rig_scene(RigConfig(rig["name"], rig.get("rig_id", "twin"), rig.get("options", {})))
 
 
-def load_run(path: Path, goal_outcomes: bool = True) -> RunData:
+def load_run(path: Path, goal_outcomes: bool = True, records: bool = True) -> RunData:
     """Read a run folder (config, history; metrics recomputed from the history).
 
     ``goal_outcomes``: also map each outcome into the run's goal space (``RunData.reached``,
     for the goals figure). For a latent run that encodes every outcome image with its VAE, the
     slow part of a report; campaign reports do without it.
+    ``records=False``: only ``RUN/metrics.csv`` (no positions, goals nor modules), falling
+    back to the history when the run has no readable metrics file.
     """
     path = Path(path)
     meta = RunStore.read_meta(path)
     RunConfig.from_dict(meta["config"], where=path / "run.json")  # one line naming a bad field
+    if not records:
+        derived = _from_metrics(path, meta)
+        if derived is not None:
+            return derived
     scene = run_scene(meta["config"])
     metrics = MetricsLog(path / "metrics.csv", scene)  # never written here
     cols: dict[str, list[Any]] = {k: [] for k in ("ball", "context_ball", "ee_final", "goals")}
@@ -163,6 +182,25 @@ def load_run(path: Path, goal_outcomes: bool = True) -> RunData:
         ee_final=pts("ee_final"),
         goals=goals,
         reached=reached_arr,
+        recordings=recording_paths(path),
+    )
+
+
+def _from_metrics(path: Path, meta: dict[str, Any]) -> RunData | None:
+    """A run's ``RunData`` from its ``metrics.csv`` alone, or None when it cannot be read."""
+    try:
+        m = read_metrics(path / METRICS_FILE)
+    except (OSError, ValueError, KeyError, TypeError, csv.Error):  # missing, torn, damaged
+        return None
+    return RunData(
+        path=path,
+        meta=meta,
+        episode=m["episode"].astype(int),
+        ball_cells=m["ball_cells"],
+        ee_cells=m["ee_cells"],
+        settle_s=m["settle_s"],
+        ball_moved=m["ball_moved"].astype(bool),
+        kind=m["kind"].astype(str),
         recordings=recording_paths(path),
     )
 

@@ -5,8 +5,15 @@ A run report (``report_run``) writes into its output folder ``coverage.png``, ``
 ``goals.png`` (only when the strategy set goals), ``summary.md`` and ``summary.html``.
 
 A campaign is a folder ``CAMPAIGN/STRATEGY/RUN/`` (e.g. ``CAMPAIGN/rpe/seed-0/``). Its report
-(``report_campaign``) writes ``campaign_coverage.png``, ``campaign_scatter.png`` and the
-summaries.
+(``report_campaign``) writes ``campaign_coverage.png`` and the summaries from each run's
+``metrics.csv`` (seconds, whatever the campaign's size), and with ``scatter=True`` also
+``campaign_scatter.png``, which needs every episode's record decoded (minutes for 100k
+episodes).
+
+A report is written into a hidden folder beside its output folder (``.NAME.partial``), then its
+files are moved in: a report stopped while drawing leaves the output folder as it was; one
+stopped while moving (milliseconds) leaves ``REPORT_INCOMPLETE`` in it, which a complete report
+removes.
 """
 
 from __future__ import annotations
@@ -14,6 +21,11 @@ from __future__ import annotations
 import base64
 import html
 import json
+import os
+import shutil
+from collections.abc import Iterator
+from contextlib import contextmanager
+from datetime import datetime
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +42,11 @@ from explore.report.figures import (
 )
 from explore.report.run_data import RunData, find_campaign_runs, load_run
 from explore.runs.store import RunStore
+
+INCOMPLETE = "REPORT_INCOMPLETE"  # in an output folder whose report stopped being moved in
+# every file a report may write: those this report did not write are stale, removed
+REPORT_FILES = ("coverage.png", "scatter.png", "goals.png", "campaign_coverage.png",
+                "campaign_scatter.png", "summary.md", "summary.html")  # fmt: skip
 
 
 # ---- summaries -------------------------------------------------------------------------------
@@ -128,6 +145,13 @@ def _campaign_markdown(
         "",
     ]
     parts += [f"![{p.stem}]({p.relative_to(out_dir)})\n" for p in figures]
+    if not any(p.name == "campaign_scatter.png" for p in figures):
+        parts += [
+            "The table and the figure above come from the runs' `metrics.csv`. The scatter of "
+            "every episode's end-effector and ball positions needs every record read (minutes "
+            f"for 100k episodes): `ergo report {campaign} --scatter`.",
+            "",
+        ]
     parts += ["## Runs", ""]
     for name, runs in sorted(groups.items()):
         for r in runs:
@@ -212,43 +236,80 @@ def _write_summaries(md: str, out_dir: Path) -> list[Path]:
     return [md_path, html_path]
 
 
+@contextmanager
+def _staged(out_dir: Path) -> Iterator[tuple[Path, list[Path]]]:
+    """(a folder to write the report into, the list of its files): at the end the files are
+    moved into ``out_dir`` (under ``REPORT_INCOMPLETE``, then removed) and the list rewritten
+    to their final paths. Stopped before the end, ``out_dir`` is as it was."""
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out_dir.parent / f".{out_dir.name}.partial"
+    if tmp.exists():
+        shutil.rmtree(tmp)  # what a stopped report left (never the report itself)
+    tmp.mkdir()
+    written: list[Path] = []
+    try:
+        yield tmp, written
+        out_dir.mkdir(exist_ok=True)
+        marker = out_dir / INCOMPLETE
+        marker.write_text(
+            f"ergo report started moving a new report into this folder at {datetime.now()} "
+            "and stopped before the end: its files are a mix of two reports; run it again.\n"
+        )
+        names = {p.name for p in written}
+        for name in REPORT_FILES:
+            if name not in names:
+                (out_dir / name).unlink(missing_ok=True)  # a figure this report has not
+        for p in written:
+            os.replace(p, out_dir / p.name)
+        written[:] = [out_dir / p.name for p in written]
+        marker.unlink()
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
 # ---- entry points ----------------------------------------------------------------------------
 def report_run(run_path: Path, out_dir: Path | None = None) -> list[Path]:
     """Figures and summaries of one run; returns the files written (default ``RUN/report``)."""
     run = load_run(Path(run_path))
     out_dir = Path(out_dir) if out_dir is not None else run.path / "report"
-    out_dir.mkdir(parents=True, exist_ok=True)
-    figures = [
-        coverage_figure(run, out_dir / "coverage.png"),
-        scatter_figure(run, out_dir / "scatter.png"),
-    ]
-    goals = goals_figure(run, out_dir / "goals.png")
-    if goals is not None:
-        figures.append(goals)
-    return figures + _write_summaries(_run_markdown(run, figures, out_dir), out_dir)
+    with _staged(out_dir) as (tmp, written):
+        figures = [
+            coverage_figure(run, tmp / "coverage.png"),
+            scatter_figure(run, tmp / "scatter.png"),
+        ]
+        goals = goals_figure(run, tmp / "goals.png")
+        if goals is not None:
+            figures.append(goals)
+        written += figures + _write_summaries(_run_markdown(run, figures, tmp), tmp)
+    return written
 
 
-def report_campaign(campaign: Path, out_dir: Path | None = None) -> list[Path]:
-    """Figures and summaries of a campaign folder (default ``CAMPAIGN/report``)."""
+def report_campaign(
+    campaign: Path, out_dir: Path | None = None, scatter: bool = False
+) -> list[Path]:
+    """Figures and summaries of a campaign folder (default ``CAMPAIGN/report``), from the runs'
+    ``metrics.csv``; ``scatter``: also ``campaign_scatter.png``, from every record."""
     campaign = Path(campaign)
     paths = find_campaign_runs(campaign)
     if not paths:
         raise FileNotFoundError(f"{campaign} holds no runs (expected CAMPAIGN/STRATEGY/RUN/)")
     groups = {
-        name: [load_run(p, goal_outcomes=False) for p in runs] for name, runs in paths.items()
+        name: [load_run(p, goal_outcomes=False, records=scatter) for p in runs]
+        for name, runs in paths.items()
     }
     out_dir = Path(out_dir) if out_dir is not None else campaign / "report"
-    out_dir.mkdir(parents=True, exist_ok=True)
-    figures = [
-        campaign_coverage_figure(groups, out_dir / "campaign_coverage.png"),
-        campaign_scatter_figure(groups, out_dir / "campaign_scatter.png"),
-    ]
-    md = _campaign_markdown(campaign, groups, figures, out_dir)
-    return figures + _write_summaries(md, out_dir)
+    with _staged(out_dir) as (tmp, written):
+        figures = [campaign_coverage_figure(groups, tmp / "campaign_coverage.png")]
+        if scatter:
+            figures.append(campaign_scatter_figure(groups, tmp / "campaign_scatter.png"))
+        md = _campaign_markdown(campaign, groups, figures, tmp)
+        written += figures + _write_summaries(md, tmp)
+    return written
 
 
-def report(path: Path, out_dir: Path | None = None) -> list[Path]:
-    """A run's report when ``path`` is a run folder, else a campaign's."""
+def report(path: Path, out_dir: Path | None = None, scatter: bool = False) -> list[Path]:
+    """A run's report when ``path`` is a run folder, else a campaign's (``scatter``: the
+    campaign's scatter figure too; a run's report always has its own)."""
     if RunStore.is_run(path):
         return report_run(path, out_dir)
-    return report_campaign(path, out_dir)
+    return report_campaign(path, out_dir, scatter)

@@ -21,6 +21,7 @@ from typing import Any
 
 from explore.rigs.rig import RIGS, RigConfig
 from explore.runs.store import RunStoreError
+from robot.registry import did_you_mean
 from robot.spec import CONTROL_RATE_HZ
 from vision.observation import OBSERVATION_SIZE
 
@@ -204,7 +205,11 @@ def _obj(where: str, parent: dict[str, Any], key: str, path: str) -> dict[str, A
 def _name(where: str, parent: dict[str, Any], path: str, table: Any) -> str:
     v = parent.get("name")
     if not isinstance(v, str) or v not in table:
-        _fail(where, f"{path}.name", f"must be one of {', '.join(sorted(table))}, got {v!r}")
+        _fail(
+            where,
+            f"{path}.name",
+            f"must be one of {', '.join(sorted(table))}, got {v!r}{did_you_mean(v, table)}",
+        )
     return v
 
 

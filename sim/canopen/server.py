@@ -11,9 +11,11 @@ with ``can: slcan:/dev/pts/7`` and ``camera: http://127.0.0.1:41234/stream.mjpg`
 
 Inside, the SLCAN adapter (``sim.canopen.slcan``) is bridged to python-can's in-process
 ``virtual`` bus on which the emulated drives (``sim.canopen.drives``) live; the twin runs in
-real time (``sim.realtime.RealtimeLoop``). Faults come from the flags of ``sim/cli.py``:
-``--drop-rate`` loses PDO/SYNC frames, ``--delay-ms`` delays the TPDOs, ``--overload-servo ID``
-makes that node fault with a following error (EMCY 0x8611) after some time enabled.
+real time (``sim.realtime.RealtimeLoop``). The served twin, its camera and its hands (and, with
+``--stand-in SEED``, a rig the software has never seen) come from ``sim.standin.served``.
+Faults come from the flags of ``sim/cli.py``: ``--drop-rate`` loses PDO/SYNC frames,
+``--delay-ms`` delays the TPDOs, ``--overload-servo ID`` makes that node fault with a following
+error (EMCY 0x8611) after some time enabled.
 ``--corrupt-rate`` does not apply: on CAN a corrupted frame fails its CRC and is retransmitted
 by the controller (ISO 11898-1), so the host never sees it.
 """
@@ -196,7 +198,7 @@ def serve(args: argparse.Namespace) -> int:
 
     from sim.canopen.drives import EmulatedDrives
     from sim.realtime import RealtimeLoop
-    from sim.twin import Twin
+    from sim.standin.served import StandinError, open_served_rig, serve_until_interrupted
 
     drop_rate = float(getattr(args, "drop_rate", 0.0) or 0.0)
     delay_ms = float(getattr(args, "delay_ms", 0.0) or 0.0)
@@ -217,15 +219,24 @@ def serve(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
 
+    try:
+        rig = open_served_rig(args)
+    except StandinError as exc:
+        print(f"ergo: error: {exc}", file=sys.stderr)
+        return 2
+
     def _terminate(signum: int, _frame: object) -> None:
         raise KeyboardInterrupt
 
     previous = signal.signal(signal.SIGTERM, _terminate)
     channel = f"ergo-canopen-{os.getpid()}"
-    twin = Twin()
+    twin = rig.twin
+    # the drives' convention: joint = offset + direction * drive angle (robot.canopen.units)
     drives = EmulatedDrives(
         twin,
         f"virtual:{channel}",
+        directions=rig.directions,
+        offsets=-rig.directions * rig.offsets,
         drop_rate=drop_rate,
         tpdo_delay_s=delay_ms / 1000.0,
         seed=int(getattr(args, "seed", 0) or 0),
@@ -240,12 +251,10 @@ def serve(args: argparse.Namespace) -> int:
             drives,
             SlcanPtyBridge(bridge_bus, link=getattr(args, "link", None)) as bridge,
         ):
-            from sim.mjpeg_server import serve_until_interrupted
-
             announce = [f"canopen bus (slcan) on {bridge.path}"]
             if bridge.link:
                 announce.append(f"canopen bus link {bridge.link}")
-            return serve_until_interrupted(twin, args, announce)
+            return serve_until_interrupted(rig, args, announce)
     finally:
         bridge_bus.shutdown()
         signal.signal(signal.SIGTERM, previous)
@@ -264,6 +273,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--link", default=None, help="keep a symbolic link to the pty at this path")
     p.add_argument("--camera-port", type=int, default=0)
     p.add_argument("--no-camera", action="store_true")
+    p.add_argument("--hands-port", type=int, default=0)
+    p.add_argument("--stand-in", type=int, default=None, metavar="SEED")
+    p.add_argument("--hidden", default=None, metavar="PATH")
     return serve(p.parse_args(argv))
 
 

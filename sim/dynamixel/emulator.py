@@ -173,6 +173,10 @@ class DynamixelEmulator:
         now: clock for the overload timer without a twin (default ``time.monotonic``).
         start_torque: servos power up with torque on, holding the twin's pose (a real XL-320
             powers up with torque off, the default: the arm then sags under gravity).
+        directions, offsets: how each servo is mounted on its joint, shape (6,) each (default
+            +1 and 0): ``servo_angle = direction * joint_angle + offset`` (rad; the convention
+            of ``robot.dynamixel.arm``), so the raw positions a host reads and writes are the
+            servo's, not the joint's (a stand-in rig's hidden mounting, ``sim.standin``).
     """
 
     def __init__(
@@ -183,8 +187,17 @@ class DynamixelEmulator:
         faults: FaultConfig | None = None,
         now: Callable[[], float] | None = None,
         start_torque: bool = False,
+        directions: Sequence[float] | None = None,
+        offsets: Sequence[float] | None = None,
     ) -> None:
         self.twin = twin
+        n = len(ids)
+        self.directions = np.ones(n) if directions is None else np.asarray(directions, float)
+        self.offsets = np.zeros(n) if offsets is None else np.asarray(offsets, float)
+        if self.directions.shape != (n,) or not np.all(np.isin(self.directions, (-1.0, 1.0))):
+            raise ValueError(f"directions must be {n} values of +1 or -1, got {directions}")
+        if self.offsets.shape != (n,) or not np.all(np.isfinite(self.offsets)):
+            raise ValueError(f"offsets must be {n} finite angles in rad, got {offsets}")
         self.model = model
         self.faults = faults or FaultConfig()
         self.servos: dict[int, EmulatedServo] = {
@@ -199,7 +212,7 @@ class DynamixelEmulator:
             with twin.lock:
                 targets = twin.joint_positions()
             for servo in self.servos.values():
-                steps = int(model.rad_to_steps(targets[servo.joint]))
+                steps = int(model.rad_to_steps(self._servo_angle(servo, targets[servo.joint])))
                 servo.poke("goal", steps)
                 self._apply_goal(servo)
         if start_torque:
@@ -357,7 +370,7 @@ class DynamixelEmulator:
         if self.twin is not None:
             with self.twin.lock:
                 q = self.twin.joint_positions()[servo.joint]
-            servo.poke("goal", int(model.rad_to_steps(q)))
+            servo.poke("goal", int(model.rad_to_steps(self._servo_angle(servo, q))))
             self._apply_goal(servo)
         self._apply_torque()
 
@@ -379,10 +392,15 @@ class DynamixelEmulator:
             self._apply_torque()
 
     # ---- the twin ----------------------------------------------------------------------------
+    def _servo_angle(self, servo: EmulatedServo, q: float) -> float:
+        """Joint angle (rad) -> the servo's angle (rad) on its mounting."""
+        return float(self.directions[servo.joint] * q + self.offsets[servo.joint])
+
     def _apply_goal(self, servo: EmulatedServo) -> None:
         if self.twin is None:
             return
-        q = float(servo.model.steps_to_rad(np.array([servo.peek("goal")]))[0])
+        angle = float(servo.model.steps_to_rad(np.array([servo.peek("goal")]))[0])
+        q = self.directions[servo.joint] * (angle - self.offsets[servo.joint])
         with self.twin.lock:
             targets = self.twin.targets()
             targets[servo.joint] = q
@@ -405,9 +423,10 @@ class DynamixelEmulator:
                 q = self.twin.joint_positions()[j]
                 v = self.twin.joint_velocities()[j]
                 load = self.twin.joint_torques()[j] / self.twin.max_torques()[j]
-            servo.poke("position", int(model.rad_to_steps(q)))
-            servo.poke("velocity", int(model.rad_s_to_speed(v)))
-            servo.poke("load", int(model.fraction_to_load(load)))
+            d = self.directions[j]
+            servo.poke("position", int(model.rad_to_steps(self._servo_angle(servo, q))))
+            servo.poke("velocity", int(model.rad_s_to_speed(d * v)))
+            servo.poke("load", int(model.fraction_to_load(d * load)))
             servo.poke("moving", int(abs(v) > MOVING_THRESHOLD_RAD_S))
         elif servo.torque:
             servo.poke("position", servo.peek("goal"))  # no physics: an ideal, instant servo

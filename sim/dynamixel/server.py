@@ -8,7 +8,9 @@ speaking Dynamixel Protocol 2.0 as six XL-320, and its overhead camera as an MJP
 Any program that drives a real Ergo Jr through a serial port then drives the twin, e.g.
 ``ergo bus scan --port /dev/pts/7`` or a ``dynamixel`` rig with ``port: /dev/pts/7`` and
 ``camera: http://127.0.0.1:41234/stream.mjpg``. The twin runs in real time
-(``sim.realtime.RealtimeLoop``); faults are injected from the flags (see ``sim/cli.py``).
+(``sim.realtime.RealtimeLoop``); faults are injected from the flags (see ``sim/cli.py``). The
+served twin, its camera and its hands (and, with ``--stand-in SEED``, a rig the software has
+never seen) come from ``sim.standin.served``.
 """
 
 from __future__ import annotations
@@ -123,7 +125,7 @@ def serve(args: argparse.Namespace) -> int:
     """Serve until interrupted; returns the exit code. Prints the pty path and the camera URL
     (one line each, flushed) so that a parent process can read them."""
     from sim.realtime import RealtimeLoop
-    from sim.twin import Twin
+    from sim.standin.served import StandinError, open_served_rig, serve_until_interrupted
 
     try:
         faults = faults_from_args(args)
@@ -135,15 +137,19 @@ def serve(args: argparse.Namespace) -> int:
             f"ergo: error: --overload-servo {faults.overload_servo} is not in 1..6", file=sys.stderr
         )
         return 2
-    twin = Twin()
-    emulator = DynamixelEmulator(twin, faults=faults)
+    try:
+        rig = open_served_rig(args)
+    except StandinError as exc:
+        print(f"ergo: error: {exc}", file=sys.stderr)
+        return 2
+    emulator = DynamixelEmulator(
+        rig.twin, faults=faults, directions=rig.directions, offsets=rig.offsets
+    )
     with (
-        RealtimeLoop(twin, speed=float(getattr(args, "speed", 1.0))),
+        RealtimeLoop(rig.twin, speed=float(getattr(args, "speed", 1.0))),
         PtyBusServer(emulator, link=getattr(args, "link", None)) as server,
     ):
-        from sim.mjpeg_server import serve_until_interrupted
-
         announce = [f"dynamixel bus on {server.path}"]
         if server.link:
             announce.append(f"dynamixel bus link {server.link}")
-        return serve_until_interrupted(twin, args, announce)
+        return serve_until_interrupted(rig, args, announce)

@@ -37,6 +37,15 @@ BALL_START = (0.15, 0.0)  # m, initial ball position on the ring
 ARENA_RADIUS = OUTER_RADIUS  # the metric's bounding square is [-R, R]^2
 CAMERA_HEIGHT = 0.55  # m above the floor
 CAMERA_FOVY = 45.0  # degrees: the arena's square fits the frame with a margin
+# The arena's four ArUco markers, as a person lays them to calibrate the arena (the layout
+# `ergo calibrate arena` looks for by default, calibration/arena.py; tests/sim/standin checks
+# the two agree): DICT_4X4_50 ids 0..3 of 30 mm, centred on the floor's corners outside the
+# wall, where the 0.55 m high 45-degree camera still sees them. A choice, not a standard. The
+# served twin (`ergo twin serve`, sim/standin/) shows them on its floor; the committed scenes do
+# not (their images are the learner's, and the tests').
+ARENA_MARKERS = {0: (-0.19, 0.19), 1: (0.19, 0.19), 2: (0.19, -0.19), 3: (-0.19, -0.19)}  # m
+ARENA_MARKER_SIZE = 0.03  # m, side of each marker's black square
+ARENA_MARKER_DICTIONARY = "DICT_4X4_50"  # cv2.aruco predefined dictionary
 # Render settings, chosen (docs/twin.md, "Render settings"): the light is straight above, so
 # the ball's shadow lies under the ball, hidden from the overhead camera, and the arm at rest
 # shades only itself; a real rig under ceiling lights sees soft shadows or none. MuJoCo's

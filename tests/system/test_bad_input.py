@@ -72,7 +72,12 @@ BAD_FIELDS = [
     ("rig.options", [], "config.rig.options", "object"),
     ("rig.options.render_size", 240, "config.rig.options.render_size", "[height, width]"),
     ("rig.options.render_size", [0, 64], "config.rig.options.render_size", "[height, width]"),
-    ("rig.options.render_sise", [64, 64], "config.rig.options.render_sise", "unknown; known"),
+    (
+        "rig.options.render_sise",
+        [64, 64],
+        "config.rig.options.render_sise",
+        "unknown (did you mean 'render_size'?); known",
+    ),
     ("rig.options.baud", 1000000, "config.rig.options.baud", "unknown; known"),  # on the twin
     ("strategy.name", "curiosity", "config.strategy.name", "one of"),
     ("strategy.options", None, "config.strategy.options", "object"),

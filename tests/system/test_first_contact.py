@@ -104,3 +104,126 @@ def test_a_resume_with_nothing_to_do_writes_no_new_recording(tmp_path):
 def test_the_readme_says_how_to_reach_ergo_after_make_run():
     readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
     assert "source .venv/bin/activate" in readme and ".venv/bin/ergo" in readme
+
+
+def _readme_commands() -> list[str]:
+    """Every ``ergo ...`` command of the README's sh blocks (continuations joined, comments and
+    ``;`` split off), but those with placeholders (``...``, ``[runs/B ...]``)."""
+    import re
+    import shlex
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    commands = []
+    for block in re.findall(r"```sh\n(.*?)```", readme, re.S):
+        for line in block.replace("\\\n", " ").splitlines():
+            for part in line.split("#")[0].split(";"):
+                words = shlex.split(part)
+                if words[:1] == ["ergo"] and not any("..." in w for w in words):
+                    commands.append(part.strip())
+    return commands
+
+
+def test_every_ergo_command_of_the_readme_parses_as_written():
+    """Parsed by ``ergo``'s own parser (nothing is run): `ergo calibrate camera|arena|joints`
+    did not."""
+    import shlex
+
+    from explore.cli import build_parser
+
+    commands = _readme_commands()
+    assert len(commands) > 20 and any(c.startswith("ergo calibrate joints") for c in commands)
+    for command in commands:
+        try:
+            build_parser().parse_args(shlex.split(command)[1:])
+        except SystemExit as exc:
+            assert exc.code == 0, command  # --help
+
+
+def _explore_spawn(out: Path, *extra: str) -> list[str]:
+    return ["explore", "--rig", "sim", "--strategy", "rpe", "--episodes", "2", "--seed", "0",
+            "--out", str(out), "--no-progress", *extra]  # fmt: skip
+
+
+def test_rerun_spawn_finds_the_viewer_beside_python_without_path(tmp_path, monkeypatch, capsys):
+    import rerun
+
+    spawned = []
+    monkeypatch.setattr(rerun, "spawn", lambda **kw: spawned.append(kw))  # no window here
+    monkeypatch.setenv("PATH", "")  # .venv/bin/ergo run with the venv not activated
+    monkeypatch.setenv("DISPLAY", ":0")
+    out = tmp_path / "run"
+    code, _, err = _cli(_explore_spawn(out, "--rerun", "spawn"), capsys)
+    assert code == 0, err
+    beside = Path(sys.executable).parent / "rerun"
+    assert beside.is_file() and spawned[0]["executable_path"] == str(beside)
+    assert (out / "coverage.png").is_file()
+
+
+def test_rerun_spawn_without_a_viewer_fails_in_one_line_before_any_folder(
+    tmp_path, monkeypatch, capsys
+):
+    import explore.report.recorder as recorder
+
+    monkeypatch.setattr(recorder, "viewer_executable", lambda: None)
+    monkeypatch.setenv("DISPLAY", ":0")
+    out = tmp_path / "run"
+    code, _, err = _cli(_explore_spawn(out, "--rerun", "spawn"), capsys)
+    assert code == 2 and len(err.splitlines()) == 1 and "rerun viewer" in err
+    assert not out.exists()  # nothing blocks the same --out
+    assert _cli(_explore_spawn(out, "--rerun", "off"), capsys)[0] == 0
+
+
+def test_rerun_spawn_without_a_display_saves_the_recording_and_the_coverage(
+    tmp_path, monkeypatch, capsys
+):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    out = tmp_path / "run"
+    code, _, err = _cli(_explore_spawn(out, "--rerun", "spawn"), capsys)
+    assert code == 0 and "no display here" in err
+    assert (out / "recording.rrd").is_file() and (out / "coverage.png").is_file()
+
+
+def test_the_coverage_figure_is_drawn_before_the_recording_is_closed(tmp_path, monkeypatch, capsys):
+    """Closing a viewer's stream waited forever for a viewer that never came up (no display),
+    and the user's Ctrl-C then left no coverage.png: it is drawn first now."""
+    import explore.report.recorder as recorder
+
+    def never_closes(self):
+        raise KeyboardInterrupt  # the user giving up on a close that hangs
+
+    monkeypatch.setattr(recorder.Recorder, "close", never_closes)
+    out = tmp_path / "run"
+    code, _, err = _cli(_explore_spawn(out, "--rerun", "save"), capsys)
+    assert code != 0 and "interrupted" in err
+    assert (out / "coverage.png").is_file()
+
+
+@pytest.mark.parametrize(
+    "args, hint",
+    [
+        (["explore", "--strategy", "rge-erf", "--episodes", "1"], "'rge-efr'"),
+        (["experiment", "--strategies", "rpe,rge-erf", "--episodes", "1"], "'rge-efr'"),
+        (["explore", "--rig", "simm"], "'sim'"),  # an argparse choice
+        (["explre"], "'explore'"),  # a command
+        (["explore", "--strategy", "rge-efr", "--strategy-option", "bootstrp=3"], "'bootstrap'"),
+        (
+            ["explore", "--strategy", "rge-efr", "--strategy-option", 'goals="unifrom"'],
+            "'uniform'",
+        ),
+    ],
+)
+def test_a_mistyped_name_gets_did_you_mean_in_one_line(args, hint, tmp_path, capsys):
+    out = tmp_path / "run"
+    code, _, err = _cli([*args, "--out", str(out)], capsys)
+    assert code == 2 and len(err.splitlines()) == 1
+    assert f"(did you mean {hint}?)" in err
+    assert not out.exists()
+
+
+def test_no_hint_for_a_name_close_to_nothing(capsys):
+    from robot.registry import did_you_mean
+
+    assert did_you_mean("zzz", ["rpe", "rge-efr"]) == ""
+    code, _, err = _cli(["explore", "--rig", "qqqq"], capsys)
+    assert code == 2 and "did you mean" not in err

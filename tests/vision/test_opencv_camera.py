@@ -4,7 +4,11 @@ and its clear errors on bad sources and dead streams."""
 from __future__ import annotations
 
 import logging
+import os
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -99,3 +103,20 @@ def test_mjpeg_stream_and_dead_stream():
             cam.disconnect()
     finally:
         server.stop()
+
+
+def test_a_device_that_does_not_open_is_one_line_without_opencvs_warnings():
+    """OpenCV printed "[ WARN:0@0.011] ... can't open camera by index" and "... should be
+    configured with libavdevice" before ergo's own line (to the process's stderr, not Python's:
+    a child process is read here)."""
+    env = {k: v for k, v in os.environ.items() if k != "OPENCV_LOG_LEVEL"}
+    env["PYTHONPATH"] = str(Path(__file__).resolve().parents[2])
+    proc = subprocess.run(
+        [sys.executable, "-m", "explore.cli", "track", "--camera", "57"],
+        capture_output=True, text=True, env=env, timeout=120,
+    )  # fmt: skip
+    assert proc.returncode == 2
+    assert proc.stderr.splitlines() == [
+        "ergo: error: cannot open camera device 57: no such device or it is busy "
+        "(run `ergo find-cameras` to list the devices that open)"
+    ]

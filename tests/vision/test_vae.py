@@ -136,6 +136,10 @@ def test_vae_train_command(tmp_path, capsys):
     assert main(["vae", "train", "--data", str(data), "--out", str(out), "--iterations", "3",
                  "--batch", "4", "--no-progress"]) == 0  # fmt: skip
     assert load_vae(out).config.latent_dim == 10
+    printed = capsys.readouterr().out
+    score = load_vae(out).config.heldout_explained_variance  # 3 iterations: below 0
+    assert f"held-out explained pixel variance {score:.3f}" in printed
+    assert ("WORSE than the mean training image" in printed) == (score < 0)
     assert main(["vae", "train", "--data", str(tmp_path / "none.npz"), "--out", str(out)]) == 2
     assert "ergo dataset outcomes" in capsys.readouterr().err
 

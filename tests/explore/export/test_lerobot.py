@@ -16,7 +16,7 @@ import pytest
 
 from explore.cli import main
 from explore.export.episodes import ExportError
-from explore.export.lerobot import VIDEO_KEY, export_lerobot
+from explore.export.lerobot import VIDEO_KEY, export_lerobot, run_names
 from explore.runs.lock import run_lock
 from explore.runs.store import read_frames, read_history
 
@@ -148,6 +148,30 @@ def test_the_values_are_the_runs(dataset, runs):
         assert span == pytest.approx((a / RATE, b / RATE))
     goals = [r for r in records if r.kind != "random"]
     assert goals, "the goal run set goals after its bootstrap"
+
+
+def test_the_export_names_its_runs_and_holds_no_local_path(dataset, runs):
+    episodes = pq.read_table(dataset / "meta/episodes/chunk-000/file-000.parquet").to_pylist()
+    assert [row["ergo/run"] for row in episodes] == ["goals"] * EPISODES + ["random"] * EPISODES
+    local = str(runs["goals"].resolve().parent)  # where the runs lie on this machine
+    for path in dataset.rglob("*"):
+        if path.suffix == ".parquet":
+            table = pq.read_table(path)
+            text = str(table.to_pylist()) + str(table.schema.metadata)
+        elif path.is_file():
+            text = path.read_bytes().decode("latin-1")  # json; the mp4's own metadata
+        else:
+            continue
+        assert local not in text and str(Path.home()) not in text, path
+
+
+def test_runs_are_named_from_the_folder_that_holds_them_all(tmp_path):
+    camp = tmp_path / "campaign"
+    assert run_names([camp / "rge-efr/seed-0", camp / "rpe/seed-0"]) == [
+        "rge-efr/seed-0",
+        "rpe/seed-0",
+    ]
+    assert run_names([Path("runs/A")]) == ["A"]
 
 
 def test_the_video_frames_are_the_frames_the_runs_kept(dataset, runs):

@@ -69,7 +69,10 @@ def test_strategy_state_is_rebuilt_by_update(reference):
 
 
 def test_bad_options_are_one_line_errors():
-    with pytest.raises(StrategyError, match="option bootstap is unknown; known: bootstrap, "):
+    with pytest.raises(
+        StrategyError,
+        match=r"option bootstap is unknown \(did you mean 'bootstrap'\?\); known: bootstrap, ",
+    ):
         make_strategy("rge-efr", bootstap=3)
     with pytest.raises(StrategyError, match="option goals must be one of 'uniform', 'normal'"):
         make_strategy("rge-efr", goals="gaussian")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import os
 import shutil
 import struct
 from pathlib import Path
@@ -67,11 +68,12 @@ def test_campaign_report_has_mean_and_spread(runs, tmp_path):
                 run, campaign / strategy / run.name, ignore=shutil.ignore_patterns("report")
             )
     out = tmp_path / "creport"
-    assert main(["report", str(campaign), "--out", str(out)]) == 0
+    assert main(["report", str(campaign), "--out", str(out), "--scatter"]) == 0
     for name in ("campaign_coverage.png", "campaign_scatter.png"):
         assert png_size(out / name) == FIG_PX
         assert (out / name).stat().st_size > 10_000
     md = (out / "summary.md").read_text()
+    assert "--scatter" not in md
     assert "| rpe | 2 |" in md and "| rpe-copy | 2 |" in md
     assert "+-" in md  # mean +- std over seeds
     row = md.split("| rpe-copy |")[1].splitlines()[0]
@@ -139,3 +141,69 @@ def test_markdown_to_html_escapes_and_embeds(tmp_path):
     )
     assert "<h1>T &lt;x&gt;</h1>" in page and "<code>c</code>" in page
     assert "data:image/png;base64," in page
+
+
+def _campaign(runs: list[Path], root: Path) -> Path:
+    campaign = root / "campaign"
+    for run in runs:
+        shutil.copytree(run, campaign / "rpe" / run.name, ignore=shutil.ignore_patterns("report"))
+    return campaign
+
+
+def _table(md: str) -> str:
+    return md.split("## Results")[1].split("## Figures")[0]
+
+
+def test_a_campaign_summary_comes_from_metrics_csv_alone(runs, tmp_path, monkeypatch):
+    campaign = _campaign(runs, tmp_path)
+    full = tmp_path / "full"
+    assert main(["report", str(campaign), "--out", str(full), "--scatter"]) == 0
+
+    import explore.report.run_data as run_data
+
+    def no_records(path):
+        raise AssertionError(f"{path}: a record was read")
+
+    monkeypatch.setattr(run_data, "iter_history", no_records)
+    out = tmp_path / "fast"
+    assert main(["report", str(campaign), "--out", str(out)]) == 0
+    assert png_size(out / "campaign_coverage.png") == FIG_PX
+    assert not (out / "campaign_scatter.png").exists()
+    md = (out / "summary.md").read_text()
+    assert f"ergo report {campaign} --scatter" in md  # says what needs the records
+    assert _table(md) == _table((full / "summary.md").read_text())  # metrics.csv = history
+
+
+def test_a_report_stopped_midway_leaves_the_old_one_or_a_marker(runs, tmp_path, monkeypatch):
+    import explore.report.summary as summary
+
+    campaign = _campaign(runs, tmp_path)
+    out = tmp_path / "report"
+    assert main(["report", str(campaign), "--out", str(out)]) == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+
+    def stopped(*args, **kwargs):
+        raise KeyboardInterrupt  # Ctrl-C while drawing
+
+    monkeypatch.setattr(summary, "campaign_coverage_figure", stopped)
+    with pytest.raises(KeyboardInterrupt):
+        summary.report_campaign(campaign, out)
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before  # the old report, whole
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+    monkeypatch.undo()
+
+    moved, real_replace = [], os.replace
+
+    def replace_once(src, dst):
+        if moved:
+            raise KeyboardInterrupt  # stopped while moving the new files in
+        moved.append(dst)
+        real_replace(src, dst)
+
+    monkeypatch.setattr(summary.os, "replace", replace_once)
+    with pytest.raises(KeyboardInterrupt):
+        summary.report_campaign(campaign, out)
+    assert len(moved) == 1 and "run it again" in (out / summary.INCOMPLETE).read_text()
+    monkeypatch.undo()
+    assert main(["report", str(campaign), "--out", str(out)]) == 0
+    assert not (out / summary.INCOMPLETE).exists()

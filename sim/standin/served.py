@@ -1,0 +1,150 @@
+"""What ``ergo twin serve`` serves besides the bus: the served twin (nominal, or a stand-in
+rig drawn from ``--stand-in SEED``), its camera and its hands. The bus servers
+(``sim/dynamixel/server.py``, ``sim/canopen/server.py``) are the only modules outside this
+package that import it (tests/sim/standin/test_secrecy.py checks it).
+
+    $ ergo twin serve --bus dynamixel --stand-in 7
+    dynamixel bus on /dev/pts/7
+    camera on http://127.0.0.1:41234/stream.mjpg
+    hands on 127.0.0.1:41235
+    stand-in seed 7: hidden parameters in /tmp/ergo-standin-7-hidden.json (tests only)
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import signal
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from sim.mjpeg_server import MjpegServer
+from sim.standin.hands import HOST, Hands, HandsServer
+from sim.standin.hidden import (
+    HiddenRig,
+    StandinError,
+    default_hidden_path,
+    draw_hidden,
+    nominal_rig,
+    write_hidden,
+)
+from sim.standin.lens import RenderPlan, ServedFrames, render_plan
+from sim.standin.scene import write_served_scene
+from sim.twin import Twin
+
+__all__ = [
+    "ServedRig",
+    "StandinError",
+    "open_served_rig",
+    "serve_until_interrupted",
+    "served_twin",
+]
+
+
+@dataclass
+class ServedRig:
+    """The served twin and what the bus emulators need of its rig.
+
+    Attributes:
+        twin: the twin (the served scene: markers, board, hands' grips; the rig's servos).
+        directions: +1/-1 per joint, shape (6,), for the bus emulators.
+        offsets: servo angle at joint zero per joint, shape (6,), rad, for the bus emulators
+            (``servo_angle = direction * joint_angle + offset``).
+        plan: how the served camera's frames are made.
+        lines: what to print once serving (the stand-in's hidden file).
+    """
+
+    twin: Twin
+    directions: np.ndarray
+    offsets: np.ndarray
+    plan: RenderPlan
+    lines: list[str]
+
+
+def open_served_rig(args: argparse.Namespace) -> ServedRig:
+    """The rig ``ergo twin serve`` serves: the nominal twin, or with ``args.stand_in`` a
+    stand-in rig whose hidden parameters are written to ``args.hidden`` (default: a file per
+    seed in the temporary folder).
+
+    Raises:
+        StandinError: a bad seed or an unwritable hidden file (one line).
+    """
+    seed = getattr(args, "stand_in", None)
+    rig = nominal_rig() if seed is None else draw_hidden(seed)
+    lines = []
+    if seed is not None:
+        path = getattr(args, "hidden", None) or default_hidden_path(seed)
+        try:
+            path = write_hidden(rig, path)
+        except OSError as exc:
+            raise StandinError(f"cannot write the hidden parameters to {path}: {exc}") from None
+        lines.append(f"stand-in seed {seed}: hidden parameters in {path} (tests only)")
+    twin, plan = served_twin(rig)
+    return ServedRig(twin, rig.directions.copy(), rig.offsets.copy(), plan, lines)
+
+
+def served_twin(rig: HiddenRig) -> tuple[Twin, RenderPlan]:
+    """The twin of a served rig (its scene written to a temporary folder, compiled, removed)
+    and how its camera's frames are made."""
+    plan = render_plan(rig.camera)
+    folder = tempfile.mkdtemp(prefix="ergo-served-")
+    try:
+        scene = write_served_scene(folder, rig, plan)
+        twin = Twin(scene=scene, servos=None if rig.seed is None else rig.servos)
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)  # the model is compiled: files not needed
+    return twin, plan
+
+
+def serve_until_interrupted(rig: ServedRig, args: Any, announce: list[str]) -> int:
+    """The tail of ``ergo twin serve`` for every bus: print ``announce`` (the bus's lines),
+    serve the camera (unless ``--no-camera``; ``--camera-port``) and the hands
+    (``--hands-port``), print their addresses and the rig's own lines (one each, flushed, for
+    a parent process to read), then block until Ctrl-C or SIGTERM (both end it cleanly: exit
+    code 0). Returns the exit code (2 when a port cannot be bound)."""
+    for line in announce:
+        print(line, flush=True)
+    frames = ServedFrames(rig.twin, rig.plan)
+    hands = Hands(rig.twin, textures_changed=frames.textures_changed.set)
+    camera = None
+    hands_server = HandsServer(hands, port=int(getattr(args, "hands_port", 0) or 0))
+    try:
+        if not getattr(args, "no_camera", False):
+            camera = MjpegServer(frames, port=int(getattr(args, "camera_port", 0) or 0))
+            camera.start()
+            print(f"camera on {camera.url}", flush=True)
+        hands_server.start()
+        print(f"hands on {HOST}:{hands_server.port}", flush=True)
+    except OSError as exc:
+        print(f"ergo: error: {exc}", file=sys.stderr)
+        hands_server.stop()
+        if camera is not None:
+            camera.stop()
+        return 2
+    for line in rig.lines:
+        print(line, flush=True)
+    previous = None
+    if threading.current_thread() is threading.main_thread():  # SIGTERM stops as Ctrl-C does
+        previous = signal.signal(signal.SIGTERM, _interrupt)
+    try:
+        while True:
+            time.sleep(1.0)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+        hands_server.stop()
+        if camera is not None:
+            camera.stop()
+    return 0
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
