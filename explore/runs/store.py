@@ -593,13 +593,16 @@ def read_frames(run: str | Path, episode: int) -> np.ndarray | None:
     return frames
 
 
-def iter_history(run: Path) -> Iterator[EpisodeRecord]:
+def iter_history(run: Path, left_out: list[int] | None = None) -> Iterator[EpisodeRecord]:
     """Read a run's stored episodes without modifying the folder (no torn-tail repair, no
-    append handle): safe on a run that another process is still writing."""
+    append handle): safe on a run that another process is still writing. ``left_out``: gets
+    the bytes of a torn last record left out (0 if none), for a reader to say so."""
     path = Path(run) / "history.bin"
     if not path.exists():
         return
     data = path.read_bytes()
     hint = f" in {run}: {salvage_hint(Path(run))}"
-    spans, _ = _scan(data, read_synced(run), hint)
+    spans, good_end = _scan(data, read_synced(run), hint)
+    if left_out is not None:
+        left_out.append(len(data) - good_end)
     yield from _decode(data, spans, hint)
