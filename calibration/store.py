@@ -147,9 +147,45 @@ def _validate_camera(c: _Checker) -> None:
     c.number("held_out_rms_px", 0.0, 1e4, optional=True)
 
 
+# Bounds of an arena file's numbers that no real calibration comes near (guesses, far out):
+# a pixel -> metre homography normalised to h[2][2] = 1 has entries of about 1e-3 (metres per
+# pixel) to 1; its condition number is about 1e3 for a camera looking down at a 0.5 m arena
+# from 0.5-1 m (singular values ~1 and ~1e-3). Distortion coefficients of real lenses stay
+# within tens (OpenCV's rational model included); focal lengths within 1e5 px.
+ARENA_HOMOGRAPHY_MAX_ABS = 1e6
+ARENA_HOMOGRAPHY_MAX_COND = 1e12
+ARENA_DISTORTION_MAX_ABS = 1e3
+ARENA_FOCAL_MAX_PX = 1e6
+
+
+def _check_arena_numbers(c: _Checker) -> None:
+    """What finite is not enough for: a homography that is singular or out of all scale, a
+    distortion or focal length no lens has (1e300 passed the finite checks and broke every
+    pixel mapped through it)."""
+    import numpy as np
+
+    h = np.asarray(c.data["homography"], dtype=float)
+    if np.abs(h).max() > ARENA_HOMOGRAPHY_MAX_ABS:
+        c.fail("homography", f"has an entry of {np.abs(h).max():g}: out of all scale (damaged?)")
+    with np.errstate(all="ignore"):
+        cond = float(np.linalg.cond(h))
+    if not cond < ARENA_HOMOGRAPHY_MAX_COND:
+        c.fail("homography", f"is singular (condition number {cond:g}): it maps no plane")
+    dist = np.asarray(c.data["dist_coeffs"], dtype=float)
+    if np.abs(dist).max() > ARENA_DISTORTION_MAX_ABS:
+        c.fail(
+            "dist_coeffs",
+            f"has a coefficient of {np.abs(dist).max():g}: no lens distorts that much (damaged?)",
+        )
+    k = c.data["camera_matrix"]
+    if not (0 < k[0][0] <= ARENA_FOCAL_MAX_PX and 0 < k[1][1] <= ARENA_FOCAL_MAX_PX):
+        c.fail("camera_matrix", f"focal lengths must be in (0, {ARENA_FOCAL_MAX_PX:g}] px")
+
+
 def _validate_arena(c: _Checker) -> None:
     _validate_camera_like(c)
     c.matrix("homography", (3, 3))
+    _check_arena_numbers(c)
     c.matrix("centre", (2,))
     c.number("radius", 1e-3, 10.0)
     pos = c.matrix("camera_position", (3,), optional=True)

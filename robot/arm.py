@@ -350,8 +350,15 @@ class Arm(ABC):
         self.counters.stops_after_link_loss += 1
         self._emergency_torque_off()
         return SafetyStop(
-            f"safety stop: {message}; torque off where the servos can be reached (a servo cut "
-            f"off from the host keeps its last goal); the run can be resumed"
+            f"safety stop: {message}; {self._torque_off_words()}; the run can be resumed"
+        )
+
+    def _torque_off_words(self) -> str:
+        """What a stop after a lost link says of the torque (a backend that knows more, e.g.
+        which drives could not confirm, says that)."""
+        return (
+            "torque off where the servos can be reached (a servo cut off from the host keeps "
+            "its last goal)"
         )
 
     def set_torque(self, enabled: bool) -> None:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import threading
+import time
 from collections.abc import Callable, Iterator
 
 
@@ -52,6 +53,16 @@ class BusGuard:
         """Raise the guard's error if another thread is preempting the bus."""
         if self.preempted:
             raise self._error()
+
+    def wait_unpreempted(self, timeout_s: float) -> bool:
+        """Wait (at most ``timeout_s``) until no other thread is preempting the bus; whether
+        that came. For an exchange that gave up to a preemption and will try again."""
+        deadline = time.monotonic() + timeout_s
+        while self.preempted:
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(0.001)
+        return True
 
     @contextlib.contextmanager
     def hold(self) -> Iterator[None]:

@@ -40,7 +40,16 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from vision.vae import VaeError, few_threads_for, to_tensor
+from vision.vae import (
+    VaeError,
+    check_statistics,
+    few_threads_for,
+    load_state,
+    read_config_json,
+    save_state,
+    to_tensor,
+    write_text_atomically,
+)
 
 FEATURES = 8  # feature maps, a 16-D code (guess, tried: see docs/results.md)
 CHANNELS = 16  # convolution channels (guess; 32 trained 4x slower for the same code)
@@ -224,12 +233,8 @@ class SpatialAutoencoder(nn.Module):
         """Write ``sae.pt`` and ``sae.json`` into ``folder``; returns the folder."""
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
-        tmp = folder / (MODEL_FILE + ".tmp")
-        torch.save(self.state_dict(), tmp)
-        tmp.replace(folder / MODEL_FILE)
-        tmp = folder / (CONFIG_FILE + ".tmp")
-        tmp.write_text(json.dumps(asdict(self.config), indent=2))
-        tmp.replace(folder / CONFIG_FILE)
+        save_state(self.state_dict(), folder / MODEL_FILE)
+        write_text_atomically(folder / CONFIG_FILE, json.dumps(asdict(self.config), indent=2))
         return folder
 
 
@@ -249,14 +254,28 @@ def load_sae(path: str | Path) -> SpatialAutoencoder:
     for f in (model_file, config_file):
         if not f.is_file():
             raise VaeError(f"{f} not found: is {folder} a model folder from `ergo sae train`?")
+    raw = read_config_json(config_file, "spatial autoencoder")
     try:
-        config = SaeConfig(**json.loads(config_file.read_text()))
-    except (json.JSONDecodeError, TypeError) as exc:
+        config = SaeConfig(**raw)
+        model = SpatialAutoencoder(config)
+    except (TypeError, ValueError, RuntimeError) as exc:
         raise VaeError(f"{config_file} is not a spatial autoencoder config: {exc}") from exc
-    model = SpatialAutoencoder(config)
+    for name in ("code_mean", "code_std"):
+        check_statistics(getattr(config, name), config.code_dim, name, config_file)
+    if config.code_corr is not None:
+        try:
+            corr = np.asarray(config.code_corr, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise VaeError(f"{config_file}: code_corr is not a matrix of numbers") from exc
+        if corr.shape != (config.code_dim, config.code_dim) or not np.all(np.isfinite(corr)):
+            raise VaeError(
+                f"{config_file}: code_corr must be {config.code_dim} x {config.code_dim} finite "
+                f"numbers, got shape {corr.shape}"
+            )
+    state = load_state(model_file, "spatial autoencoder model")
     try:
-        model.load_state_dict(torch.load(model_file, map_location="cpu", weights_only=True))
-    except (RuntimeError, KeyError) as exc:
+        model.load_state_dict(state)
+    except (RuntimeError, KeyError, TypeError, AttributeError) as exc:
         raise VaeError(f"{model_file} does not match its config: {exc}") from exc
     model.eval()
     return model

@@ -19,9 +19,12 @@ from __future__ import annotations
 
 import contextlib
 import json
+import shutil
+import warnings
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -40,6 +43,78 @@ MODEL_FILE, CONFIG_FILE = "vae.pt", "vae.json"
 
 class VaeError(ValueError):
     """Bad VAE input, configuration or model files."""
+
+
+def read_config_json(path: Path, what: str) -> dict:
+    """The JSON object in ``path`` (a model's config); a one-line ``VaeError`` for a file that
+    is not one (empty, truncated, binary garbage, a list)."""
+    try:
+        raw = json.loads(path.read_text())
+    except (ValueError, UnicodeDecodeError) as exc:  # JSONDecodeError is a ValueError
+        raise VaeError(f"{path} is not a {what} config (not JSON: {exc}): damaged?") from exc
+    if not isinstance(raw, dict):
+        raise VaeError(f"{path} is not a {what} config (a JSON {type(raw).__name__})")
+    return raw
+
+
+def load_state(path: Path, what: str) -> Any:
+    """``torch.load`` of a file written by ``torch.save`` (tensors only); a one-line
+    ``VaeError`` for one that is empty, truncated or not a torch file."""
+    try:
+        with warnings.catch_warnings():  # garbage can look like another pickle protocol
+            warnings.simplefilter("ignore")
+            return torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # EOFError, UnpicklingError, RuntimeError (zip), OSError, ...
+        detail = " ".join(str(exc).split())[:200] or type(exc).__name__
+        raise VaeError(
+            f"{path} is not a readable {what} ({detail}): damaged or truncated?"
+        ) from exc
+
+
+def save_state(obj: Any, path: Path) -> None:
+    """``torch.save`` to ``path`` through a temporary file and a rename: a failure (a full
+    disk: torch reports it as a ``RuntimeError``) leaves ``path`` as it was and no temporary
+    file, and is a one-line ``VaeError``."""
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        torch.save(obj, tmp)
+        tmp.replace(path)
+    except (RuntimeError, OSError) as exc:
+        tmp.unlink(missing_ok=True)
+        detail = " ".join(str(exc).split())[:200]
+        with contextlib.suppress(OSError):  # torch's writer does not give the errno: look
+            if shutil.disk_usage(path.parent).free < (1 << 20):
+                detail = f"No space left on device: {detail}"
+        raise VaeError(f"cannot write {path} ({detail})") from exc
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def write_text_atomically(path: Path, text: str) -> None:
+    """``path.write_text`` through a temporary file and a rename (no half file on failure)."""
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        tmp.write_text(text)
+        tmp.replace(path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def check_statistics(values: Any, length: int, name: str, where: Path) -> None:
+    """``values`` is None or a list of ``length`` finite numbers (a model's statistics); a
+    one-line ``VaeError`` otherwise."""
+    if values is None:
+        return
+    try:
+        arr = np.asarray(values, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise VaeError(f"{where}: {name} is not a list of numbers") from exc
+    if arr.shape != (length,):
+        raise VaeError(f"{where}: {name} has {arr.size} values, the model has {length}")
+    if not np.all(np.isfinite(arr)):
+        raise VaeError(f"{where}: {name} holds NaN or infinite values: damaged?")
 
 
 def limit_threads(n: int = MAX_THREADS) -> None:
@@ -229,12 +304,8 @@ class Vae(nn.Module):
         """Write ``vae.pt`` and ``vae.json`` into ``folder``; returns the folder."""
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
-        tmp = folder / (MODEL_FILE + ".tmp")
-        torch.save(self.state_dict(), tmp)
-        tmp.replace(folder / MODEL_FILE)
-        tmp = folder / (CONFIG_FILE + ".tmp")
-        tmp.write_text(json.dumps(asdict(self.config), indent=2))
-        tmp.replace(folder / CONFIG_FILE)
+        save_state(self.state_dict(), folder / MODEL_FILE)
+        write_text_atomically(folder / CONFIG_FILE, json.dumps(asdict(self.config), indent=2))
         return folder
 
 
@@ -251,16 +322,18 @@ def load_vae(path: str | Path) -> Vae:
     for f in (model_file, config_file):
         if not f.is_file():
             raise VaeError(f"{f} not found: is {folder} a model folder from `ergo vae train`?")
+    raw = read_config_json(config_file, "VAE")
     try:
-        raw = json.loads(config_file.read_text())
         config = VaeConfig(**raw)
-    except (json.JSONDecodeError, TypeError) as exc:
+        vae = Vae(config)
+    except (TypeError, ValueError, RuntimeError) as exc:
         raise VaeError(f"{config_file} is not a VAE config: {exc}") from exc
-    vae = Vae(config)
+    for name in ("kl_per_latent", "latent_mean", "latent_std"):
+        check_statistics(getattr(config, name), config.latent_dim, name, config_file)
+    state = load_state(model_file, "VAE model")
     try:
-        state = torch.load(model_file, map_location="cpu", weights_only=True)
         vae.load_state_dict(state)
-    except (RuntimeError, KeyError) as exc:
+    except (RuntimeError, KeyError, TypeError, AttributeError) as exc:
         raise VaeError(f"{model_file} does not match its config: {exc}") from exc
     vae.eval()
     return vae

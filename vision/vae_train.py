@@ -20,6 +20,8 @@ and the final ``vae.pt`` + ``vae.json`` (``Vae.save``).
 from __future__ import annotations
 
 import sys
+import zipfile
+import zlib
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -29,7 +31,16 @@ import numpy as np
 import torch
 
 from vision.representation_quality import explained_pixel_variance, heldout_split
-from vision.vae import MAX_THREADS, Vae, VaeConfig, VaeError, limit_threads, to_tensor
+from vision.vae import (
+    MAX_THREADS,
+    Vae,
+    VaeConfig,
+    VaeError,
+    limit_threads,
+    load_state,
+    save_state,
+    to_tensor,
+)
 
 CHECKPOINT = "checkpoint.pt"
 LOG = "train_log.csv"
@@ -96,10 +107,18 @@ def load_images(path: str | Path) -> np.ndarray:
     if not path.is_file():
         raise VaeError(f"{path}: no such dataset file (make one with `ergo dataset outcomes`)")
     try:
-        with np.load(path, allow_pickle=False) as z:
+        z = np.load(path, allow_pickle=False)
+        if not isinstance(z, np.lib.npyio.NpzFile):  # an .npy: one array, not an archive
+            raise VaeError(f"{path}: a single .npy array, not a dataset (.npz) of `ergo dataset`")
+        with z:
             images = z["images"]
-    except (KeyError, ValueError, OSError) as exc:
-        raise VaeError(f"{path}: not a dataset with an 'images' array ({exc})") from exc
+    except VaeError:
+        raise
+    except (KeyError, ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
+        detail = " ".join(str(exc).split())[:200] or type(exc).__name__
+        raise VaeError(
+            f"{path}: not a dataset with an 'images' array ({detail}): damaged or truncated?"
+        ) from exc
     to_tensor(images[:1])  # checks shape and dtype
     return images
 
@@ -166,7 +185,17 @@ def fit(
     ckpt_path = out / CHECKPOINT
     state = None
     if ckpt_path.exists():
-        state = torch.load(ckpt_path, map_location="cpu", weights_only=True)
+        state = load_state(ckpt_path, "training checkpoint")
+        if not isinstance(state, dict) or not {
+            "model",
+            "optim",
+            "iteration",
+            "model_config",
+        } <= set(state):
+            raise VaeError(
+                f"{ckpt_path} is not a training checkpoint (damaged?): remove it to train from "
+                "the start"
+            )
         if state["model_config"] != settings:
             raise VaeError(
                 f"{ckpt_path} was trained with {state['model_config']}; remove it or use the "
@@ -234,13 +263,11 @@ def _checkpoint(
     iteration: int,
     settings: dict[str, Any],
 ) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(
+    save_state(
         {"model": model.state_dict(), "optim": optim.state_dict(), "iteration": iteration,
          "model_config": settings},
-        tmp,
+        path,
     )  # fmt: skip
-    tmp.replace(path)
 
 
 def _append_log(path: Path, header: str, rows: list[str]) -> None:

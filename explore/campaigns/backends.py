@@ -57,6 +57,8 @@ def load_backend(name: str) -> Callable[[list[Trial], BackendSettings], list[Tri
 def report_line(r: TrialResult) -> str:
     """One line on a finished trial (progress output)."""
     resumed = f", resumed at {r.resumed_from}" if r.resumed_from else ""
+    if r.resumed_from >= r.episodes:
+        resumed = ", complete already (an earlier or another campaign process ran it)"
     return (f"done: {r.strategy} seed {r.seed}: {r.episodes} episodes, {r.cells} ball cells "
             f"({r.host} pid {r.pid}, {r.wall_s:.1f} s{resumed})")  # fmt: skip
 

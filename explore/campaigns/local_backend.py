@@ -5,10 +5,22 @@ from __future__ import annotations
 
 import os
 import sys
+import time
 from collections.abc import Callable
 
 from explore.campaigns.backends import BackendSettings, failure_message, report_line
-from explore.campaigns.trial import CampaignError, Trial, TrialResult, run_trial
+from explore.campaigns.trial import (
+    CampaignError,
+    Trial,
+    TrialLockedError,
+    TrialResult,
+    run_trial,
+)
+from explore.runs.lock import is_being_written
+
+# How often a campaign looks whether another process still writes a trial's run, s (a look
+# takes microseconds; a trial takes minutes: a choice).
+LOCK_POLL_S = 1.0
 
 
 def _one_line(exc: BaseException) -> str:
@@ -54,10 +66,15 @@ def run_local(trials: list[Trial], settings: BackendSettings) -> list[TrialResul
     jobs = settings.jobs or 1
     results: list[TrialResult] = []
     failed: list[tuple[Trial, str]] = []
+    locked: list[Trial] = []
 
     def done(trial: Trial, get: Callable[[], TrialResult]) -> None:
         try:
             r = get()
+        except TrialLockedError as exc:  # another campaign process runs it: wait, below
+            print(f"waiting: {trial.label}: {_one_line(exc)}", file=sys.stderr)
+            locked.append(trial)
+            return
         except Exception as exc:  # one trial's failure is reported, the others go on
             failed.append((trial, _one_line(exc)))
             return
@@ -81,6 +98,14 @@ def run_local(trials: list[Trial], settings: BackendSettings) -> list[TrialResul
                        for t in trials]  # fmt: skip
             for t, f in futures:
                 done(t, f.result)
+    # Trials another process was writing (two ``ergo experiment`` on one campaign): once it
+    # lets go of the run, the trial is run here, which resumes it, or finds it complete (then
+    # nothing runs) when the other process finished it.
+    while locked:
+        trial = locked.pop(0)
+        while is_being_written(trial.run_dir):
+            time.sleep(LOCK_POLL_S)
+        done(trial, lambda t=trial: run_trial(t, settings.progress))
     if failed:
         raise CampaignError(failure_message(failed, len(results)))
     return results

@@ -41,6 +41,11 @@ class CampaignError(RuntimeError):
     """A campaign could not be planned or one of its trials failed; the message is one line."""
 
 
+class TrialLockedError(CampaignError):
+    """Another process (another ``ergo experiment`` on the same campaign) is writing the
+    trial's run: it was not run here. The message is one line naming that process."""
+
+
 @dataclass(frozen=True)
 class Trial:
     """One (strategy, seed) of a campaign: everything a worker needs, JSON-like and picklable.
@@ -187,6 +192,7 @@ def run_trial(trial: Trial, progress: bool = False) -> TrialResult:
     """Run (or resume) one trial until ``trial.episodes``; runs in the worker (a local process
     or a Ray task). Raises ``CampaignError`` (or the rig's and the strategy's errors) with a
     one-line message."""
+    from explore.runs.lock import RunLockedError
     from explore.runs.open_run import open_run
     from explore.runs.store import RunStoreError, atomic_write_text
 
@@ -200,6 +206,8 @@ def run_trial(trial: Trial, progress: bool = False) -> TrialResult:
             path, trial_config(trial), mode="auto", episodes=trial.episodes,
             rig_options=trial.rig.get("options", {}),  # ports change between sessions
         )  # fmt: skip
+    except RunLockedError as exc:
+        raise TrialLockedError(str(exc)) from exc
     except RunStoreError as exc:
         raise CampaignError(str(exc)) from exc
     with run:  # the history closes before the lock goes

@@ -4,6 +4,7 @@ function in its own ``cli`` module (listed below); this root only assembles them
 from __future__ import annotations
 
 import argparse
+import errno
 import logging
 import sys
 from typing import Any
@@ -58,6 +59,24 @@ def _user_errors() -> tuple[type[BaseException], ...]:
     return (CliError, RegistryError, RobotError, CameraError, FileNotFoundError, PermissionError)
 
 
+# What the file system says when it cannot do what a command asked (full, read-only, a loop of
+# links, a file where a folder should be): the machine's state, not a bug: one line naming the
+# file. Commands that can keep what they stored say more themselves.
+FILE_SYSTEM_ERRNOS = frozenset(
+    {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.ELOOP, errno.ENOTDIR,
+     errno.EISDIR, errno.EIO, errno.ENAMETOOLONG}
+)  # fmt: skip
+
+
+def describe_os_error(exc: OSError) -> str:
+    """``OSError`` in one line: what failed and on which file."""
+    what = exc.strerror or str(exc)
+    where = f": {exc.filename}" if exc.filename else ""
+    hint = " (a full disk: free some space and run the command again)" if exc.errno in (
+        errno.ENOSPC, errno.EDQUOT) else ""  # fmt: skip
+    return f"{what}{where}{hint}"
+
+
 def version() -> str:
     """The installed version of ergo-explore (its package metadata), or "unknown" when the
     source runs without being installed."""
@@ -96,6 +115,11 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except _user_errors() as exc:
         print(f"ergo: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        if exc.errno not in FILE_SYSTEM_ERRNOS:
+            raise
+        print(f"ergo: error: {describe_os_error(exc)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("ergo: interrupted", file=sys.stderr)

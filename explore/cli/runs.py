@@ -21,8 +21,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     cmds.required = True
     check = cmds.add_parser(
         "check",
-        help="say what the history holds: good records, damage, missing episodes (exit 1 if "
-        "it cannot be resumed as it is)",
+        help="say what the history holds: good records, damage, missing episodes, camera "
+        "frames, whether run.json can be run (exit 1 if it cannot be resumed as it is)",
     )
     check.add_argument("run", type=Path, metavar="RUN")
     check.set_defaults(func=run_check)
@@ -50,7 +50,7 @@ def run_check(args: argparse.Namespace) -> int:
         print(f"being written now by {describe_holder(holder)}")
     for line in describe(args.run, s):
         print(f"  {line}")
-    return 1 if s.needs_salvage else 0
+    return 0 if s.resumable else 1
 
 
 def run_salvage(args: argparse.Namespace) -> int:

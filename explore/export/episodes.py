@@ -140,8 +140,12 @@ def _state(record: EpisodeRecord) -> np.ndarray:
     return np.vstack([first[None], record.measured[:-1]])
 
 
-def iter_episodes(source: RunSource, video: bool) -> Iterator[ExportEpisode]:
-    """The run's episodes in order (``video``: with their frames, which must exist)."""
+def iter_episodes(
+    source: RunSource, video: bool, left_out: list[str] | None = None
+) -> Iterator[ExportEpisode]:
+    """The run's episodes in order (``video``: with their frames). With ``left_out``, an
+    episode whose frames are missing or unreadable is left out and named there (one line);
+    without, it fails the export."""
     strategy = _describer(source)
     descriptions = []
     for rec in source.records:  # the goal space as the run saw it, episode by episode
@@ -154,12 +158,26 @@ def iter_episodes(source: RunSource, video: bool) -> Iterator[ExportEpisode]:
     if dims is None:
         raise ExportError(f"{source.path}: its strategy never had a goal space over these episodes")
     for rec, d in zip(source.records, descriptions, strict=True):
-        frames = read_frames(source.path, rec.episode) if video else None
-        if video and (frames is None or len(frames) != len(rec.targets)):
-            raise ExportError(
-                f"{source.path}: episode {rec.episode} has no camera frames at the control rate "
-                "(run with --rig-option record_video=SIDE, or export with --no-video)"
+        try:
+            frames = read_frames(source.path, rec.episode) if video else None
+            why = "" if frames is not None or not video else "missing"
+            if frames is not None and len(frames) != len(rec.targets):
+                why = f"{len(frames)} frames for {len(rec.targets)} control ticks"
+        except RunStoreError as exc:
+            frames, why = None, f"unreadable ({exc})"
+        if video and why:
+            if left_out is None:
+                raise ExportError(
+                    f"{source.path}: episode {rec.episode} has no camera frames at the control "
+                    f"rate ({why}; run with --rig-option record_video=SIDE, or export with "
+                    "--no-video)"
+                )
+            left_out.append(
+                f"{source.path}: episode {rec.episode} left out: its camera frames "
+                f"{frames_path(source.path, rec.episode)} are {why} (export with --no-video "
+                "to keep every episode without video)"
             )
+            continue
         nan_out, nan_ctx = np.full(dims[0], np.nan), np.full(dims[1], np.nan)
         yield ExportEpisode(
             run=source.path,
@@ -176,5 +194,6 @@ def iter_episodes(source: RunSource, video: bool) -> Iterator[ExportEpisode]:
 
 
 def has_frames(source: RunSource) -> bool:
-    """Whether the run kept camera frames for every one of its episodes."""
-    return all(frames_path(source.path, rec.episode).is_file() for rec in source.records)
+    """Whether the run kept camera frames (``record_video``): a file for any of its episodes
+    (those missing one are left out of a video export, and named)."""
+    return any(frames_path(source.path, rec.episode).is_file() for rec in source.records)

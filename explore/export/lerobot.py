@@ -21,12 +21,16 @@ frames: ``episode.dmp_parameters`` (the 48 motor parameters), ``episode.goal``,
 The ``task`` is what the strategy was doing ("motor babbling", "goal in module k"). Each episode
 row also names where it comes from (``ergo/run``, ``ergo/episode``, ``ergo/strategy``,
 ``ergo/seed``; ``ergo/run`` is the run's name, never a path of the exporting machine: see
-``run_names``). Every file goes into a temporary folder beside ``OUT``, renamed to ``OUT`` at
-the end: an export that fails leaves nothing.
+``run_names``). Every file goes into a temporary folder beside ``OUT`` (``.OUT.partial-PID``:
+one per export, so that two exports to one ``OUT`` never remove each other's), renamed to
+``OUT`` at the end: an export that fails leaves nothing, and of two exports to one ``OUT`` the
+second to finish says so and leaves the first's dataset alone.
 """
 
 from __future__ import annotations
 
+import errno
+import glob
 import json
 import os
 import shutil
@@ -142,11 +146,30 @@ def _video_choice(sources: list[RunSource], video: bool) -> bool:
     if any(kept):
         missing = next(s.path for s, k in zip(sources, kept, strict=True) if not k)
         raise ExportError(
-            f"{missing} has no camera frames at the control rate for every episode (it ran "
-            "without --rig-option record_video=SIDE) while other runs have: export them apart, "
-            "or all with --no-video"
+            f"{missing} has no camera frames (it ran without --rig-option record_video=SIDE) "
+            "while other runs have: export them apart, or all with --no-video"
         )
     return False
+
+
+def _remove_dead_partials(out: Path) -> None:
+    """Remove what earlier exports to ``out`` left when they died (``.OUT.partial-PID`` of a
+    process that is gone); a running export's folder is its own, never touched."""
+    for tmp in out.parent.glob(f".{glob.escape(out.name)}.partial*"):
+        pid = tmp.name.rsplit("-", 1)[-1]
+        if pid.isdigit() and _alive(int(pid)):
+            continue
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
 
 
 def run_names(paths: list[Path]) -> list[str]:
@@ -189,19 +212,25 @@ def export_lerobot(runs: list[Path], out: Path, video: bool = True) -> ExportSum
         for s in sources
         if s.torn_bytes
     ]
-    tmp = out.parent / f".{out.name}.partial"
-    if tmp.exists():
-        shutil.rmtree(tmp)  # what an earlier failed export left (never the dataset itself)
+    _remove_dead_partials(out)
+    tmp = out.parent / f".{out.name}.partial-{os.getpid()}"  # this export's own
     try:
-        summary = _write(sources, tmp, fps, n_params, with_video)
-        if out.exists():
-            out.rmdir()  # empty, checked above
-        tmp.rename(out)
+        left_out: list[str] = []
+        summary = _write(sources, tmp, fps, n_params, with_video, left_out)
+        try:
+            os.rename(tmp, out)  # onto a missing or empty folder only (POSIX)
+        except OSError as exc:
+            if exc.errno not in (errno.ENOTEMPTY, errno.EEXIST, errno.ENOTDIR):
+                raise
+            raise ExportError(
+                f"{out} was written by another export meanwhile: this one wrote nothing (give "
+                "another --out)"
+            ) from None
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     summary.out = out
-    summary.warnings = warnings
+    summary.warnings = warnings + left_out
     return summary
 
 
@@ -220,7 +249,12 @@ class _Columns:
 
 
 def _write(
-    sources: list[RunSource], root: Path, fps: int, n_params: int, with_video: bool
+    sources: list[RunSource],
+    root: Path,
+    fps: int,
+    n_params: int,
+    with_video: bool,
+    left_out: list[str],
 ) -> ExportSummary:
     root.mkdir(parents=True)
     cols = _Columns()
@@ -233,7 +267,7 @@ def _write(
     names = run_names([s.path for s in sources])
     try:
         for source, name in zip(sources, names, strict=True):
-            for ep in iter_episodes(source, with_video):
+            for ep in iter_episodes(source, with_video, left_out if with_video else None):
                 shape = (ep.goal.size, ep.context.size)
                 if dims is None:
                     dims = shape
@@ -262,7 +296,8 @@ def _write(
     finally:
         if writer is not None:
             writer.close()
-    assert dims is not None
+    if dims is None:
+        raise ExportError("no episode left to export: every one lacks its camera frames")
     feats = features(cols.array("observation.state").shape[1], n_params, *dims, side)
     _write_tables(root, cols, feats, tasks)
     stats = {key: _stats(cols.array(key)) for key in cols.frames}

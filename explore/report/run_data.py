@@ -10,6 +10,7 @@ run); the positions and goals of each episode need every record of the history d
 from __future__ import annotations
 
 import csv
+import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -22,6 +23,8 @@ from explore.report.recorder import recording_paths
 from explore.runs.config import RunConfig
 from explore.runs.metrics import METRICS_FILE, MetricsLog, read_metrics
 from explore.runs.store import RunStore, iter_history
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -131,7 +134,8 @@ def load_run(path: Path, goal_outcomes: bool = True, records: bool = True) -> Ru
         if goal_outcomes
         else None
     )
-    for rec in iter_history(path):
+    torn: list[int] = []
+    for rec in iter_history(path, torn):
         metrics.update(rec)
         cols["ball"].append(np.asarray(rec.ball, dtype=float))
         cols["context_ball"].append(np.asarray(rec.context_ball, dtype=float))
@@ -140,6 +144,11 @@ def load_run(path: Path, goal_outcomes: bool = True, records: bool = True) -> Ru
         module.append(rec.module)
         reached.append(outcome_of(rec) if outcome_of and rec.goal.size else None)
     rows = metrics.rows
+    if torn and torn[0]:
+        log.warning(
+            "%s: left out a torn last record (%d bytes: a crash mid-append, or an append in "
+            "progress); the report covers episodes 0..%d", path, torn[0], len(rows) - 1,
+        )  # fmt: skip
     g = max((len(x) for x in cols["goals"]), default=0)
     goals = np.full((len(rows), g), np.nan)
     for i, x in enumerate(cols["goals"]):

@@ -107,5 +107,9 @@ def save_dataset(path: str | Path, data: dict[str, np.ndarray]) -> None:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.stem + ".tmp.npz")
-    np.savez_compressed(tmp, **data)
-    tmp.replace(path)
+    try:
+        np.savez_compressed(tmp, **data)
+        tmp.replace(path)
+    except BaseException:  # a full disk: no half-written file left, an older dataset kept
+        tmp.unlink(missing_ok=True)
+        raise

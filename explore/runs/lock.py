@@ -7,9 +7,14 @@ the holder's pid.
 
 The kernel drops a ``flock`` when its holder dies (SIGKILL, a crash, a power cut), so the lock
 of a dead writer never blocks anyone: the next writer takes it over and says so (the file then
-still names the dead writer, who ended without emptying it). A writer that ends normally
-empties the file before unlocking it. The file is never deleted: deleting a lock file races
-with a writer that has just opened it (both would then lock different files).
+still names the dead writer, who ended without blanking it). A writer that ends normally
+blanks the file (spaces) before unlocking it. The file is never deleted: deleting a lock file
+races with a writer that has just opened it (both would then lock different files).
+
+A run folder may come from someone else: the lock file is opened without following a
+symbolic link, must be a regular file with no other hard link, and is never truncated (the
+holder's JSON is written over the first ``HOLDER_BYTES`` bytes, padded with spaces), so that a
+``writer.lock`` pointing at another file can neither empty nor rewrite it.
 
 A ``flock`` belongs to the open file, not to the process: two opens of one run in one process
 exclude each other too. Over NFS, Linux emulates it with a POSIX record lock on the server.
@@ -18,10 +23,12 @@ exclude each other too. Over NFS, Linux emulates it with a POSIX record lock on 
 from __future__ import annotations
 
 import contextlib
+import errno
 import fcntl
 import json
 import os
 import socket
+import stat
 import sys
 import time
 from collections.abc import Iterator
@@ -36,6 +43,9 @@ LOCK_FILE = WRITER_LOCK_FILE
 # before it is refused, s: the holder writes its name just after taking the lock, a reader's
 # look (``holder_of``) lasts microseconds. A bound, not an expectation: guess.
 HOLDER_WAIT_S = 1.0
+# Bytes of the lock file the holder's JSON is written over (padded with spaces): the file is
+# never truncated. The JSON takes about 150 bytes plus the command (at most 300 characters).
+HOLDER_BYTES = 1024
 
 
 class RunLockedError(RunStoreError):
@@ -81,6 +91,38 @@ def _read(fd: int) -> dict[str, Any]:
     return info if isinstance(info, dict) else {}
 
 
+def _open_lock_file(path: Path, flags: int) -> int:
+    """Open the lock file without following a link; refuse one that is not the run's own
+    (``RunStoreError``, one line): a symbolic link, a hard link, not a regular file."""
+    try:
+        fd = os.open(path, flags | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP and path.is_symlink():
+            raise RunStoreError(
+                f"{path} is a symbolic link: a run folder must hold its own files (a folder "
+                "received from someone else?); remove it"
+            ) from exc
+        raise
+    st = os.fstat(fd)
+    if not stat.S_ISREG(st.st_mode) or st.st_nlink > 1:
+        os.close(fd)
+        what = "not a regular file" if not stat.S_ISREG(st.st_mode) else "a hard link"
+        raise RunStoreError(
+            f"{path} is {what}: a run folder must hold its own files (a folder received from "
+            "someone else?); remove it"
+        )
+    return fd
+
+
+def _write_holder(fd: int, info: dict[str, Any] | None) -> None:
+    """Write the holder (None: nobody) over the first ``HOLDER_BYTES`` bytes, padded with
+    spaces; never truncates."""
+    text = b"" if info is None else json.dumps(info).encode()
+    if len(text) > HOLDER_BYTES - 1 and info is not None:
+        text = json.dumps({k: v for k, v in info.items() if k != "command"}).encode()
+    os.pwrite(fd, text.ljust(HOLDER_BYTES - 1) + b"\n", 0)
+
+
 def _command() -> str:
     argv = [os.path.basename(sys.argv[0] or "python"), *sys.argv[1:]]
     return " ".join(argv)[:300]
@@ -113,7 +155,10 @@ def run_lock(run: str | os.PathLike[str]) -> Iterator[RunLock]:
     ``HOLDER_WAIT_S``) rather than refusing itself on a reader's look."""
     run = Path(run)
     path = run / LOCK_FILE
-    fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+    try:
+        fd = _open_lock_file(path, os.O_RDWR | os.O_CREAT)
+    except OSError as exc:
+        raise RunStoreError(f"cannot open {path}: {exc.strerror or exc}") from exc
     try:
         deadline = time.monotonic() + HOLDER_WAIT_S
         while True:
@@ -131,14 +176,16 @@ def run_lock(run: str | os.PathLike[str]) -> Iterator[RunLock]:
         previous = _read(fd)
         info = {"pid": os.getpid(), "host": socket.gethostname(), "since": time.time(),
                 "command": _command()}  # fmt: skip
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, json.dumps(info).encode(), 0)
+        try:
+            _write_holder(fd, info)
+        except OSError as exc:  # a read-only file system, a full disk
+            raise RunStoreError(f"cannot write {path}: {exc.strerror or exc}") from exc
         lock = RunLock(path, previous or None)
         try:
             yield lock
         finally:
             with contextlib.suppress(OSError):  # a full disk must not keep the lock
-                os.ftruncate(fd, 0)  # released cleanly: the next writer takes over nothing
+                _write_holder(fd, None)  # released cleanly: the next writer takes over nothing
     finally:
         os.close(fd)  # releases the flock
 
@@ -149,10 +196,12 @@ def _try_lock(run: str | os.PathLike[str], exclusive: bool) -> Iterator[tuple[in
     created here) and whether the lock could be taken (it then is)."""
     path = Path(run) / LOCK_FILE
     try:
-        fd = os.open(path, (os.O_RDWR if exclusive else os.O_RDONLY) | os.O_CLOEXEC)
+        fd = _open_lock_file(path, os.O_RDWR if exclusive else os.O_RDONLY)
     except FileNotFoundError:
         yield -1, True
         return
+    except OSError as exc:  # a loop of links on the way, a folder that cannot be read
+        raise RunStoreError(f"cannot open {path}: {exc.strerror or exc}") from exc
     try:
         try:
             fcntl.flock(fd, (fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH) | fcntl.LOCK_NB)

@@ -15,6 +15,7 @@ comes from the config.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import logging
 from collections.abc import Callable
@@ -31,7 +32,7 @@ from explore.runs.inputs import check_inputs, record_inputs
 from explore.runs.lock import LOCK_FILE, RunLock, remove_lock_if_free, run_lock
 from explore.runs.metrics import recorded_episodes
 from explore.runs.record import EpisodeRecord
-from explore.runs.store import RunStore, RunStoreError, make_run_dir
+from explore.runs.store import RunStore, RunStoreError, check_own_files, make_run_dir
 
 Mode = Literal["new", "resume", "auto"]
 log = logging.getLogger(__name__)
@@ -99,7 +100,8 @@ class OpenRun:
         out = []
         if self.store.truncated_bytes:
             out.append(
-                f"{self.path}: dropped a torn last record ({self.store.truncated_bytes} bytes)"
+                f"{self.path}: moved a torn last record ({self.store.truncated_bytes} bytes: a "
+                f"crash mid-append) aside to {self.store.moved_aside}; that episode is run again"
             )
         if self.missing:
             out.append(
@@ -188,12 +190,14 @@ def open_run(
         allow_changed_inputs=allow_changed_inputs,
     )  # fmt: skip
     held = ExitStack()
+    made = False  # whether this call made the folder (removed again if the open fails)
     try:
         lock = None
         resume = mode == "resume" or (mode == "auto" and RunStore.is_run(path))
         if resume:
             RunStore.read_meta(path)  # a one-line error for a folder that holds no run
             lock = held.enter_context(run_lock(path))
+            check_own_files(path)  # a received folder cannot make us write outside it
             store = RunStore.open(path)  # under the lock: no other writer is appending
             held.callback(store.close)  # unwinds first: the history closes before the lock
             run_config = RunConfig.from_dict(store.config, where=path / "run.json")
@@ -215,13 +219,20 @@ def open_run(
         the_strategy = strategy if strategy is not None else strategy_for(run_config, the_rig)
         _check_sees_ball(run_config, the_rig, the_strategy)
         if store is None:
+            made = not path.exists()
             make_run_dir(path)
             lock = held.enter_context(run_lock(path))
             if mode == "auto" and RunStore.is_run(path):
                 # another writer made the run between our look and our lock: resume it
                 held.close()
                 return again(mode="resume")
-            store = RunStore.create(path, run_config.to_dict())
+            try:
+                store = RunStore.create(path, run_config.to_dict())
+            except OSError as exc:  # a full disk, a read-only file system
+                raise RunStoreError(
+                    f"cannot create the run {path}: {exc.strerror or exc}"
+                    + (f" ({exc.filename})" if exc.filename else "")
+                ) from exc
             held.callback(store.close)
             record_inputs(store, run_config)
         store.sync_interval_s = the_rig.sync_interval_s
@@ -234,6 +245,9 @@ def open_run(
         )  # fmt: skip
     except BaseException:
         held.close()
+        if made:  # a new run that could not be created (a full or read-only disk)
+            with contextlib.suppress(OSError, RunStoreError):
+                discard_empty_run(path)
         raise
 
 
@@ -241,6 +255,7 @@ def open_run(
 # only these, and only from a run that holds no episode).
 _NEW_RUN_FILES = (
     "history.bin", "metrics.csv", "faults.json", "trial.json", "recording.rrd", "run.json",
+    "run.json.tmp",
 )  # fmt: skip
 
 
@@ -254,6 +269,8 @@ def discard_empty_run(run: Path) -> None:
         raise RunStoreError(f"{run} holds episodes: not removed")
     for name in _NEW_RUN_FILES:
         (run / name).unlink(missing_ok=True)
+    for tmp in run.glob("run.json.tmp*"):  # a create's own temporary file
+        tmp.unlink(missing_ok=True)
     left = [p.name for p in run.iterdir()]
     if left == [LOCK_FILE] and remove_lock_if_free(run):
         left = []

@@ -27,8 +27,10 @@ emptied or deleted shows as fewer episodes than it recorded (``Survey.missing``)
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import shutil
 import time
 import zlib
 from collections.abc import Iterator
@@ -39,9 +41,19 @@ from typing import Literal
 from explore.runs.lock import run_lock
 from explore.runs.metrics import recorded_episodes
 from explore.runs.record import EpisodeRecord, RecordError
-from explore.runs.store import HEADER, MAGIC, RunStore, RunStoreError
-
-SALVAGE_DIR = "salvage"
+from explore.runs.store import (
+    FRAMES_DIR,
+    HEADER,
+    MAGIC,
+    RunStore,
+    RunStoreError,
+    check_own_files,
+    fsync_dir,
+    fsync_write,
+    new_salvage_folder,
+    next_frame,
+    read_frames,
+)
 
 Kind = Literal["record", "damaged", "torn"]
 
@@ -73,6 +85,11 @@ class Survey:
         prefix_end: byte offset where that prefix ends.
         recorded: episodes the run had stored as ``metrics.csv`` says, None without it.
         exists: whether ``history.bin`` exists.
+        config_error: why ``run.json``'s config cannot be run (None: it can).
+        frames: for a run that keeps camera frames (``RUN/frames/``): episodes of the
+            resumable history with readable frames; None for a run without.
+        frames_missing, frames_bad: episodes without a frames file, and (episode, why) of
+            those whose file cannot be read.
     """
 
     size: int
@@ -81,6 +98,10 @@ class Survey:
     prefix_end: int = 0
     recorded: int | None = None
     exists: bool = True
+    config_error: str | None = None
+    frames: int | None = None
+    frames_missing: list[int] = field(default_factory=list)
+    frames_bad: list[tuple[int, str]] = field(default_factory=list)
 
     @property
     def good(self) -> list[Piece]:
@@ -103,6 +124,11 @@ class Survey:
     def missing(self) -> int:
         """Episodes the run had stored that its resumable history lacks."""
         return max(0, (self.recorded or 0) - self.prefix)
+
+    @property
+    def resumable(self) -> bool:
+        """Whether ``ergo explore --resume`` can continue the run as it is."""
+        return not self.needs_salvage and self.config_error is None
 
     @property
     def needs_salvage(self) -> bool:
@@ -135,12 +161,10 @@ def _record_at(data: bytes, pos: int) -> tuple[int, int | None, str]:
 def _next_good(data: bytes, pos: int) -> int:
     """Offset of the next good record after ``pos``, or ``len(data)``."""
     at = pos
-    while True:
-        at = data.find(MAGIC, at + 1)
-        if at < 0:
-            return len(data)
+    while (at := next_frame(data, at)) is not None:
         if _record_at(data, at)[1] is not None:
             return at
+    return len(data)
 
 
 def survey_bytes(data: bytes) -> Survey:
@@ -169,15 +193,31 @@ def survey_bytes(data: bytes) -> Survey:
 
 def survey(run: str | Path) -> Survey:
     """Survey ``RUN/history.bin`` (read only: safe while another process writes the run)."""
+    from explore.runs.config import RunConfig
+
     run = Path(run)
-    RunStore.read_meta(run)  # a one-line error for a folder that holds no run
+    meta = RunStore.read_meta(run)  # a one-line error for a folder that holds no run
     path = run / "history.bin"
     try:
         data = path.read_bytes()
         s = survey_bytes(data)
     except FileNotFoundError:
         s = Survey(size=0, exists=False)
+    except OSError as exc:
+        raise RunStoreError(f"cannot read {path}: {exc.strerror or exc}") from exc
     s.recorded = recorded_episodes(run)
+    try:
+        RunConfig.from_dict(meta["config"], where=run / "run.json")
+    except RunStoreError as exc:
+        s.config_error = str(exc)
+    if (run / FRAMES_DIR).is_dir():
+        for episode in range(s.prefix):
+            try:
+                if read_frames(run, episode) is None:
+                    s.frames_missing.append(episode)
+            except RunStoreError as exc:
+                s.frames_bad.append((episode, str(exc)))
+        s.frames = s.prefix - len(s.frames_missing) - len(s.frames_bad)
     return s
 
 
@@ -215,6 +255,16 @@ def describe(run: Path, s: Survey) -> list[str]:
             f"metrics.csv recorded {s.recorded} episode(s) stored: "
             + (f"{s.missing} missing from the history" if s.missing else "none missing")
         )
+    if s.frames is not None:
+        line = f"frames: {s.frames} of {s.prefix} episode(s) with readable camera frames"
+        if s.frames_missing:
+            line += f"; missing: episode(s) {_list(s.frames_missing)}"
+        if s.frames_bad:
+            line += f"; unreadable: {'; '.join(why for _, why in s.frames_bad[:3])}"
+            line += "..." if len(s.frames_bad) > 3 else ""
+        lines.append(line)
+    if s.config_error is not None:
+        lines.append(f"run.json: {s.config_error}")
     if s.needs_salvage:
         lines.append(
             f"damaged: `ergo runs salvage {run}` keeps episodes 0..{s.prefix - 1} as the "
@@ -223,14 +273,26 @@ def describe(run: Path, s: Survey) -> list[str]:
             else f"damaged: `ergo runs salvage {run}` moves the history aside (nothing "
             "deleted) and lets the run start again from episode 0"
         )
+    elif s.config_error is not None:
+        lines.append("not resumable: run.json cannot be run (above); restore it from a copy")
     elif s.missing:
         lines.append(
             f"resumable, {s.missing} episode(s) short of what it had stored: "
             f"`ergo explore --resume {run}` re-runs them"
         )
+    elif s.frames_missing or s.frames_bad:
+        lost = len(s.frames_missing) + len(s.frames_bad)
+        lines.append(
+            f"resumable as it is, but {lost} episode(s) lack readable camera frames (above): "
+            "a video export leaves them out"
+        )
     else:
         lines.append("ok: resumable as it is")
     return lines
+
+
+def _list(episodes: list[int]) -> str:
+    return ", ".join(map(str, episodes[:8])) + (", ..." if len(episodes) > 8 else "")
 
 
 @dataclass(frozen=True)
@@ -244,25 +306,6 @@ class SalvageResult:
     missing: int
 
 
-def _fsync_write(path: Path, chunks: Iterator[bytes]) -> int:
-    n = 0
-    with open(path, "xb") as f:
-        for chunk in chunks:
-            f.write(chunk)
-            n += len(chunk)
-        f.flush()
-        os.fsync(f.fileno())
-    return n
-
-
-def _fsync_dir(path: Path) -> None:
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
 def salvage(run: str | Path) -> SalvageResult:
     """Keep the resumable prefix of ``RUN/history.bin`` and move the rest to
     ``RUN/salvage/N/`` (see the module's docstring). Takes the run's writer lock: refused
@@ -270,6 +313,7 @@ def salvage(run: str | Path) -> SalvageResult:
     run = Path(run)
     RunStore.read_meta(run)
     with run_lock(run):
+        check_own_files(run)
         path = run / "history.bin"
         data = path.read_bytes() if path.exists() else b""
         s = survey_bytes(data)
@@ -277,18 +321,17 @@ def salvage(run: str | Path) -> SalvageResult:
         rest = [p for p in s.pieces if p.start >= s.prefix_end]
         if not rest:
             return SalvageResult(s.prefix, 0, 0, None, s.missing)
-        base = run / SALVAGE_DIR
-        base.mkdir(exist_ok=True)
-        k = 1
-        while (base / str(k)).exists():
-            k += 1
-        folder = base / str(k)
-        folder.mkdir()
+        try:
+            folder = new_salvage_folder(run)
+        except OSError as exc:
+            raise RunStoreError(
+                f"cannot salvage {run}: {exc.strerror or exc}; history.bin left as it was"
+            ) from exc
         damaged = [p for p in rest if p.kind != "record"]
         kept = [p for p in rest if p.kind == "record"]
         try:
-            _fsync_write(folder / "damaged.bin", (data[p.start : p.end] for p in damaged))
-            _fsync_write(folder / "kept.bin", (data[p.start : p.end] for p in kept))
+            fsync_write(folder / "damaged.bin", (data[p.start : p.end] for p in damaged))
+            fsync_write(folder / "kept.bin", (data[p.start : p.end] for p in kept))
             placed: list[dict[str, object]] = []
             offsets = {"damaged.bin": 0, "kept.bin": 0}
             for p in s.pieces:
@@ -311,12 +354,15 @@ def salvage(run: str | Path) -> SalvageResult:
                 "recorded_in_metrics": s.recorded,
                 "pieces": placed,
             }
-            _fsync_write(folder / "salvage.json", iter([json.dumps(report, indent=1).encode()]))
-            _fsync_dir(folder)
+            fsync_write(folder / "salvage.json", iter([json.dumps(report, indent=1).encode()]))
+            fsync_dir(folder)
             with open(path, "r+b") as f:  # the rest is safe on disk: cut it from the history
                 f.truncate(s.prefix_end)
                 os.fsync(f.fileno())
         except OSError as exc:
+            shutil.rmtree(folder, ignore_errors=True)  # a partial copy: history.bin has it all
+            with contextlib.suppress(OSError):
+                folder.parent.rmdir()  # salvage/ itself, if this made it and nothing else is in
             raise RunStoreError(
                 f"cannot salvage {run}: {exc.strerror or exc}; history.bin left as it was"
             ) from exc

@@ -28,10 +28,18 @@ Layout of ``RUN/``:
   resume).
 - ``coverage.png`` and whatever later stages write (models, figures, recordings).
 
-On open, a torn last record (a crash mid-write) is cut off, and so is everything from the first
-bad record on when it lies past ``history.synced`` (a power cut's unsynced tail); any other bad
-record followed by more data is corruption and raises ``RunStoreError`` naming the offset,
-without touching the file.
+On open, a torn last record (a crash mid-write) is moved aside to ``RUN/salvage/N/`` (the
+bytes kept, never deleted; the episode is run again), and so is everything from the first bad
+record on when it lies past ``history.synced`` (a power cut's unsynced tail). A bad record is
+only taken for a torn tail when no good record follows it: a damaged length field makes a
+record look as if it ran past the end of the file, so the rest of the file is searched for a
+frame whose marker and checksum hold (``next_frame``); one found means damage, not a tear.
+Damage raises ``RunStoreError`` naming the offset, without touching the file (``ergo runs
+salvage`` keeps what can be kept).
+
+A run folder may come from someone else: the writer refuses one whose files it would write
+are symbolic links, hard links or not regular files (``check_own_files``), and opens them
+without following links, so that a received folder cannot make it write outside itself.
 """
 
 from __future__ import annotations
@@ -41,8 +49,11 @@ import io
 import json
 import math
 import os
+import stat
 import struct
+import threading
 import time
+import zipfile
 import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -61,20 +72,88 @@ FRAMES_DIR = "frames"
 WRITER_LOCK_FILE = "writer.lock"  # the writer's lock (explore/runs/lock.py), not run data
 SYNCED = "history.synced"
 _SYNCED = struct.Struct("<Q")
+SALVAGE_DIR = "salvage"  # damaged or torn history moved aside (explore/runs/repair.py)
+# Files a writer of the run opens for writing (besides writer.lock, checked by the lock), and
+# the folders whose files it writes: ``check_own_files`` refuses a link among them.
+WRITER_FILES = (
+    "run.json", "run.json.tmp", "history.bin", SYNCED, "metrics.csv", "metrics.csv.tmp",
+    "faults.json", "faults.json.tmp", "faults.json.bad", "trial.json", "coverage.png",
+)  # fmt: skip
+WRITER_DIRS = (FRAMES_DIR, SALVAGE_DIR)
+# open flags of a file the writer writes: never through a symbolic link
+_NOFOLLOW = os.O_NOFOLLOW | os.O_CLOEXEC
 
 
 class RunStoreError(RuntimeError):
     """A run folder is missing, foreign, from another version, or corrupt."""
 
 
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` via a temporary file and an atomic rename (fsync'ed). The
+    temporary file is this writer's own (``NAME.tmp-PID-THREAD``: two processes writing one
+    file, two ``ergo experiment`` writing ``campaign.json``, never rename each other's), made
+    anew (never written through: a link at its name cannot redirect the write); on failure (a
+    full disk) it is removed and ``path`` is left as it was."""
+    tmp = path.with_name(f"{path.name}.tmp-{os.getpid()}-{threading.get_ident()}")
+    with contextlib.suppress(FileNotFoundError):
+        os.unlink(tmp)  # a dead writer's, whose pid and thread id were the same
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | _NOFOLLOW, 0o644)
+    try:
+        try:
+            view = memoryview(data)
+            while view:
+                view = view[os.write(fd, view) :]
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
 def atomic_write_text(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` via a temporary file and an atomic rename (fsync'ed)."""
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    atomic_write_bytes(path, text.encode())
+
+
+def check_own_files(run: Path) -> None:
+    """Refuse (``RunStoreError``, one line) a run folder whose files a writer would write are
+    not its own: a symbolic link, a file with other hard links, or not a regular file (a
+    folder, a device) at one of ``WRITER_FILES`` or in ``WRITER_DIRS``. A run received from
+    someone else could otherwise make the writer write, append to or empty files outside it."""
+    names = [run / n for n in WRITER_FILES]
+    for d in WRITER_DIRS:
+        sub = run / d
+        if sub.is_symlink() or (sub.exists() and not sub.is_dir()):
+            raise RunStoreError(
+                _not_own(sub, "a symbolic link" if sub.is_symlink() else "not a folder")
+            )
+        if sub.is_dir():
+            names += sorted(sub.rglob("*"))
+    for path in names:
+        try:
+            st = os.lstat(path)
+        except FileNotFoundError:
+            continue
+        except OSError as exc:
+            raise RunStoreError(f"cannot look at {path}: {exc.strerror or exc}") from exc
+        if stat.S_ISLNK(st.st_mode):
+            raise RunStoreError(_not_own(path, "a symbolic link"))
+        if stat.S_ISDIR(st.st_mode) and path.parent != run:
+            continue  # salvage/1/ and the like
+        if not stat.S_ISREG(st.st_mode):
+            raise RunStoreError(_not_own(path, "not a regular file"))
+        if st.st_nlink > 1:
+            raise RunStoreError(_not_own(path, f"a hard link ({st.st_nlink} names for one file)"))
+
+
+def _not_own(path: Path, what: str) -> str:
+    return (
+        f"{path} is {what}: a run folder must hold its own files (a folder received from "
+        f"someone else?); replace it with a copy of the file, or remove it"
+    )
 
 
 def make_run_dir(path: Path) -> None:
@@ -94,6 +173,22 @@ def salvage_hint(run: Path) -> str:
     return f"`ergo runs check {run}` says what can be kept, `ergo runs salvage {run}` keeps it"
 
 
+def next_frame(data: bytes, after: int) -> int | None:
+    """Offset of the first frame starting after ``after`` whose marker and checksum hold (a
+    good record's frame), or None. What tells a torn tail (nothing good after it) from damage
+    in the middle (a damaged length field makes a record look as if it ran past the end)."""
+    n = len(data)
+    at = after
+    while (at := data.find(MAGIC, at + 1)) >= 0:
+        if n - at < HEADER.size:
+            return None
+        _, length, crc = HEADER.unpack_from(data, at)
+        end = at + HEADER.size + length
+        if end <= n and zlib.crc32(data[at + HEADER.size : end]) == crc:
+            return at
+    return None
+
+
 def _scan(
     data: bytes, durable: int | None = None, hint: str = ""
 ) -> tuple[list[tuple[int, int]], int]:
@@ -106,7 +201,7 @@ def _scan(
         spans: (start, end) of each valid payload, in order.
         good_end: offset just after the last valid record (where a torn tail starts).
     Raises RunStoreError when an invalid record is followed by more data that is not just a
-    torn tail, i.e. real corruption.
+    torn tail (a good frame follows it), i.e. real corruption.
     """
     spans: list[tuple[int, int]] = []
     pos = 0
@@ -121,12 +216,13 @@ def _scan(
             break  # past what was synced: what a power cut left of the unsynced tail
         if magic != MAGIC:
             raise RunStoreError(f"history.bin is corrupt at byte {pos}: bad record marker{hint}")
-        if end > n:
-            break  # torn payload
-        if zlib.crc32(data[start:end]) != crc:
-            if end == n:
-                break  # last record incomplete on disk
-            raise RunStoreError(f"history.bin is corrupt at byte {pos}: checksum mismatch{hint}")
+        if end > n or zlib.crc32(data[start:end]) != crc:
+            why = "record runs past the end of the file" if end > n else "checksum mismatch"
+            good = next_frame(data, pos)
+            if good is None and end >= n:
+                break  # the last record, incomplete on disk: a torn tail
+            after = f", and a good record follows at byte {good}" if good is not None else ""
+            raise RunStoreError(f"history.bin is corrupt at byte {pos}: {why}{after}{hint}")
         spans.append((start, end))
         pos = end
     return spans, pos
@@ -154,7 +250,8 @@ class RunStore:
         self.meta = meta
         self.records: list[EpisodeRecord] = []
         self._fd: int | None = None  # history.bin, O_APPEND, unbuffered
-        self.truncated_bytes = 0  # torn bytes cut by ``open``
+        self.truncated_bytes = 0  # torn bytes moved out of history.bin by ``open``
+        self.moved_aside: Path | None = None  # where ``open`` moved them (RUN/salvage/N)
         self.torn_bytes = 0  # torn bytes found after the last record (cut by ``open`` only)
         #: seconds between two fsyncs of the history (0: every append)
         self.sync_interval_s = 0.0
@@ -169,10 +266,10 @@ class RunStore:
         ``explore/runs/lock.py``, aside)."""
         path = Path(path)
         make_run_dir(path)
-        stale = path / "run.json.tmp"
         found = sorted(p.name for p in path.iterdir() if p.name != WRITER_LOCK_FILE)
-        if found == [stale.name]:
-            stale.unlink()  # a kill during a previous create's atomic write: nothing was made
+        if found and all(name.startswith("run.json.tmp") for name in found):
+            for name in found:  # a kill during a previous create's atomic write: nothing made
+                (path / name).unlink()
             found = []
         if found:
             raise RunStoreError(
@@ -263,17 +360,32 @@ class RunStore:
         self.torn_bytes = len(data) - good_end
         if self.torn_bytes and repair:
             # a crash during the last append (the episode in flight), or a power cut's unsynced
-            # tail: drop the bytes from the first bad record on, the episodes are run again
+            # tail: the bytes from the first bad record on are moved aside (kept, not
+            # deleted: on hardware that episode cannot be run again the same), then cut from
+            # the history; the episodes are run again
+            try:
+                self.moved_aside = move_tail_aside(self.path, data, good_end, len(self.records))
+                with open(self.history_path, "r+b") as f:
+                    f.truncate(good_end)
+                    os.fsync(f.fileno())
+                if self._synced_length is not None:
+                    self._write_synced(good_end)
+            except OSError as exc:
+                raise RunStoreError(
+                    f"cannot move the torn last record of {self.history_path} aside "
+                    f"({self.torn_bytes} bytes): {exc.strerror or exc}; history.bin left as it "
+                    "was"
+                ) from exc
             self.truncated_bytes = self.torn_bytes
-            with open(self.history_path, "r+b") as f:
-                f.truncate(good_end)
-                os.fsync(f.fileno())
-            if self._synced_length is not None:
-                self._write_synced(good_end)
 
     def _open_for_append(self) -> None:
-        flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_CLOEXEC
-        self._fd = os.open(self.history_path, flags, 0o644)
+        flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT | _NOFOLLOW
+        try:
+            self._fd = os.open(self.history_path, flags, 0o644)
+        except OSError as exc:
+            raise RunStoreError(
+                f"cannot open {self.history_path} for appending: {exc.strerror or exc}"
+            ) from exc
         self._size = os.fstat(self._fd).st_size
 
     def _sync(self) -> None:
@@ -290,7 +402,7 @@ class RunStore:
         self._synced_length = length
         path = self.path / SYNCED
         new = not path.exists()
-        fd = os.open(path, os.O_WRONLY | os.O_CREAT, 0o644)
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | _NOFOLLOW, 0o644)
         try:
             os.pwrite(fd, _SYNCED.pack(length), 0)
             os.fsync(fd)
@@ -365,6 +477,67 @@ class RunStore:
         self.close()
 
 
+def new_salvage_folder(run: Path) -> Path:
+    """A new, empty ``RUN/salvage/N/`` (N = 1, 2, ...: never an earlier one)."""
+    base = run / SALVAGE_DIR
+    if base.is_symlink():
+        raise RunStoreError(_not_own(base, "a symbolic link"))
+    base.mkdir(exist_ok=True)
+    k = 1
+    while True:
+        folder = base / str(k)
+        try:
+            folder.mkdir()
+            return folder
+        except FileExistsError:
+            k += 1
+
+
+def fsync_write(path: Path, chunks: Iterator[bytes]) -> int:
+    """Write a new file (never an existing one) from ``chunks``, fsync'ed; returns its size."""
+    n = 0
+    with open(path, "xb") as f:
+        for chunk in chunks:
+            f.write(chunk)
+            n += len(chunk)
+        f.flush()
+        os.fsync(f.fileno())
+    return n
+
+
+def fsync_dir(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def move_tail_aside(run: Path, data: bytes, start: int, records: int) -> Path:
+    """Copy ``data[start:]`` (a torn last record, or a power cut's unsynced tail, of the
+    history ``data``) to a new ``RUN/salvage/N/damaged.bin`` with its ``salvage.json`` (as
+    ``ergo runs salvage`` writes them: the history's pieces, where each went), fsync'ed,
+    before the caller cuts it from the history. Returns the folder."""
+    folder = new_salvage_folder(run)
+    size = len(data) - start
+    fsync_write(folder / "damaged.bin", iter([data[start:]]))
+    report = {
+        "salvaged": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        "by": "resume (a torn last record: a crash mid-append, or a power cut's unsynced tail)",
+        "history_bytes_before": len(data),
+        "kept_in_history": records,
+        "good_records_moved": 0,
+        "damaged_bytes_moved": size,
+        "pieces": [
+            {"start": 0, "end": start, "kind": "records", "file": "history.bin", "at": 0},
+            {"start": start, "end": len(data), "kind": "torn", "file": "damaged.bin", "at": 0},
+        ],
+    }
+    fsync_write(folder / "salvage.json", iter([json.dumps(report, indent=1).encode()]))
+    fsync_dir(folder)
+    return folder
+
+
 def read_synced(run: str | Path) -> int | None:
     """The length of ``RUN/history.bin`` known to be on disk (``history.synced``), or None
     when the run keeps none (it fsyncs every append)."""
@@ -413,20 +586,23 @@ def read_frames(run: str | Path, episode: int) -> np.ndarray | None:
     try:
         with np.load(path, allow_pickle=False) as z:
             frames = z["frames"]
-    except (OSError, ValueError, KeyError, zlib.error) as exc:
-        raise RunStoreError(f"{path} is not readable: {exc}") from exc
+    except (OSError, ValueError, KeyError, EOFError, zlib.error, zipfile.BadZipFile) as exc:
+        raise RunStoreError(f"{path} is not readable: {exc or type(exc).__name__}") from exc
     if frames.ndim != 4 or frames.shape[-1] != 3 or frames.dtype != np.uint8:
         raise RunStoreError(f"{path} holds frames of shape {frames.shape}, not (T, S, S, 3) uint8")
     return frames
 
 
-def iter_history(run: Path) -> Iterator[EpisodeRecord]:
+def iter_history(run: Path, left_out: list[int] | None = None) -> Iterator[EpisodeRecord]:
     """Read a run's stored episodes without modifying the folder (no torn-tail repair, no
-    append handle): safe on a run that another process is still writing."""
+    append handle): safe on a run that another process is still writing. ``left_out``: gets
+    the bytes of a torn last record left out (0 if none), for a reader to say so."""
     path = Path(run) / "history.bin"
     if not path.exists():
         return
     data = path.read_bytes()
     hint = f" in {run}: {salvage_hint(Path(run))}"
-    spans, _ = _scan(data, read_synced(run), hint)
+    spans, good_end = _scan(data, read_synced(run), hint)
+    if left_out is not None:
+        left_out.append(len(data) - good_end)
     yield from _decode(data, spans, hint)

@@ -61,7 +61,7 @@ from robot.canopen.network import (
     safe_decode,
 )
 from robot.canopen.units import JointScaling
-from robot.errors import SafetyStop
+from robot.errors import BusError, SafetyStop
 from robot.spec import ArmSpec, ergo_jr_spec
 from robot.torque_guardian import EmergencyPayload, serial_path
 from robot.watchdog import Watchdog
@@ -71,6 +71,9 @@ log = logging.getLogger(__name__)
 EDS_PATH = Path(__file__).resolve().parent / "ergo_drive.eds"
 CSP = 8  # modes of operation 0x6060: cyclic synchronous position (CiA 402-2)
 DEVICE_PROFILE_402 = 402  # low word of 0x1000 for a drive (CiA 402-2)
+# A heartbeat lost to a garbled SLCAN line while the node's TPDOs keep coming is excused for up
+# to this many heartbeat limits (guess: a burst of noise of a few hundred ms; longer is a stop).
+GARBLED_HEARTBEAT_GRACE = 3.0
 
 
 @dataclass(frozen=True)
@@ -166,6 +169,9 @@ class CanArm(Arm):
         self._tripping = threading.Event()
         self._closing = threading.Event()
         self._monitor: threading.Thread | None = None
+        #: how the last torque off went when some drive could not confirm it (None: every
+        #: drive that can answer confirmed it): "not confirmed by ...: sent to ..."
+        self.torque_off_report: str | None = None
 
     # ---- connect ---------------------------------------------------------------------------
     def _connect(self) -> None:
@@ -280,11 +286,11 @@ class CanArm(Arm):
                     return f"safety stop: {net.who(i)}: {emcy.describe(*active)}; torque off"
             for i in range(self.spec.n):
                 silent = now - net.heartbeat_at[i]
-                if silent > limit:
+                if silent > limit and not self._heartbeat_eaten_by_the_line(i, now, limit):
                     return (
                         f"safety stop: {net.who(i)} lost: no heartbeat for {silent:.2f} s "
                         f"(heartbeat time {self._heartbeat_s:.3f} s x "
-                        f"{self.config.heartbeat_factor}); torque off"
+                        f"{self.config.heartbeat_factor}){net.garbled_note()}; torque off"
                     )
                 if net.nmt_state[i] != HEARTBEAT_OPERATIONAL:
                     return (
@@ -301,9 +307,27 @@ class CanArm(Arm):
                 if waited > self.config.max_position_age_s:
                     return (
                         f"safety stop: {net.who(i)} answered no SYNC for {waited:.2f} s "
-                        f"({net.missed[i]} cycles); torque off"
+                        f"({net.missed[i]} cycles){net.garbled_note()}; torque off"
                     )
         return None
+
+    def _heartbeat_eaten_by_the_line(self, i: int, now: float, limit: float) -> bool:
+        """Whether node ``i``'s overdue heartbeat was most likely lost on the serial line
+        between the SLCAN adapter and the host rather than by the node: garbled lines were
+        dropped since its last heartbeat, and its TPDOs, which only a live node in NMT
+        OPERATIONAL sends, kept coming (the last within ``limit``). Excused for at most
+        ``GARBLED_HEARTBEAT_GRACE`` times ``limit``: past that the node counts as lost
+        whatever the line did. (On the CAN wire itself a frame is not lost: the controllers
+        retransmit it; an SLCAN line has no checksum and no retransmission.) Call under
+        ``net.cond``."""
+        net = self.net
+        silent = now - net.heartbeat_at[i]
+        return bool(
+            silent <= GARBLED_HEARTBEAT_GRACE * limit
+            and net.garbled_at > net.heartbeat_at[i]
+            and net.rx_seq[i] >= 0
+            and now - net.rx_time[i] <= limit
+        )
 
     def _trip(self, reason: str) -> None:
         """Stop: torque off on every node, then record the reason. A thread that calls
@@ -316,6 +340,8 @@ class CanArm(Arm):
         try:
             log.error("%s", reason)
             self._emergency_torque_off()
+            if self.torque_off_report is not None and reason.endswith("; torque off"):
+                reason += f" {self.torque_off_report}"
         finally:
             self._stop_reason = reason
             self._tripping.clear()
@@ -352,8 +378,19 @@ class CanArm(Arm):
         return True
 
     def _backend_counts(self) -> dict[str, float]:
-        """Cycles, late cycles (a TPDO missed ``pdo_timeout_s``) and TPDOs missing in them."""
-        return {f"can_{k}": v for k, v in self.net.stats.items()}
+        """Cycles, late cycles (a TPDO missed ``pdo_timeout_s``), TPDOs missing in them, and
+        garbled lines dropped from an SLCAN adapter."""
+        counts = {f"can_{k}": v for k, v in self.net.stats.items()}
+        counts["can_garbled_lines"] = self.net.garbled_lines
+        return counts
+
+    def _torque_off_words(self) -> str:
+        if self.torque_off_report is None:
+            return "torque off confirmed by every drive that answers"
+        return (
+            f"torque off {self.torque_off_report}; a drive cut off from the host keeps its "
+            f"last target unless its own heartbeat consumer stops it (docs/canopen.md)"
+        )
 
     def _lost(self) -> set[int]:
         """Nodes that cannot confirm anything (``DriveNetwork.lost``)."""
@@ -396,17 +433,59 @@ class CanArm(Arm):
     def _set_torque(self, enabled: bool) -> None:
         if enabled:
             self._check()
-            self._drive_to(State.OPERATION_ENABLED)
+            try:
+                self._drive_to(State.OPERATION_ENABLED)
+            except CyclePreemptedError:
+                self._check()  # a safety stop preempted us: say so (SafetyStop)
+                raise
         else:
-            self._drive_to(State.SWITCHED_ON)
+            self._torque_off()
 
-    def _drive_to(self, target: State) -> None:
+    def _torque_off(self) -> None:
+        """Disable operation on every node, confirmed by each node that can answer. Nodes that
+        cannot (lost, or the link failed under the exchange) get the torque-off frames once
+        more without confirmation (``DriveNetwork.blind_torque_off``), and
+        ``torque_off_report`` says so; a failed exchange still raises (``CanNodeError``)."""
+        net = self.net
+        if net.network is None:  # closed under the arm (a failed reconnection): blind only
+            said = self.torque_off_report is not None  # the stop said so already
+            self.torque_off_report = f"not confirmed: {net.blind_torque_off()}"
+            log.log(
+                logging.DEBUG if said else logging.WARNING, "torque off %s", self.torque_off_report
+            )
+            return
+        self.torque_off_report = None
+        for attempt in range(2):
+            try:
+                with net.guard.hold():
+                    silent = self._drive_to(State.SWITCHED_ON)
+                break
+            except CyclePreemptedError:
+                # another thread is cutting torque (a safety stop, a signal): once it is done,
+                # confirm it here (what a disconnect during a trip needs)
+                if attempt or not net.guard.wait_unpreempted(self.config.state_timeout_s):
+                    raise
+            except BusError as exc:
+                with net.guard.hold():
+                    sent = net.blind_torque_off()
+                self.torque_off_report = f"not confirmed ({exc}): {sent}"
+                raise CanNodeError(f"torque off {self.torque_off_report}") from exc
+        with net.guard.hold():
+            if silent:
+                names = ", ".join(net.who(i) for i in silent)
+                self.torque_off_report = (
+                    f"not confirmed by {names} (silent): {net.blind_torque_off()}"
+                )
+                log.warning("torque off %s", self.torque_off_report)
+
+    def _drive_to(self, target: State) -> list[int]:
         """Walk every node to ``target`` (OPERATION_ENABLED or SWITCHED_ON) through the
         controlword in RPDO1, one transition per cycle, holding the joints where they are.
 
         Torque off tells every node at once (lost ones too) in the first cycle, then waits
         for the confirmation of the nodes that can still give one; nodes below SWITCHED_ON or
-        in FAULT already have their torque off and are left there.
+        in FAULT already have their torque off and are left there. Returns the lost nodes
+        last heard in OPERATION ENABLED (torque off not confirmed), empty for torque on.
         """
         net = self.net
         deadline = time.monotonic() + self.config.state_timeout_s
@@ -419,13 +498,12 @@ class CanArm(Arm):
                 while True:
                     net.cycle(send_rpdo=True, on_sent=self._torque_off_sent)
                     lost = self._lost()
-                    todo = [
-                        i
-                        for i, st in enumerate(net.states())
-                        if st is State.OPERATION_ENABLED and i not in lost
+                    enabled = [
+                        i for i, st in enumerate(net.states()) if st is State.OPERATION_ENABLED
                     ]
+                    todo = [i for i in enabled if i not in lost]
                     if not todo:
-                        return
+                        return [i for i in enabled if i in lost]
                     if time.monotonic() > deadline:
                         names = ", ".join(net.who(i) for i in todo)
                         raise CanNodeError(f"torque off not confirmed by {names}")
@@ -445,7 +523,7 @@ class CanArm(Arm):
                     if cw is not None:
                         net.cw[i] = cw
                 if not todo:
-                    return
+                    return []
                 if time.monotonic() > deadline:
                     names = ", ".join(
                         f"{net.who(i)} in {states[i].value if states[i] else 'an unknown state'}"
@@ -463,6 +541,12 @@ class CanArm(Arm):
             self._torque = False
             return
         if self.net.network is None:
+            # the network closed under a connected arm (a reconnection that failed): the drives
+            # may still be enabled; tell them without a network
+            if self._connected:
+                with guard.preempt():
+                    self.torque_off_report = f"not confirmed: {self.net.blind_torque_off()}"
+                log.warning("torque off %s", self.torque_off_report)
             self._torque = False
             return
         # From another thread (the signal watcher, the monitor): the cycle in progress gives

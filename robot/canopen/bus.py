@@ -69,6 +69,16 @@ SLCAN_OPENING_COMMANDS = 4
 # bridge that never answers, not an expectation (it answers in microseconds when idle; guess).
 SLCAN_ANSWER_WAIT_S = 2.0
 
+# Longest SLCAN line an adapter sends, bytes: an extended CAN FD frame (``D``/``B``, 8 id digits,
+# a DLC digit, 64 data bytes in hex) and its CR (Lawicel protocol, CANable 2.0 FD extension).
+# A longer run of bytes without a CR or BEL is garbage: dropped.
+MAX_SLCAN_LINE = 1 + 8 + 1 + 128 + 1
+
+# How long the SLCAN reader waits after an error of the port itself before it reads again, s
+# (a bound on the notifier thread's spinning on a dead port; the arm notices the loss on its
+# next send, within a control period).
+PORT_ERROR_PAUSE_S = 0.1
+
 # What to try when an interface fails to open (python-can and Linux SocketCAN docs).
 HINTS = {
     "socketcan": " (is the adapter plugged in and up? sudo ip link set can0 up type can bitrate"
@@ -164,7 +174,12 @@ def open_bus(spec: CanBusSpec | str, bitrate: int | None = DEFAULT_BITRATE) -> A
     import can
 
     try:
-        bus = can.Bus(**spec.bus_kwargs())
+        if spec.interface == "slcan":
+            kwargs = spec.bus_kwargs()
+            del kwargs["interface"]
+            bus = tolerant_slcan_bus()(**kwargs)
+        else:
+            bus = can.Bus(**spec.bus_kwargs())
     except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as exc:
         detail = " ".join(str(exc).split()) or type(exc).__name__
         hint = HINTS.get(spec.interface, "")
@@ -200,3 +215,69 @@ def _await_opening_answers(bus: Any) -> None:
                 line = b""
             else:
                 line += bytes([byte])
+
+
+_TOLERANT_SLCAN: Any = None
+
+
+def tolerant_slcan_bus() -> Any:
+    """python-can's SLCAN bus class, made to drop a garbled line instead of dying.
+
+    python-can (4.6) decodes each line the adapter sends as it comes: a byte that is not ASCII
+    raises ``UnicodeDecodeError`` (wrapped in ``CanOperationError``, the garbled bytes left in
+    its buffer, so every later line fails too), a bad hex digit or a short line a
+    ``ValueError``/``IndexError``. In the CANopen network's notifier thread any of them ends
+    the thread (a traceback on stderr) and every later send re-raises it: noise on the serial
+    line for a few milliseconds cut the host off from its drives for good. This class drops
+    such a line, as a CAN controller drops a frame that fails its CRC, and counts it
+    (``garbled_lines``; ``garbled_at``: when the last one came, ``time.monotonic`` s): the
+    frames lost with it are late or missing TPDOs, heartbeats and SDO answers, which the
+    arm's usual bounds deal with. An error of the port itself (EIO: unplugged) is kept in
+    ``port_error`` and the reader waits ``PORT_ERROR_PAUSE_S`` before reading again, instead
+    of ending the notifier thread with a traceback: the next send on the dead port fails and
+    the arm takes that for a lost link (and reconnects).
+
+    SLCAN has no checksum: garbage that happens to spell a valid line (``t``, three hex
+    digits, a DLC digit, that many hex bytes, CR) is taken for a frame. Random bytes rarely do
+    (``t`` then 4+ constrained ASCII characters: below 1e-8 a byte).
+    """
+    global _TOLERANT_SLCAN
+    if _TOLERANT_SLCAN is not None:
+        return _TOLERANT_SLCAN
+    import can
+    from can.interfaces.slcan import slcanBus
+
+    class TolerantSlcanBus(slcanBus):
+        garbled_lines = 0
+        garbled_at = 0.0
+        port_error: BaseException | None = None
+
+        def _garbled(self) -> tuple[None, bool]:
+            self._buffer.clear()
+            self.garbled_lines += 1
+            self.garbled_at = time.monotonic()
+            return None, False
+
+        def _recv_internal(self, timeout: float | None) -> tuple[Any, bool]:
+            if len(self._buffer) > MAX_SLCAN_LINE:
+                return self._garbled()
+            try:
+                msg, filtered = super()._recv_internal(timeout)
+            except can.CanOperationError as exc:
+                if isinstance(exc.__cause__, UnicodeDecodeError):
+                    return self._garbled()
+                # the port itself failed (unplugged: EIO): say so to whoever looks, and let the
+                # reader thread wait rather than die with a traceback; the next send fails on
+                # the same port and the arm takes it for a lost link
+                self.port_error = exc.__cause__ or exc
+                time.sleep(min(timeout if timeout is not None else PORT_ERROR_PAUSE_S,
+                               PORT_ERROR_PAUSE_S))  # fmt: skip
+                return None, False
+            except (ValueError, IndexError, KeyError):
+                return self._garbled()
+            if msg is not None and not msg.is_remote_frame and len(msg.data) != msg.dlc:
+                return self._garbled()  # fewer hex bytes than its DLC says
+            return msg, filtered
+
+    _TOLERANT_SLCAN = TolerantSlcanBus
+    return TolerantSlcanBus

@@ -18,14 +18,20 @@ heartbeat), never hand-written SDO/PDO frames. ``DriveNetwork`` owns:
   (``guard``, ``robot.bus_guard.BusGuard``): a torque-off from another thread preempts a cycle
   in progress, which gives up at once with ``CyclePreemptedError``.
 
-An adapter that fails under the network (unplugged, bus off, a serial error) raises
-``CanLinkLost``, a ``robot.errors.LinkLost``. Positions are drive increments here; the arm
-converts them (``robot.canopen.units.JointScaling``).
+An adapter that fails under the network (unplugged, bus off, a serial error, the notifier
+thread ended by one) raises ``CanLinkLost``, a ``robot.errors.LinkLost``, from every exchange
+(SDO, NMT, PDO, the cycle), never python-can's or canopen's own exceptions. Garbled lines from
+an SLCAN adapter are dropped and counted (``robot.canopen.bus.tolerant_slcan_bus``).
+``blind_torque_off`` sends the torque-off frames without listening (over a fresh handle on the
+adapter): the last resort when the network cannot be used to confirm anything. Positions
+are drive increments here; the arm converts them (``robot.canopen.units.JointScaling``).
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import os
 import struct
 import threading
 import time
@@ -37,7 +43,7 @@ import numpy as np
 
 from robot.bus_guard import BusGuard
 from robot.canopen import cia402, emcy
-from robot.canopen.bus import CanBusError, CanBusSpec, open_bus
+from robot.canopen.bus import SLCAN_BITRATES, CanBusError, CanBusSpec, open_bus
 from robot.canopen.cia402 import State
 from robot.errors import BusError, LinkLost
 from robot.torque_guardian import EmergencyPayload
@@ -58,6 +64,12 @@ NOTIFIER_CYCLE_S = 0.1
 # A node that answered no TPDO for this many cycles in a row is lost (guess: one lost frame
 # is normal, three in a row are not).
 LOST_AFTER_CYCLES = 3
+# SDO expedited download of 2 bytes (CiA 301: command specifier 1, n = 2 unused bytes,
+# expedited, size indicated), to 0x600 + node id: how a controlword is written without PDOs.
+SDO_RX_BASE, SDO_DOWNLOAD_2_BYTES = 0x600, 0x2B
+# Garbled adapter lines this recent are named in the messages of lost nodes and unanswered
+# SDOs, s (guess: a few heartbeat times).
+GARBLED_RECENT_S = 2.0
 
 
 class CanNodeError(BusError):
@@ -84,6 +96,30 @@ def safe_decode(statusword: int) -> State | None:
 def slcan_line(can_id: int, data: bytes) -> bytes:
     """A standard-id data frame as an SLCAN (Lawicel) transmit command."""
     return f"t{can_id:03X}{len(data)}{data.hex().upper()}\r".encode()
+
+
+def sdo_controlword(node_id: int, controlword: int) -> tuple[int, bytes]:
+    """The frame (COB-ID, data) of an SDO write of ``controlword`` to 0x6040:0 of a node."""
+    return SDO_RX_BASE + node_id, struct.pack(
+        "<BHBH2x", SDO_DOWNLOAD_2_BYTES, 0x6040, 0, controlword
+    )
+
+
+@contextlib.contextmanager
+def link_errors(bus_spec: CanBusSpec, what: str) -> Any:
+    """Turn python-can's and canopen's failures of the adapter (``can.CanError``, an
+    ``OSError``, a send on a closed network, the exception that ended the notifier thread, which
+    canopen re-raises from every later send) into one-line ``CanLinkLost``."""
+    import can
+
+    try:
+        yield
+    except (can.CanError, OSError) as exc:
+        detail = " ".join(str(exc).split()) or type(exc).__name__
+        cause = exc.__cause__
+        if cause is not None and str(cause):
+            detail += f" ({' '.join(str(cause).split())})"
+        raise CanLinkLost(f"CAN bus {bus_spec} failed during {what}: {detail}") from exc
 
 
 class DriveNetwork:
@@ -144,6 +180,7 @@ class DriveNetwork:
         self.sync_since_read = False
         # cycles run, cycles where a node's TPDO missed pdo_timeout_s, TPDOs missing in them
         self.stats = {"cycles": 0, "late_cycles": 0, "missing_tpdos": 0}
+        self._garbled_before = 0  # garbled lines of the buses closed before the current one
         self.started = False
         self.guard = BusGuard(
             lambda: CyclePreemptedError(
@@ -194,25 +231,60 @@ class DriveNetwork:
         """Close the network and its bus; never raises (logged)."""
         self.started = False
         if self.network is not None:
+            self._garbled_before += self._garbled_now()
             try:
+                if self.network.notifier is not None:
+                    self.network.notifier.exception = None  # reported already, by a send
                 self.network.disconnect()
             except Exception as exc:
                 log.error("closing CAN bus %s: %s", self.bus_spec, exc)
             self.network = None
+
+    def _garbled_now(self) -> int:
+        bus = None if self.network is None else self.network.bus
+        return int(getattr(bus, "garbled_lines", 0))
+
+    @property
+    def garbled_lines(self) -> int:
+        """Lines from the adapter dropped as garbage since this network was made."""
+        return self._garbled_before + self._garbled_now()
+
+    @property
+    def garbled_at(self) -> float:
+        """When the adapter last sent a garbled line (``time.monotonic`` s; 0: never)."""
+        bus = None if self.network is None else self.network.bus
+        return float(getattr(bus, "garbled_at", 0.0))
+
+    def garbled_note(self) -> str:
+        """``"; N garbled lines from the adapter ..."`` when some came lately, else ``""``:
+        what a message about silent nodes adds when the line itself is the likely cause."""
+        at = self.garbled_at
+        if not at or time.monotonic() - at > GARBLED_RECENT_S:
+            return ""
+        return (
+            f"; {self.garbled_lines} garbled line(s) from the adapter dropped: noise on the "
+            f"serial line, a wrong baud rate, or not an SLCAN adapter?"
+        )
+
+    def _require_open(self, what: str) -> None:
+        if self.network is None or not self.nodes:
+            raise CanLinkLost(f"CAN bus {self.bus_spec} is not open ({what})")
 
     # ---- SDO -------------------------------------------------------------------------------
     def sdo_read(self, i: int, index: int, sub: int = 0) -> int:
         """Object ``index``:``sub`` of node ``i``, read by SDO."""
         from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
+        self._require_open(f"SDO read of 0x{index:04X}:{sub}")
         node = self.nodes[i]
         try:
-            var = node.sdo[index] if sub == 0 else node.sdo[index][sub]
-            return int(var.raw)
+            with link_errors(self.bus_spec, f"SDO read of 0x{index:04X}:{sub}"):
+                var = node.sdo[index] if sub == 0 else node.sdo[index][sub]
+                return int(var.raw)
         except SdoCommunicationError as exc:
             raise CanNodeError(
                 f"{self.who(i)} does not answer SDO 0x{index:04X}:{sub} on {self.bus_spec} "
-                f"({exc}): powered? right node id and bitrate?"
+                f"({exc}): powered? right node id and bitrate?{self.garbled_note()}"
             ) from exc
         except (SdoAbortedError, KeyError) as exc:
             raise CanNodeError(f"{self.who(i)} refused to read 0x{index:04X}:{sub}: {exc}") from exc
@@ -221,13 +293,16 @@ class DriveNetwork:
         """Write ``value`` to object ``index``:``sub`` of node ``i`` by SDO."""
         from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
+        self._require_open(f"SDO write of 0x{index:04X}:{sub}")
         node = self.nodes[i]
         try:
-            var = node.sdo[index] if sub == 0 else node.sdo[index][sub]
-            var.raw = int(value)
+            with link_errors(self.bus_spec, f"SDO write of 0x{index:04X}:{sub}"):
+                var = node.sdo[index] if sub == 0 else node.sdo[index][sub]
+                var.raw = int(value)
         except SdoCommunicationError as exc:
             raise CanNodeError(
-                f"{self.who(i)} does not answer SDO 0x{index:04X}:{sub} on {self.bus_spec} ({exc})"
+                f"{self.who(i)} does not answer SDO 0x{index:04X}:{sub} on {self.bus_spec} "
+                f"({exc}){self.garbled_note()}"
             ) from exc
         except (SdoAbortedError, KeyError) as exc:
             raise CanNodeError(
@@ -236,36 +311,43 @@ class DriveNetwork:
 
     def pre_operational(self) -> None:
         """NMT pre-operational on every node (PDOs off, for configuration)."""
-        self.network.nmt.send_command(NMT_PRE_OPERATIONAL)
+        self._require_open("NMT pre-operational")
+        with link_errors(self.bus_spec, "NMT pre-operational"):
+            self.network.nmt.send_command(NMT_PRE_OPERATIONAL)
 
     def map_pdos(self, i: int) -> None:
         """RPDO1 = controlword + target position, TPDO1 = statusword + position actual, both
         synchronous; other PDOs of the EDS disabled."""
         from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
-        node, nid = self.nodes[i], self.node_ids[i]
+        self._require_open("PDO mapping")
         try:
-            for maps, base, entries in (
-                (node.rpdo, RPDO1_BASE, (0x6040, 0x607A)),
-                (node.tpdo, TPDO1_BASE, (0x6041, 0x6064)),
-            ):
-                for number, pdo in maps.map.items():
-                    if number == 1:
-                        continue
-                    cob = int(pdo.com_record[1].raw)
-                    if not cob & PDO_NOT_VALID:
-                        pdo.com_record[1].raw = cob | PDO_NOT_VALID
-                pdo = maps.map[1]
-                pdo.clear()
-                for index in entries:
-                    pdo.add_variable(index)
-                pdo.cob_id = base + nid
-                pdo.trans_type = TRANS_SYNC
-                pdo.enabled = True
-                pdo.save()
-            node.tpdo.map[1].add_callback(lambda pdo, i=i: self._on_tpdo(i, pdo))
+            with link_errors(self.bus_spec, f"PDO mapping of {self.who(i)}"):
+                self._map_pdos(i)
         except (SdoCommunicationError, SdoAbortedError) as exc:
             raise CanNodeError(f"{self.who(i)}: PDO mapping failed: {exc}") from exc
+
+    def _map_pdos(self, i: int) -> None:
+        node, nid = self.nodes[i], self.node_ids[i]
+        for maps, base, entries in (
+            (node.rpdo, RPDO1_BASE, (0x6040, 0x607A)),
+            (node.tpdo, TPDO1_BASE, (0x6041, 0x6064)),
+        ):
+            for number, pdo in maps.map.items():
+                if number == 1:
+                    continue
+                cob = int(pdo.com_record[1].raw)
+                if not cob & PDO_NOT_VALID:
+                    pdo.com_record[1].raw = cob | PDO_NOT_VALID
+            pdo = maps.map[1]
+            pdo.clear()
+            for index in entries:
+                pdo.add_variable(index)
+            pdo.cob_id = base + nid
+            pdo.trans_type = TRANS_SYNC
+            pdo.enabled = True
+            pdo.save()
+        node.tpdo.map[1].add_callback(lambda pdo, i=i: self._on_tpdo(i, pdo))
 
     def start(self, heartbeat_s: float, state_timeout_s: float) -> None:
         """NMT start all, then wait for a heartbeat from every node saying OPERATIONAL (at
@@ -274,7 +356,9 @@ class DriveNetwork:
         with self.cond:
             self.heartbeat_at[:] = now
             self.nmt_state[:] = 0
-        self.network.nmt.send_command(NMT_START_ALL)
+        self._require_open("NMT start")
+        with link_errors(self.bus_spec, "NMT start"):
+            self.network.nmt.send_command(NMT_START_ALL)
         deadline = now + max(3 * heartbeat_s, state_timeout_s)
         with self.cond:
             ok = self.cond.wait_for(
@@ -285,7 +369,7 @@ class DriveNetwork:
                 silent = np.flatnonzero(self.nmt_state != HEARTBEAT_OPERATIONAL)
                 raise CanNodeError(
                     f"no OPERATIONAL heartbeat from {', '.join(self.who(i) for i in silent)} "
-                    "after NMT start"
+                    f"after NMT start{self.garbled_note()}"
                 )
         self.started = True
 
@@ -336,6 +420,79 @@ class DriveNetwork:
         ]
         return b"".join([*lines, slcan_line(SYNC_COB_ID, b"")])
 
+    def torque_off_frames(self) -> list[tuple[int, bytes]]:
+        """Every frame of a torque off that needs no answer, (COB-ID, data): RPDO1 "disable
+        operation" with the current target to each node and a SYNC (drives in NMT
+        OPERATIONAL apply it at the SYNC), then an SDO write of "disable operation" to each
+        node's controlword (applied at once in PRE-OPERATIONAL too: a drive that was reset or
+        never configured; its answer is not awaited). A drive in OPERATION ENABLED goes to
+        SWITCHED ON (torque off); in the lower states "disable operation" is no transition
+        or "switch on" from READY TO SWITCH ON, which leaves torque off (CiA 402-2)."""
+        frames = [
+            (RPDO1_BASE + nid, struct.pack("<Hi", cia402.CW_DISABLE_OPERATION, int(t)))
+            for nid, t in zip(self.node_ids, self.target, strict=True)
+        ]
+        frames.append((SYNC_COB_ID, b""))
+        frames += [sdo_controlword(nid, cia402.CW_DISABLE_OPERATION) for nid in self.node_ids]
+        return frames
+
+    def blind_torque_off(self) -> str:
+        """Send ``torque_off_frames`` listening to nothing: the last resort when the drives
+        cannot confirm a torque off (lost nodes, a garbled line, the notifier thread ended, the
+        network closed after a failed reconnection). On the open bus if it still sends; else on
+        a fresh handle of the adapter: on an SLCAN serial port the lines are written straight
+        to the device after the commands that (re)open the CAN channel (``C``, ``Sn``, ``O``:
+        a re-plugged adapter starts closed), other interfaces get a new python-can bus. Call it
+        holding ``guard``. Never raises.
+
+        Returns:
+            what was done, for a one-line message: "sent to node(s) 1, ..., 6 without
+            confirmation (...)" or "could not be sent (reason)".
+        """
+        import can
+
+        frames = self.torque_off_frames()
+        ids = ", ".join(str(n) for n in self.node_ids)
+        messages = [can.Message(arbitration_id=c, data=d, is_extended_id=False) for c, d in frames]
+        network = self.network
+        if network is not None and network.bus is not None:
+            try:  # the open bus, whatever its notifier thread's state
+                with network.send_lock:
+                    for msg in messages:
+                        network.bus.send(msg)
+                return (
+                    f"sent to node(s) {ids} without confirmation (disable operation by RPDO "
+                    f"and SDO)"
+                )
+            except Exception as exc:
+                log.warning("blind torque off on the open bus %s: %s", self.bus_spec, exc)
+        try:
+            path = self.bus_spec.channel.split("@", 1)[0]
+            if self.bus_spec.interface == "slcan" and path.startswith("/"):
+                rate = self.bus_spec.bitrate or 1_000_000
+                opening = f"C\rS{SLCAN_BITRATES.index(rate)}\rO\r".encode()
+                data = opening + b"".join(slcan_line(cid, d) for cid, d in frames)
+                fd = os.open(path, os.O_WRONLY | os.O_NOCTTY | os.O_NONBLOCK | os.O_CLOEXEC)
+                try:
+                    os.write(fd, data)
+                finally:
+                    os.close(fd)
+            else:
+                bus = open_bus(self.bus_spec)
+                try:
+                    for msg in messages:
+                        bus.send(msg)
+                finally:
+                    bus.shutdown()
+        except Exception as exc:
+            detail = " ".join(str(exc).split()) or type(exc).__name__
+            log.error("blind torque off on %s failed: %s", self.bus_spec, detail)
+            return f"could not be sent ({detail})"
+        return (
+            f"sent to node(s) {ids} on a reopened adapter without confirmation (disable "
+            f"operation by RPDO and SDO)"
+        )
+
     def cycle(self, send_rpdo: bool = True, on_sent: Callable[[], None] | None = None) -> None:
         """RPDO1 to every node (``cw`` + ``target``), then a SYNC, then wait for the TPDOs.
         Call it inside ``guard.hold()``. ``on_sent`` is called once the RPDOs and the SYNC
@@ -345,16 +502,15 @@ class DriveNetwork:
             CanLinkLost: the adapter failed (unplugged, bus off, serial error).
             CyclePreemptedError: another thread is cutting torque.
         """
-        import can
-
         self.guard.check()
+        self._require_open("bus cycle")
         if self.emergency is not None:
             self.emergency.set(self.torque_off_lines())
         with self.cond:
             self.seq += 1
             seq = self.seq
         sent_at = time.monotonic()
-        try:
+        with link_errors(self.bus_spec, "a bus cycle"):
             if send_rpdo:
                 for i, node in enumerate(self.nodes):
                     pdo = node.rpdo.map[1]
@@ -364,9 +520,6 @@ class DriveNetwork:
             self.network.sync.transmit()
             if on_sent is not None:
                 on_sent()
-        except (can.CanError, OSError) as exc:
-            detail = " ".join(str(exc).split()) or type(exc).__name__
-            raise CanLinkLost(f"CAN bus {self.bus_spec} failed: {detail}") from exc
         self.stats["cycles"] += 1
         with self.cond:
             self.cond.wait_for(

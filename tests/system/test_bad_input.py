@@ -349,3 +349,32 @@ def test_out_under_a_regular_file_gets_one_line(tmp_path, capsys, monkeypatch):
     code, err = _run_cli(["explore", "--episodes", "1", "--out", "afile/run"], capsys)
     assert code == 2 and "afile is a file" in err and len(err.splitlines()) == 1, err
     assert (tmp_path / "afile").read_text() == "mine"
+
+
+@pytest.mark.parametrize(
+    ("change", "field"),
+    [
+        ({"homography": [[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [0.0, 0.0, 1.0]]}, "homography"),
+        ({"homography": [[1e300, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]}, "homography"),
+        ({"dist_coeffs": [1e300, 0.0, 0.0, 0.0, 0.0]}, "dist_coeffs"),
+        ({"camera_matrix": [[1e300, 0.0, 320.0], [0.0, 600.0, 240.0], [0.0, 0.0, 1.0]]},
+         "camera_matrix"),
+    ],
+)  # fmt: skip
+def test_an_arena_file_out_of_all_scale_is_refused(tmp_path, change, field):
+    """Finite but absurd numbers (issue 29): a singular homography maps no plane, 1e300
+    overflows every pixel mapped through it; both were accepted."""
+    from calibration.store import CalibrationError, validate
+
+    arena = {
+        "camera_matrix": [[600.0, 0.0, 320.0], [0.0, 600.0, 240.0], [0.0, 0.0, 1.0]],
+        "dist_coeffs": [0.1, -0.05, 0.0, 0.0, 0.0],
+        "image_size": [640, 480],
+        "homography": [[1e-3, 0.0, -0.3], [0.0, 1e-3, -0.2], [0.0, 0.0, 1.0]],
+        "centre": [0.0, 0.0],
+        "radius": 0.2,
+    }
+    validate("arena", arena)  # the sound file passes
+    with pytest.raises(CalibrationError) as info:
+        validate("arena", {**arena, **change})
+    assert field in str(info.value) and "\n" not in str(info.value)

@@ -154,3 +154,28 @@ def test_workers_is_another_name_for_jobs(tmp_path):
     args = parser.parse_args(["experiment", "--strategies", "rpe", "--seeds", "8", "--episodes",
                               "5", "--workers", "2", "--out", str(tmp_path)])  # fmt: skip
     assert args.jobs == 2 and cli_experiment.parse_seeds(args.seeds) == list(range(8))
+
+
+def test_two_campaign_processes_on_one_campaign_say_what_happened(tmp_path):
+    """Two ``ergo experiment`` on one campaign folder: a trial whose run the other process is
+    writing is waited for, then found complete (or resumed, had the other died); both end
+    with every run complete and exit 0. Before: both exited 2 with "trial(s) failed" although
+    every run had completed."""
+    import subprocess
+    import sys
+
+    from explore.runs.store import read_history
+
+    out = tmp_path / "c"
+    cmd = [sys.executable, "-m", "explore.cli", "experiment", "--strategies", "rpe",
+           "--seeds", "0,1", "--episodes", "25", "--out", str(out), "--no-progress",
+           "--no-report"]  # fmt: skip
+    procs = [subprocess.Popen(cmd, stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+             for _ in range(2)]  # fmt: skip
+    outs = [p.communicate(timeout=300) for p in procs]
+    for p, (_, stderr) in zip(procs, outs, strict=True):
+        assert p.returncode == 0, stderr
+        assert "failed" not in stderr and "Traceback" not in stderr, stderr
+    for seed in (0, 1):
+        history = read_history(out / "rpe" / f"seed-{seed}")  # checks: no duplicate
+        assert [r.episode for r in history.records] == list(range(25))

@@ -280,12 +280,40 @@ def test_runs_with_and_without_frames_need_no_video(runs, tmp_path, capsys):
 
 
 def test_an_export_failing_midway_leaves_nothing(runs, tmp_path):
-    run = tmp_path / "lost-frames"
+    run = tmp_path / "other-side"
     shutil.copytree(runs["random"], run)
-    (run / "frames/episode-000004.npz").write_bytes(b"not an npz")
-    with pytest.raises(Exception, match="episode-000004"):
+    small = np.zeros((40, SIDE // 2, SIDE // 2, 3), dtype=np.uint8)  # frames of another size
+    np.savez_compressed(run / "frames/episode-000004.npz", frames=small)
+    with pytest.raises(ExportError, match="px"):
         export_lerobot([run], tmp_path / "o")
     assert not (tmp_path / "o").exists() and not any(tmp_path.glob(".o.partial*"))
+
+
+@pytest.mark.parametrize("damage", ["missing", "truncated", "garbage", "empty"])
+def test_episodes_without_readable_frames_are_left_out_and_named(runs, tmp_path, damage, capsys):
+    """One frames file missing or damaged: the other episodes export with their video and the
+    line names the episode left out (before: the whole video dropped without a word, or a
+    BadZipFile traceback). ``ergo runs check`` names it too."""
+    run = tmp_path / "lost-frames"
+    shutil.copytree(runs["random"], run)
+    path = run / "frames/episode-000004.npz"
+    if damage == "missing":
+        path.unlink()
+    else:
+        data = path.read_bytes()
+        path.write_bytes({"truncated": data[: len(data) // 2], "garbage": b"not an npz",
+                          "empty": b""}[damage])  # fmt: skip
+    out = tmp_path / "o"
+    assert main(["export", "lerobot", str(run), "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "episode 4 left out" in err and "episode-000004.npz" in err and err.count("\n") == 1
+    info = _info(out)
+    assert info["total_episodes"] == EPISODES - 1 and VIDEO_KEY in info["features"]
+    assert main(["runs", "check", str(run)]) == 0
+    said = capsys.readouterr().out
+    assert f"frames: {EPISODES - 1} of {EPISODES} episode(s)" in said
+    assert ("missing: episode(s) 4" if damage == "missing" else "unreadable") in said
+    assert "1 episode(s) lack readable camera frames" in said
 
 
 def test_an_rpe_run_is_described_in_rge_efrs_goal_space(runs, tmp_path):

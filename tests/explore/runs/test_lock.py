@@ -48,7 +48,7 @@ def test_a_second_writer_in_this_process_is_refused_and_a_clean_release_leaves_n
         message = str(info.value)
         assert "\n" not in message and f"pid {os.getpid()} on " in message
     assert holder_of(tmp_path) is None
-    assert (tmp_path / LOCK_FILE).read_bytes() == b""  # released cleanly
+    assert (tmp_path / LOCK_FILE).read_bytes().strip() == b""  # released cleanly (blanked)
     with run_lock(tmp_path) as again:
         assert again.took_over is None
 
@@ -67,7 +67,7 @@ def test_a_writer_in_another_process_is_named_and_its_lock_taken_over_once_it_is
         assert lock.took_over is not None and lock.took_over["pid"] == proc.pid
         assert f"pid {proc.pid}" in lock.describe_takeover()
         assert "ended without releasing" in lock.describe_takeover()
-    info = json.loads((tmp_path / LOCK_FILE).read_bytes() or b"{}")
+    info = json.loads((tmp_path / LOCK_FILE).read_bytes().strip() or b"{}")
     assert info == {}  # and this writer released it cleanly
 
 

@@ -29,6 +29,7 @@ import uuid
 from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
 import numpy as np
 import pytest
@@ -36,10 +37,9 @@ import pytest
 from robot.arm import Arm, RecoveryPolicy
 
 
-def _load_arms() -> ModuleType:
-    """``arms.py`` beside this file (the tests are not a package: loaded by path)."""
-    path = Path(__file__).with_name("arms.py")
-    spec = importlib.util.spec_from_file_location("ergo_contract_arms", path)
+def _load(name: str, path: Path) -> ModuleType:
+    """A helper module by path (the tests are not a package), registered as ``name``."""
+    spec = importlib.util.spec_from_file_location(name, path)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module  # the test module imports it by this name
@@ -47,7 +47,9 @@ def _load_arms() -> ModuleType:
     return module
 
 
-arms = _load_arms()
+arms = _load("ergo_contract_arms", Path(__file__).with_name("arms.py"))
+# the pty proxy that injects wire faults (tests/wire_proxy.py)
+wire_proxy = _load("ergo_wire_proxy", Path(__file__).resolve().parents[2] / "wire_proxy.py")
 
 REAL_PORT_VAR = "ERGO_TEST_PORT"
 REAL_CAN_VAR = "ERGO_TEST_CAN"
@@ -75,6 +77,11 @@ class Backend:
     no_unplug: str | None = None
     no_faults: str | None = None
     twin = None
+    #: how the wire is cut into units for the fault proxy (``wire_proxy.FRAMERS``); None: no
+    #: wire to put a proxy on (``no_faults`` says why)
+    framing: str | None = None
+    #: the emulator's port, which the fault proxy opens as its device
+    device = ""
 
     def arm(self, recovery: RecoveryPolicy | None = None) -> Arm:
         """A new, unconnected arm with the suite's step bound (``arms.contract_spec``)."""
@@ -106,6 +113,19 @@ class Backend:
         """Inject bus faults inside the block (lost replies or frames)."""
         raise NotImplementedError
         yield
+
+    @contextlib.contextmanager
+    def wire_proxy(self, seed: int = 0) -> Iterator[Any]:
+        """A ``wire_proxy.WireProxy`` between the emulator's port and the arms of
+        ``arm_through``, without faults until the test sets them."""
+        assert self.framing is not None, self.no_faults
+        with wire_proxy.WireProxy(self.device, self.framing, seed=seed) as proxy:
+            yield proxy
+
+    def arm_through(self, proxy: Any, recovery: RecoveryPolicy | None = None) -> Arm:
+        """A new, unconnected arm that talks to the emulator through ``proxy``."""
+        address = proxy.port if self.kind == "dynamixel" else f"slcan:{proxy.port}"
+        return arms.make_arm(self.kind, address, emulated=True, recovery=recovery)
 
     def reset(self) -> None:
         """Before and after each test: plugged in, no injected faults."""
@@ -200,7 +220,8 @@ class DynamixelPtyBackend(Backend):
         self.server = PtyBusServer(self.emulator, link=tmp / "ttyERGO")
         self.loop.start()
         self.server.start()
-        self.address = self.server.port
+        self.address = self.device = self.server.port
+        self.framing = "dynamixel"
 
     def torque(self, arm: Arm | None = None) -> np.ndarray:
         return np.array(list(self.emulator.torque_states().values()))
@@ -253,7 +274,9 @@ class CanSlcanBackend(Backend):
         self.bridge_bus = can.Bus(interface="virtual", channel=channel)
         self.bridge = SlcanPtyBridge(self.bridge_bus, link=tmp / "ttyCAN")
         self.bridge.start()
-        self.address = f"slcan:{self.bridge.port}"
+        self.device = self.bridge.port
+        self.address = f"slcan:{self.device}"
+        self.framing = "slcan"
 
     def torque(self, arm: Arm | None = None) -> np.ndarray:
         from robot.canopen.cia402 import State

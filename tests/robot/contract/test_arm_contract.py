@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 
 from robot.arm import ArmCounters, RecoveryPolicy
-from robot.errors import NotConnectedError, SafetyStop
+from robot.errors import NotConnectedError, RobotError, SafetyStop
 from robot.spec import ergo_jr_spec
 
 ROOT = Path(__file__).resolve().parents[3]  # the repository (tests/robot/contract/ is 3 deep)
@@ -275,3 +275,78 @@ def test_injected_bus_faults_are_counted_and_absorbed(backend) -> None:
         assert all(counts[k] > 0 for k in wanted), counts
         assert np.abs(state.positions - q0).max() < arms.HOLD_TOLERANCE_RAD
     assert not backend.torque().any()
+
+
+# Wire faults injected by a pty proxy between the arm and the emulator (tests/wire_proxy.py),
+# toward the host: what each does to the proxy. Rates are fractions of the wire's units (SLCAN
+# lines, Dynamixel packets); the garbage is random bytes at 11.5 kB/s between units and a few
+# before each unit (no unit comes through untouched).
+WIRE_FAULTS = {
+    "garbage-50ms": lambda proxy: proxy.garbage(0.05),
+    "garbage-1.5s": lambda proxy: proxy.garbage(1.5),
+    "drops": lambda proxy: setattr(proxy.to_host.faults, "drop_rate", 0.02),
+    "truncated": lambda proxy: setattr(proxy.to_host.faults, "truncate_rate", 0.02),
+    "delayed": lambda proxy: (
+        setattr(proxy.to_host.faults, "delay_rate", 0.05),
+        setattr(proxy.to_host.faults, "delay_s", 0.03),
+    ),
+}
+WIRE_FAULT_S = 1.5  # how long the arm holds its pose under the fault, s
+
+
+def _limp_within(backend, seconds: float) -> bool:
+    """Whether the servos read back limp (from the emulator itself) within ``seconds``: the
+    emulator applies what reached it in its own threads, which wait for a CPU on a loaded
+    machine (a real servo applies it within microseconds)."""
+    deadline = time.monotonic() + seconds
+    while backend.torque().any():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.01)
+    return True
+
+
+@pytest.mark.filterwarnings("error::pytest.PytestUnhandledThreadExceptionWarning")
+@pytest.mark.parametrize("fault", list(WIRE_FAULTS))
+def test_wire_faults_end_with_the_arm_limp_and_at_most_one_line(backend, fault) -> None:
+    """The arm holds its pose (torque on) through a proxy that garbles, drops, truncates or
+    delays what the servos send; it either rides the fault out or stops with one line (a
+    ``RobotError``, never another exception, never a thread's traceback). Stopped by a
+    ``SafetyStop``, the servos are limp at once, as the emulator itself says (not the arm
+    under test), while the fault goes on; in every case they are limp once the arm is left,
+    the fault still on.
+
+    What each bus must do besides: a 50 ms burst of garbage is ridden out on both (the
+    Dynamixel decoder skips garbage between packets; the CANopen host drops garbled SLCAN
+    lines and excuses a heartbeat the line ate while the drive's TPDOs kept coming); 1.5 s of
+    it stops the CANopen arm (no frame comes through: "answered no SYNC"), never a traceback
+    from python-can's reader thread (before: the thread died and the drives stayed enabled)."""
+    if backend.no_faults:
+        pytest.skip(backend.no_faults)
+    with backend.wire_proxy(seed=hash(fault) % 1000) as proxy:
+        arm = backend.arm_through(proxy)
+        stop = None
+        with arm:
+            q0 = backend.narrow(arm)
+            arm.set_torque(True)
+            WIRE_FAULTS[fault](proxy)
+            try:
+                for _ in range(round(WIRE_FAULT_S / arms.PERIOD_S)):
+                    arm.command(q0)
+                    backend.tick()
+                    arm.read()
+            except RobotError as exc:
+                stop = exc
+                assert "\n" not in str(exc), str(exc)
+                if isinstance(exc, SafetyStop):  # limp as soon as the emulator has applied it
+                    assert _limp_within(backend, arms.LIMP_S), str(exc)
+        counts = arm.fault_counts()
+        faults = {k: v for k, v in proxy.to_host.counts.__dict__.items() if v}
+    assert not backend.torque().any(), (stop, faults, counts)
+    print(f"{backend.name} {fault}: {faults}; {stop or 'rode it out'}; {counts}")
+    if fault == "garbage-50ms":
+        assert stop is None, stop
+    if backend.kind == "canopen" and fault.startswith("garbage"):
+        assert counts["can_garbled_lines"] > 0, counts
+    if backend.kind == "canopen" and fault == "garbage-1.5s":
+        assert isinstance(stop, SafetyStop), (stop, counts)

@@ -1,0 +1,185 @@
+"""Damage to ``history.bin`` that must never cost a good record (issue 29): a flipped bit in a
+record's length field is damage, not a torn tail (resume refuses, salvage keeps the rest); a
+damaged last record is moved aside, never deleted; readers say what they leave out. The
+battery at the end flips any single bit or cuts the file at any length."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from explore.cli import main
+from explore.runs.repair import iter_records, salvage, survey
+from explore.runs.store import HEADER, RunStore, RunStoreError, read_history
+
+N = 10
+
+
+def ergo(*args: str) -> int:
+    if args[0] == "explore":
+        args = (*args, "--no-progress", "--rerun", "off")
+    return main(list(args))
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("ref") / "run"
+    assert ergo("explore", "--episodes", str(N), "--seed", "3", "--out", str(out)) == 0
+    return out
+
+
+@pytest.fixture
+def run(reference, tmp_path) -> Path:
+    copy = tmp_path / "run"
+    shutil.copytree(reference, copy)
+    return copy
+
+
+def _starts(run: Path) -> list[int]:
+    return [p.start for p in survey(run).good]
+
+
+def test_a_flipped_bit_in_a_length_field_is_damage_and_no_good_record_is_cut(run, capsys):
+    """The issue's case: bit 4 of byte 6 of record 3's frame (its u32 length) makes the
+    record seem to run past the end of the file, as a torn tail would. Before, resume cut
+    records 3..9 for good and export/report quietly used 3 episodes."""
+    hist = run / "history.bin"
+    at = _starts(run)[3] + 6
+    damaged = bytearray(hist.read_bytes())
+    damaged[at] ^= 1 << 4
+    hist.write_bytes(bytes(damaged))
+
+    assert ergo("explore", "--resume", str(run)) == 2  # refused, nothing cut
+    err = capsys.readouterr().err
+    assert "record runs past the end of the file, and a good record follows" in err, err
+    assert f"ergo runs salvage {run}" in err and err.count("\n") == 1
+    assert hist.read_bytes() == bytes(damaged)
+    for reader in (
+        ("report", str(run)),
+        ("export", "lerobot", str(run), "--out", str(run.parent / "ds")),
+    ):
+        assert ergo(*reader) == 2  # readers refuse rather than quietly use episodes 0..2
+        err = capsys.readouterr().err
+        assert "corrupt at byte" in err and err.count("\n") == 1, (reader, err)
+    assert ergo("runs", "check", str(run)) == 1
+    assert "good records after it: 6 (episodes 4..9)" in capsys.readouterr().out
+    assert ergo("runs", "salvage", str(run)) == 0
+    kept = [r.episode for r in iter_records(run / "salvage" / "1" / "kept.bin")]
+    assert kept == [4, 5, 6, 7, 8, 9] and len(RunStore.read(run).records) == 3
+
+
+def test_a_damaged_last_record_is_moved_aside_not_deleted(run, capsys):
+    hist = run / "history.bin"
+    data = hist.read_bytes()
+    last = _starts(run)[-1]
+    hist.write_bytes(data[:-100])  # a crash mid-append: the last record torn
+    assert ergo("runs", "check", str(run)) == 0
+    assert "a torn tail of" in capsys.readouterr().out
+    assert ergo("explore", "--resume", str(run)) == 0
+    err = capsys.readouterr().err
+    folder = run / "salvage" / "1"
+    assert f"moved a torn last record ({len(data) - 100 - last} bytes" in err and str(folder) in err
+    assert (folder / "damaged.bin").read_bytes() == data[last:-100]  # kept, byte for byte
+    report = json.loads((folder / "salvage.json").read_text())
+    assert (
+        report["kept_in_history"] == N - 1
+        and report["damaged_bytes_moved"] == len(data) - 100 - last
+    )
+    assert len(RunStore.read(run).records) == N  # the episode run again
+
+
+def test_readers_say_what_they_leave_out(run, caplog):
+    """A torn tail left in place (a reader never repairs): ``read_history`` counts its bytes,
+    which export and report name."""
+    hist = run / "history.bin"
+    data = hist.read_bytes()
+    last = _starts(run)[-1]
+    hist.write_bytes(data[:-7])
+    history = read_history(run)
+    assert len(history.records) == N - 1
+    assert history.torn_bytes == len(data) - 7 - last
+    assert ergo("report", str(run), "--out", str(run.parent / "report")) == 0
+    assert f"left out a torn last record ({history.torn_bytes} bytes" in caplog.text
+
+
+# ---- the damage battery ------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory) -> tuple[bytes, list[tuple[int, int]], Path]:
+    """A 5-episode run built once: (history bytes, (start, end) of each record frame, run)."""
+    out = tmp_path_factory.mktemp("small") / "run"
+    assert ergo("explore", "--episodes", "5", "--seed", "1", "--out", str(out)) == 0
+    data = (out / "history.bin").read_bytes()
+    pieces = [(p.start, p.end) for p in survey(out).good]
+    return data, pieces, out
+
+
+def _damage(
+    data: bytes, pieces: list[tuple[int, int]], draw: st.DataObject
+) -> tuple[bytes, set[int]]:
+    """Damage ``data`` one way: a single bit flipped anywhere (often in a header), or the file
+    cut at any length. Returns the damaged bytes and the records left untouched."""
+    if draw.draw(st.booleans(), label="cut"):
+        cut = draw.draw(st.integers(0, len(data) - 1), label="length")
+        return data[:cut], {i for i, (_, b) in enumerate(pieces) if b <= cut}
+    in_header = draw.draw(st.booleans(), label="in a header")
+    if in_header:
+        i = draw.draw(st.integers(0, len(pieces) - 1), label="record")
+        at = pieces[i][0] + draw.draw(st.integers(0, HEADER.size - 1), label="header byte")
+    else:
+        at = draw.draw(st.integers(0, len(data) - 1), label="byte")
+    bit = draw.draw(st.integers(0, 7), label="bit")
+    out = bytearray(data)
+    out[at] ^= 1 << bit
+    return bytes(out), {i for i, (a, b) in enumerate(pieces) if not a <= at < b}
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=list(HealthCheck))
+@given(draw=st.data())
+def test_no_single_bit_flip_or_cut_loses_an_undamaged_record(small, tmp_path_factory, draw):
+    data, pieces, source = small
+    originals = [r.to_bytes() for r in RunStore.read(source).records]
+    run = tmp_path_factory.mktemp("battery") / "run"
+    shutil.copytree(source, run)
+    damaged, intact = _damage(data, pieces, draw)
+    (run / "history.bin").write_bytes(damaged)
+
+    # a reader says what it leaves out, or refuses in one line
+    try:
+        h = read_history(run)
+        assert [r.to_bytes() for r in h.records] == originals[: len(h.records)]
+        assert len(damaged) - h.torn_bytes == (pieces[len(h.records) - 1][1] if h.records else 0)
+    except RunStoreError as exc:
+        assert "\n" not in str(exc)
+
+    # resume: opens (moving a torn tail aside), or refuses and salvage makes it resumable
+    try:
+        store = RunStore.open(run)
+    except RunStoreError:
+        salvage(run)
+        store = RunStore.open(run)
+    store.close()
+    kept = [r.to_bytes() for r in store.records]
+    aside = [
+        r.to_bytes() for f in sorted((run / "salvage").glob("*/kept.bin")) for r in iter_records(f)
+    ]
+    for i in intact:  # still in the history, or moved aside: never deleted
+        assert originals[i] in kept or originals[i] in aside, (i, len(kept), len(aside))
+    # and every byte of the damaged file is somewhere
+    moved = (
+        sum(
+            (f / name).stat().st_size
+            for f in (run / "salvage").glob("*")
+            for name in ("kept.bin", "damaged.bin")
+            if (f / name).exists()
+        )
+        if (run / "salvage").exists()
+        else 0
+    )
+    assert (run / "history.bin").stat().st_size + moved == len(damaged)

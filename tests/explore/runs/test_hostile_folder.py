@@ -1,0 +1,129 @@
+"""A run folder received from someone else must not make a command touch files outside it,
+and odd paths get one line (issue 29): a ``writer.lock`` (or another file the writer writes)
+that is a symbolic or hard link to a file elsewhere is refused and the file left as it was
+(before: ``ergo explore --resume`` emptied it); a loop of links given to export; two exports
+to one ``--out``; ``ergo runs check`` on a run.json that cannot be run."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from explore.cli import main
+
+VICTIM = b"precious data\n" * 100
+
+
+def ergo(*args: str) -> int:
+    if args[0] == "explore":
+        args = (*args, "--no-progress", "--rerun", "off")
+    return main(list(args))
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("ref") / "run"
+    assert ergo("explore", "--episodes", "3", "--seed", "2", "--out", str(out)) == 0
+    return out
+
+
+@pytest.fixture
+def run(reference, tmp_path) -> Path:
+    copy = tmp_path / "run"
+    shutil.copytree(reference, copy)
+    return copy
+
+
+@pytest.fixture
+def victim(tmp_path) -> Path:
+    path = tmp_path / "victim"
+    path.write_bytes(VICTIM)
+    return path
+
+
+def _one_line(capsys) -> str:
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if not ln.startswith("INFO ")]
+    assert len(lines) == 1, err
+    return lines[0]
+
+
+@pytest.mark.parametrize("link", ["symbolic", "hard"])
+@pytest.mark.parametrize(
+    "name", ["writer.lock", "history.bin", "metrics.csv", "faults.json", "run.json.tmp"]
+)
+def test_a_linked_file_in_a_received_run_is_refused_and_left_alone(run, victim, capsys, name, link):
+    target = run / name
+    if name == "history.bin":  # the victim holds the history's bytes: a valid run to resume
+        victim.write_bytes(target.read_bytes())
+    before = victim.read_bytes()
+    target.unlink(missing_ok=True)
+    if link == "symbolic":
+        target.symlink_to(victim)
+    else:
+        os.link(victim, target)
+    assert ergo("explore", "--resume", str(run), "--episodes", "5") == 2
+    line = _one_line(capsys)
+    assert name in line and ("symbolic link" in line or "hard link" in line), line
+    assert victim.read_bytes() == before
+    if name in ("writer.lock", "history.bin"):
+        assert ergo("runs", "salvage", str(run)) == 2
+        assert name in _one_line(capsys) and victim.read_bytes() == before
+
+
+def test_a_salvage_folder_linked_elsewhere_is_refused(run, tmp_path, capsys):
+    hist = run / "history.bin"
+    hist.write_bytes(hist.read_bytes()[:-50] + b"x" * 10)  # damaged: salvage has work
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (run / "salvage").symlink_to(elsewhere)
+    assert ergo("runs", "salvage", str(run)) == 2
+    assert "salvage" in _one_line(capsys) and not any(elsewhere.iterdir())
+
+
+def test_a_loop_of_links_given_to_export_is_one_line(tmp_path, capsys):
+    loop = tmp_path / "loop"
+    loop.symlink_to(loop)
+    for args in (
+        ["export", "lerobot", str(loop), "--out", str(tmp_path / "ds")],
+        ["export", "lerobot", str(loop / "run"), "--out", str(tmp_path / "ds")],
+        ["runs", "check", str(loop)],
+        ["report", str(loop)],
+    ):
+        assert ergo(*args) == 2, args
+        assert "Traceback" not in _one_line(capsys)
+
+
+def test_two_exports_to_one_out_never_remove_each_other(reference, tmp_path):
+    """Each export writes into its own partial folder (before: one shared name, which each
+    removed at its start, so two exports broke each other)."""
+    out = tmp_path / "ds"
+    cmd = [sys.executable, "-m", "explore.cli", "export", "lerobot", str(reference), "--out",
+           str(out), "--no-video"]  # fmt: skip
+    procs = [subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    results = [(p.wait(timeout=300), p.stderr.read()) for p in procs]
+    codes = sorted(rc for rc, _ in results)
+    assert codes[0] == 0, results  # at least one wrote the dataset
+    for rc, err in results:
+        assert "Traceback" not in err, err
+        if rc:
+            assert rc == 2 and err.count("\n") == 1, err
+            assert "another export" in err or "not empty" in err, err
+    info = json.loads((out / "meta/info.json").read_text())
+    assert info["total_episodes"] == 3
+    assert not list(tmp_path.glob(".ds.partial*"))
+
+
+def test_runs_check_does_not_call_an_invalid_run_json_resumable(run, capsys):
+    meta = json.loads((run / "run.json").read_text())
+    meta["config"]["seed"] = "abc"
+    (run / "run.json").write_text(json.dumps(meta))
+    assert ergo("runs", "check", str(run)) == 1
+    out = capsys.readouterr().out
+    assert "ok: resumable" not in out and "not resumable: run.json" in out and "seed" in out
