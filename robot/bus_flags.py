@@ -77,5 +77,10 @@ def bus_from_args(args: argparse.Namespace) -> Bus | None:
 
 def make_arm(bus: Bus, **kw: Any) -> Any:
     """The (unconnected) ``robot.Arm`` on ``bus``: ``DynamixelArm(port, baud, **kw)`` or
-    ``CanArm(can, bitrate, **kw)`` with their defaults (directions +1, offsets 0)."""
+    ``CanArm(can, bitrate, **kw)`` with their defaults (directions +1, offsets 0; a CanArm
+    on the emulator's pty with ``robot.canopen.arm.config_for``'s pty settings)."""
+    if bus.kind == "canopen" and "config" not in kw:
+        from robot.canopen.arm import config_for
+
+        kw = {**kw, "config": config_for(bus.where)}
     return ARMS.load(bus.kind)(bus.where, bus.rate, **kw)

@@ -21,10 +21,6 @@ from explore.rigs.hardware import (
 from explore.rigs.rig import Rig, RigConfig, RigError
 from explore.rigs.video import camera_video_frame
 
-# Heartbeat time for the emulator on a pty, ms: its heartbeats cross several Python threads on
-# a shared machine, and gaps over 150 ms were seen with the camera rendering under load (a
-# guess with margin).
-PTY_HEARTBEAT_MS = 500
 PHYSICAL = True  # an arm on a host: one trial at a time, on the host that has it
 __all__ = ["PHYSICAL", "Options", "make_rig", "scene"]
 
@@ -42,7 +38,7 @@ class Options(HardwareOptions):
         eds: the drives' EDS file (default: ``robot/canopen/ergo_drive.eds``, the emulated drive).
         pdo_timeout_s, following_error_window: see ``robot.canopen.arm.CanArmConfig``.
         heartbeat_ms: producer heartbeat time written to the drives, ms (default 100 on a real
-            adapter; ``PTY_HEARTBEAT_MS`` on a pty, i.e. the emulator).
+            adapter; ``robot.canopen.arm.PTY_SETTINGS`` on a pty, i.e. the emulator).
     """
 
     can: str | None = None
@@ -63,7 +59,7 @@ def can_offsets(directions: np.ndarray, servo_offsets: np.ndarray) -> np.ndarray
 
 def make_rig(config: RigConfig, options: Options) -> Rig:
     """Build (not connect) the rig; bad or missing options are one-line ``RigError``s."""
-    from robot.canopen.arm import CanArm, CanArmConfig
+    from robot.canopen.arm import CanArm, config_for
     from robot.canopen.bus import CanBusError, parse_can_spec
     from robot.spec import ERGO_JR_JOINTS
 
@@ -84,13 +80,10 @@ def make_rig(config: RigConfig, options: Options) -> Rig:
         "following_error_window": options.following_error_window,
         "eds": Path(options.eds) if options.eds is not None else None,
     }
-    if arm_config["heartbeat_ms"] is None and "/dev/pts/" in options.can:
-        arm_config["heartbeat_ms"] = PTY_HEARTBEAT_MS
     camera = rig_camera(options, config.name)
     try:
         bus_spec = parse_can_spec(options.can, options.bitrate)
-        given = {k: v for k, v in arm_config.items() if v is not None}
-        arm = CanArm(bus_spec, spec=joints.spec, config=CanArmConfig(**given))
+        arm = CanArm(bus_spec, spec=joints.spec, config=config_for(bus_spec, **arm_config))
     except (CanBusError, ValueError) as exc:
         raise RigError(f"rig 'canopen': {exc}") from exc
     locator, why = rig_ball_locator(config)

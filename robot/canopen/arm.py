@@ -51,7 +51,7 @@ import numpy as np
 
 from robot.arm import Arm, JointState, RecoveryPolicy
 from robot.canopen import cia402, emcy
-from robot.canopen.bus import DEFAULT_BITRATE, CanBusSpec, parse_can_spec
+from robot.canopen.bus import DEFAULT_BITRATE, CanBusSpec, is_pty, parse_can_spec
 from robot.canopen.cia402 import State
 from robot.canopen.network import (
     HEARTBEAT_OPERATIONAL,
@@ -112,6 +112,27 @@ class CanArmConfig:
     sdo_timeout_s: float = 0.3
     following_error_window: float | None = None
     eds: Path = EDS_PATH
+
+
+# The settings of a CanArm on an SLCAN pty, i.e. the emulator of `ergo twin serve --bus
+# canopen` (a real adapter is a tty or a network interface, never a pty), where not given:
+# - heartbeat 500 ms: the emulator's heartbeats cross several Python threads on a shared
+#   machine; gaps over 150 ms were seen with the camera rendering under load, so 100 ms x 1.5
+#   stopped `ergo calibrate joints` (measured 2026-12-02; 500 is a guess with margin);
+# - SDO timeout 2 s: one SDO of the connect's configuration went unanswered for canopen's
+#   0.3 s at load 6-8, and for 1.0 s at load 13-15 (measured with bench/load.py, 2026-12-02).
+# Neither is a safety bound on a real arm, which keeps CanArmConfig's defaults.
+PTY_SETTINGS = {"heartbeat_ms": 500, "sdo_timeout_s": 2.0}
+
+
+def config_for(can: str | CanBusSpec, **given: object) -> CanArmConfig:
+    """A ``CanArmConfig`` for the bus ``can``: the fields ``given`` (None values left out),
+    the pty's ``PTY_SETTINGS`` where the channel is a pseudo-terminal, else the defaults."""
+    spec = can if isinstance(can, CanBusSpec) else parse_can_spec(can, None)
+    fields = {k: v for k, v in given.items() if v is not None}
+    if spec.interface == "slcan" and is_pty(spec.channel):
+        fields = {**PTY_SETTINGS, **fields}
+    return CanArmConfig(**fields)  # type: ignore[arg-type]
 
 
 class CanArm(Arm):

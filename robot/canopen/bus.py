@@ -115,12 +115,12 @@ class CanBusSpec:
         kw: dict[str, Any] = {"interface": self.interface, "channel": self.channel}
         if self.bitrate is not None:
             kw["bitrate"] = self.bitrate
-        if self.interface == "slcan" and _is_pty(self.channel):
+        if self.interface == "slcan" and is_pty(self.channel):
             kw["sleep_after_open"] = PTY_SLEEP_AFTER_OPEN_S
         return kw
 
 
-def _is_pty(channel: str) -> bool:
+def is_pty(channel: str) -> bool:
     """A pseudo-terminal, named directly or through a symbolic link (``/dev/pts/N``)."""
     path = channel.split("@", 1)[0]
     return path.startswith("/dev/pts/") or os.path.realpath(path).startswith("/dev/pts/")
@@ -184,7 +184,7 @@ def open_bus(spec: CanBusSpec | str, bitrate: int | None = DEFAULT_BITRATE) -> A
         detail = " ".join(str(exc).split()) or type(exc).__name__
         hint = HINTS.get(spec.interface, "")
         raise CanBusError(f"cannot open CAN bus {spec}: {detail}{hint}") from exc
-    if spec.interface == "slcan" and _is_pty(spec.channel):
+    if spec.interface == "slcan" and is_pty(spec.channel):
         _await_opening_answers(bus)
     return bus
 

@@ -1,0 +1,418 @@
+"""A scripted owner: follows docs/real_arm.md on a served stand-in rig, typing the guide's
+``ergo`` commands as a person types them and using the stand-in's hands where a person uses
+theirs (moving the limp joints to the marks ``ergo calibrate joints`` asks for, holding a
+chessboard in front of the camera while ``ergo calibrate camera`` collects views).
+
+Every step is a subprocess of the installed ``ergo`` (``python -m explore.cli``), with the
+calibration folder in ``ERGO_CALIBRATION_DIR``: nothing here calls the calibration code
+directly, and nothing here reads the stand-in's hidden parameters (``sim.standin.truth`` is for
+tests and bench scripts, which compare what the steps recovered against them).
+
+Used by ``tests/system/test_guide.py`` and ``bench/rehearse_real_arm.py``::
+
+    with ServedRig("dynamixel", seed=7, hidden=tmp / "h.json") as rig:
+        owner = Owner(rig, rig_id="s7", calibration_dir=tmp / "cal", log=print)
+        owner.scan()
+        owner.calibrate_joints()
+        owner.calibrate_camera()
+        owner.calibrate_arena()
+        owner.show()
+        owner.explore(tmp / "run", episodes=20, seed=0)
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from queue import Empty, Queue
+from typing import Any, Literal
+
+import numpy as np
+
+from robot.spec import ArmSpec, ergo_jr_spec
+from sim.standin.hands import HandsClient, HandsError
+
+ERGO = [sys.executable, "-m", "explore.cli"]
+START_BOUND_S = 90.0  # against hangs (the server imports MuJoCo, draws its floor); not a target
+STEP_BOUND_S = 900.0  # one guide step (an exploration of a few hundred episodes takes longer)
+# How far short of a joint's stop a person's hand leaves it (guess: one does not lean on a stop).
+SHORT_OF_STOP_RAD = math.radians(0.5)
+# The joints folded back before m2 is taken to its forward (upper) stop: with m3 straight the
+# arm hits the floor first (the hands report "blocked by the floor", docs/standin.md).
+FOLD_FOR_M2_UPPER = {"m3": -1.5}
+# The chessboard the guide prints (`ergo calibrate camera --print-board`): 10 x 7 squares of
+# 20 mm (9 x 6 inner corners), and the poses a person holds it at in front of the camera:
+# 0.32-0.42 m above the floor (the camera is 0.50-0.60 m up), within 8 cm of the arena's
+# centre, tilted up to 30 deg and turned up to 40 deg (guesses; OpenCV's tutorial asks for
+# varied tilts and positions).
+BOARD = {"kind": "chessboard", "squares": [10, 7], "square_m": 0.02}
+BOARD_HEIGHT_M = (0.32, 0.42)
+BOARD_SHIFT_M = 0.08
+BOARD_TILT_DEG = 30.0
+BOARD_TURN_DEG = 40.0
+BOARD_HOLD_S = 0.4  # how long each pose is held (the stream serves ~15 frames/s)
+# A prompt of `ergo calibrate joints` (calibration/joints.py: interactive_prompt)
+_PROMPT = re.compile(r"\[([^\]]+)\](?: \(try \d+\))? (Put|Move) (.*?), then press Enter: ")
+
+
+class OwnerError(RuntimeError):
+    """A guide step failed: what it printed, in one line."""
+
+
+@dataclass
+class Step:
+    """What one guide command did: its words, exit code and output."""
+
+    command: list[str]
+    rc: int
+    stdout: str
+    stderr: str
+    seconds: float
+
+    def text(self) -> str:
+        return f"$ ergo {' '.join(self.command)}  (rc {self.rc}, {self.seconds:.0f} s)"
+
+
+class ServedRig:
+    """``ergo twin serve --bus BUS --stand-in SEED --hidden PATH [flags]`` in a subprocess.
+
+    Attributes (once entered): ``bus_kind``, ``where`` (the pty, or ``slcan:PTY`` for
+    CANopen), ``camera_url``, ``hands_port``, ``lines`` (the announced lines by first word).
+    """
+
+    def __init__(
+        self,
+        bus: Literal["dynamixel", "canopen"],
+        seed: int,
+        hidden: Path,
+        flags: Sequence[str] = (),
+        env: Mapping[str, str] | None = None,
+    ) -> None:
+        self.bus_kind = bus
+        self.seed = seed
+        self.hidden = Path(hidden)
+        self.flags = list(flags)
+        self.env = dict(env or os.environ)
+        self.lines: dict[str, str] = {}
+        self.proc: subprocess.Popen[str] | None = None
+
+    def __enter__(self) -> ServedRig:
+        cmd = [*ERGO, "twin", "serve", "--bus", self.bus_kind, "--stand-in", str(self.seed)]
+        cmd += ["--hidden", str(self.hidden), *self.flags]
+        env = {**self.env, "PYTHONUNBUFFERED": "1"}
+        self.proc = subprocess.Popen(
+            cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        )
+        queue: Queue[str] = Queue()  # a thread reads: select() misses lines already buffered
+        threading.Thread(
+            target=lambda: [queue.put(x) for x in self.proc.stdout], daemon=True
+        ).start()
+        deadline = time.monotonic() + START_BOUND_S
+        while "stand-in" not in self.lines and time.monotonic() < deadline:
+            try:
+                line = queue.get(timeout=1.0).strip()
+            except Empty:
+                if self.proc.poll() is not None:
+                    break
+                continue
+            self.lines.setdefault("bus" if " bus " in line else line.split()[0], line)
+        if "stand-in" not in self.lines:
+            self.stop()
+            raise OwnerError(f"ergo twin serve did not start: {self.lines}")
+        pty = self.lines["bus"].split()[-1]
+        self.where = pty if self.bus_kind == "dynamixel" else f"slcan:{pty}"
+        self.camera_url = self.lines["camera"].split()[-1]
+        self.hands_port = int(self.lines["hands"].rsplit(":", 1)[1])
+        return self
+
+    def bus_flags(self) -> list[str]:
+        """The flags that name this rig's bus on any ``ergo`` command."""
+        return ["--port", self.where] if self.bus_kind == "dynamixel" else ["--can", self.where]
+
+    def stop(self) -> int | None:
+        """SIGTERM, then the exit code (None if it had to be killed)."""
+        if self.proc is None or self.proc.poll() is not None:
+            return None if self.proc is None else self.proc.returncode
+        self.proc.terminate()
+        try:
+            return self.proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait(timeout=10)
+            return None
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+
+def _reader(stream: Any, out: list[str], chunks: Queue[str] | None = None) -> None:
+    """Read a pipe to its end, character batches appended to ``out`` (and queued)."""
+    fd = stream.fileno()
+    while True:
+        data = os.read(fd, 4096)
+        if not data:
+            break
+        text = data.decode(errors="replace")
+        out.append(text)
+        if chunks is not None:
+            chunks.put(text)
+
+
+class Owner:
+    """A person following the guide on a ``ServedRig``: each method is one step, runs the
+    guide's command and returns its ``Step``; a failed step raises ``OwnerError`` with the
+    command's last line (``check=False`` returns it instead).
+
+    Args:
+        rig: the served stand-in.
+        rig_id: the id given to ``--rig-id`` (the calibration files' folder).
+        calibration_dir: the calibration root (``ERGO_CALIBRATION_DIR`` of every step).
+        log: told each command and what it printed (default: nothing).
+        rng_seed: the owner's own randomness (where the board is held).
+    """
+
+    def __init__(
+        self,
+        rig: ServedRig,
+        rig_id: str,
+        calibration_dir: Path,
+        log: Callable[[str], None] | None = None,
+        rng_seed: int = 0,
+    ) -> None:
+        self.rig = rig
+        self.rig_id = rig_id
+        self.calibration_dir = Path(calibration_dir)
+        self.log = log or (lambda text: None)
+        self.rng = np.random.default_rng(rng_seed)
+        self.spec: ArmSpec = ergo_jr_spec()
+        self.env = {**rig.env, "ERGO_CALIBRATION_DIR": str(self.calibration_dir)}
+        self.steps: list[Step] = []
+
+    # ---- running a command -------------------------------------------------------------
+    def _finish(self, step: Step, check: bool) -> Step:
+        self.steps.append(step)
+        self.log(step.text())
+        self.log((step.stdout + step.stderr).rstrip())
+        if check and step.rc != 0:
+            last = (step.stderr.strip() or step.stdout.strip() or "no output").splitlines()[-1]
+            raise OwnerError(f"ergo {step.command[0]} {step.command[1]} failed: {last}")
+        return step
+
+    def run(self, *args: str, check: bool = True, timeout: float = STEP_BOUND_S) -> Step:
+        """``ergo ARGS`` with stdin closed."""
+        t0 = time.monotonic()
+        done = subprocess.run(
+            [*ERGO, *args],
+            env=self.env,
+            stdin=subprocess.DEVNULL,
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+        )
+        step = Step(list(args), done.returncode, done.stdout, done.stderr, time.monotonic() - t0)
+        return self._finish(step, check)
+
+    def _run_with(
+        self,
+        args: Sequence[str],
+        on_output: Callable[[str, subprocess.Popen[bytes]], None] | None,
+        beside: Callable[[threading.Event], None] | None = None,
+        check: bool = True,
+    ) -> Step:
+        """``ergo ARGS`` with a pipe on stdin: ``on_output(all output so far, process)`` is
+        called on each new piece of stdout (it may answer on stdin); ``beside(stop)`` runs in a
+        thread until the command ends (``stop`` is then set)."""
+        t0 = time.monotonic()
+        proc = subprocess.Popen(
+            [*ERGO, *args],
+            env={**self.env, "PYTHONUNBUFFERED": "1"},
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+        )
+        out: list[str] = []
+        err: list[str] = []
+        chunks: Queue[str] = Queue()
+        threads = [
+            threading.Thread(target=_reader, args=(proc.stdout, out, chunks), daemon=True),
+            threading.Thread(target=_reader, args=(proc.stderr, err), daemon=True),
+        ]
+        stop = threading.Event()
+        if beside is not None:
+            threads.append(threading.Thread(target=beside, args=(stop,), daemon=True))
+        for t in threads:
+            t.start()
+        try:
+            while proc.poll() is None or not chunks.empty():
+                if time.monotonic() - t0 > STEP_BOUND_S:
+                    raise OwnerError(
+                        f"ergo {' '.join(args[:2])} still running after {STEP_BOUND_S:.0f} s"
+                    )
+                try:
+                    chunks.get(timeout=0.2)
+                except Empty:
+                    continue
+                if on_output is not None and proc.poll() is None:
+                    on_output("".join(out), proc)
+        finally:
+            stop.set()
+            if proc.poll() is None:
+                proc.kill()
+            proc.wait(timeout=30)
+            for t in threads:
+                t.join(timeout=30)
+        step = Step(list(args), proc.returncode, "".join(out), "".join(err), time.monotonic() - t0)
+        return self._finish(step, check)
+
+    def hands(self) -> HandsClient:
+        return HandsClient(self.rig.hands_port)
+
+    # ---- the guide's steps -------------------------------------------------------------
+    def scan(self, check: bool = True) -> Step:
+        """``ergo bus scan``: which servos answer."""
+        return self.run("bus", "scan", *self.rig.bus_flags(), check=check)
+
+    def calibrate_joints(self, joints: Sequence[str] | None = None, check: bool = True) -> Step:
+        """``ergo calibrate joints``: the hands put the limp arm at its zero marks, then each
+        joint at its stops, pressing Enter after each move as the command asks; the arm is
+        left held at its zero pose."""
+        args = ["calibrate", "joints", "--rig-id", self.rig_id, *self.rig.bus_flags()]
+        if joints:
+            args += ["--joints", *joints]
+        answered = [0]
+        failure: list[str] = []
+        with self.hands() as hands:
+
+            def answer(text: str, proc: subprocess.Popen[bytes]) -> None:
+                prompts = _PROMPT.findall(text)
+                if len(prompts) <= answered[0] or not text.endswith(": "):
+                    return
+                names, _verb, what = prompts[-1]
+                try:
+                    self._pose_for(hands, [n.strip() for n in names.split(",")], what)
+                except HandsError as exc:
+                    failure.append(str(exc))
+                    proc.kill()
+                    return
+                answered[0] = len(prompts)
+                proc.stdin.write(b"\n")
+                proc.stdin.flush()
+
+            step = self._run_with(args, answer, check=False)
+            if failure:
+                raise OwnerError(
+                    f"the hands could not do what ergo calibrate joints asked: {failure[0]}"
+                )
+            self._to_zero(hands)
+        return self._finish_checked(step, check)
+
+    def _finish_checked(self, step: Step, check: bool) -> Step:
+        if check and step.rc != 0:
+            last = (step.stderr.strip() or step.stdout.strip() or "no output").splitlines()[-1]
+            raise OwnerError(f"ergo {step.command[0]} {step.command[1]} failed: {last}")
+        return step
+
+    def _to_zero(self, hands: HandsClient) -> None:
+        """Back to the zero pose, m2 first (it may be forward with m3 folded back)."""
+        hands.move({"m2": 0.0})
+        hands.move({name: 0.0 for name in self.spec.names})
+
+    def _pose_for(self, hands: HandsClient, names: list[str], what: str) -> None:
+        """Move the joints as a prompt's words ask: "the arm in its zero pose", "m3 at its
+        zero mark", "m3 to its lower limit ...", "m3 to its upper limit ..."."""
+        self._to_zero(hands)
+        if "zero" in what:
+            return
+        (name,) = names
+        joint = self.spec.joints[self.spec.names.index(name)]
+        if "lower limit" in what:
+            target = joint.lower + SHORT_OF_STOP_RAD
+        elif "upper limit" in what:
+            target = joint.upper - SHORT_OF_STOP_RAD
+        else:
+            raise HandsError(f"cannot read the prompt {what!r}")
+        if name == "m2" and target > 0:
+            hands.move(FOLD_FOR_M2_UPPER)
+        hands.move({name: target})
+
+    def board_poses(
+        self, n: int
+    ) -> list[tuple[tuple[float, float, float], tuple[float, float, float]]]:
+        """``n`` poses (position m, euler deg) to hold the board at, drawn from the owner's
+        randomness."""
+        poses = []
+        for _ in range(n):
+            x, y = self.rng.uniform(-BOARD_SHIFT_M, BOARD_SHIFT_M, 2)
+            z = self.rng.uniform(*BOARD_HEIGHT_M)
+            rx, ry = self.rng.uniform(-BOARD_TILT_DEG, BOARD_TILT_DEG, 2)
+            rz = self.rng.uniform(-BOARD_TURN_DEG, BOARD_TURN_DEG)
+            poses.append(((float(x), float(y), float(z)), (float(rx), float(ry), float(rz))))
+        return poses
+
+    def calibrate_camera(self, views: int = 15, check: bool = True) -> Step:
+        """``ergo calibrate camera --camera URL --board chessboard``: the hands hold the board
+        at a new pose every ``BOARD_HOLD_S`` until the command has its views, then put it
+        away."""
+        args = ["calibrate", "camera", "--rig-id", self.rig_id, "--camera", self.rig.camera_url]
+        args += ["--board", "chessboard", "--squares", *map(str, BOARD["squares"])]
+        args += ["--square-m", str(BOARD["square_m"]), "--views", str(views)]
+
+        def hold(stop: threading.Event) -> None:
+            with self.hands() as hands:
+                while not stop.is_set():
+                    for position, euler in self.board_poses(10):
+                        if stop.is_set():
+                            break
+                        hands.show_board(BOARD, position, euler)
+                        stop.wait(BOARD_HOLD_S)
+                hands.put_board_away()
+
+        return self._run_with(args, None, beside=hold, check=check)
+
+    def calibrate_arena(self, check: bool = True) -> Step:
+        """``ergo calibrate arena --camera URL``: the arena's four markers and the ball."""
+        with self.hands() as hands:
+            hands.put_board_away()
+        return self.run(
+            "calibrate", "arena", "--rig-id", self.rig_id, "--camera", self.rig.camera_url,
+            check=check,
+        )  # fmt: skip
+
+    def show(self, check: bool = True) -> Step:
+        """``ergo calibrate show``: the three files, their age and hash."""
+        return self.run("calibrate", "show", "--rig-id", self.rig_id, check=check)
+
+    def explore(
+        self,
+        out: Path,
+        episodes: int,
+        seed: int,
+        strategy: str = "rge-efr",
+        extra: Sequence[str] = (),
+        check: bool = True,
+    ) -> Step:
+        """``ergo explore --rig BUS --rig-id ID ... --camera URL``: the hands let go as the
+        torque comes on."""
+        rig = "dynamixel" if self.rig.bus_kind == "dynamixel" else "canopen"
+        return self.run(
+            "explore", "--rig", rig, "--rig-id", self.rig_id, *self.rig.bus_flags(),
+            "--camera", self.rig.camera_url, "--strategy", strategy,
+            "--episodes", str(episodes), "--seed", str(seed), "--out", str(out), *extra,
+            check=check,
+        )  # fmt: skip
+
+
+def read_saved(calibration_dir: Path, rig_id: str, kind: str) -> dict[str, Any]:
+    """The ``data`` of a calibration file the steps saved (plain JSON: what a test compares)."""
+    import json
+
+    path = Path(calibration_dir) / rig_id / f"{kind}.json"
+    return json.loads(path.read_text())["data"]
