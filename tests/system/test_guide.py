@@ -105,3 +105,25 @@ def test_a_step_that_fails_is_one_line_and_keeps_what_was_saved(tmp_path):
     assert len(lines) == 1 and lines[0].startswith("ergo: error:") and "marker" in lines[0]
     assert (tmp_path / "cal" / "mine" / "camera.json").read_bytes() == saved
     assert not (tmp_path / "cal" / "mine" / "arena.json").exists()
+
+
+def test_every_command_of_the_guide_parses_as_written():
+    """Every ``$ ergo ...`` line of docs/real_arm.md, parsed by ``ergo``'s own parser (nothing
+    is run): the page and the commands cannot drift apart unnoticed."""
+    import shlex
+    from pathlib import Path
+
+    from explore.cli import build_parser
+
+    page = Path(__file__).resolve().parents[2] / "docs" / "real_arm.md"
+    commands = [
+        line.split("$ ", 1)[1].split("  #")[0]
+        for line in page.read_text().splitlines()
+        if line.startswith("$ ergo ")
+    ]
+    assert len(commands) >= 10
+    for command in commands:
+        try:
+            build_parser().parse_args(shlex.split(command)[1:])
+        except SystemExit as exc:
+            raise AssertionError(f"docs/real_arm.md: {command}") from exc
