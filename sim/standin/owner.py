@@ -42,7 +42,8 @@ from sim.standin.hands import HandsClient, HandsError
 
 ERGO = [sys.executable, "-m", "explore.cli"]
 START_BOUND_S = 90.0  # against hangs (the server imports MuJoCo, draws its floor); not a target
-STEP_BOUND_S = 900.0  # one guide step (an exploration of a few hundred episodes takes longer)
+STEP_BOUND_S = 900.0  # one guide step, s, against hangs
+EPISODE_BOUND_S = 10.0  # one episode of an exploration over a bus, s (2.4-2.7 s measured)
 # How far short of a joint's stop a person's hand leaves it (guess: one does not lean on a stop).
 SHORT_OF_STOP_RAD = math.radians(0.5)
 # The joints folded back before m2 is taken to its forward (upper) stop: with m3 straight the
@@ -406,7 +407,7 @@ class Owner:
             "explore", "--rig", rig, "--rig-id", self.rig_id, *self.rig.bus_flags(),
             "--camera", self.rig.camera_url, "--strategy", strategy,
             "--episodes", str(episodes), "--seed", str(seed), "--out", str(out), *extra,
-            check=check,
+            check=check, timeout=max(STEP_BOUND_S, EPISODE_BOUND_S * episodes),
         )  # fmt: skip
 
 
