@@ -84,9 +84,8 @@ def rehearse(bus: str, seed: int, args: argparse.Namespace, tmp: Path) -> dict[s
         t = time.monotonic()
         owner.calibrate_joints()
         row["joints s"] = time.monotonic() - t
-        row["offset err deg"], row["directions"] = joint_errors(
-            owner.calibration_dir, owner.rig_id, hidden
-        )
+        err, row["directions"] = joint_errors(hidden, saved("joints"))
+        row["offset err deg"] = float(err.max())
         t = time.monotonic()
         owner.calibrate_camera()
         row["camera s"] = time.monotonic() - t
@@ -99,7 +98,10 @@ def rehearse(bus: str, seed: int, args: argparse.Namespace, tmp: Path) -> dict[s
         owner.show()
         run = tmp / f"run-{bus}-{seed}"
         t = time.monotonic()
-        owner.explore(run, args.episodes, args.explore_seed, args.strategy)
+        owner.explore(run, args.episodes, args.explore_seed, args.strategy, resumes=args.resumes)
+        row["stops resumed"] = len(owner.stops)
+        for stop in owner.stops:
+            print(f"  {bus} {seed}: {stop}", flush=True)
         row["explore s"] = time.monotonic() - t
         row["cells"], row["tracked"], row["moved"] = run_summary(run)
     row["total s"] = time.monotonic() - t0
@@ -128,6 +130,7 @@ def main() -> None:
     p.add_argument("--episodes", type=int, default=20, help="episodes of the check run")
     p.add_argument("--explore-seed", type=int, default=0)
     p.add_argument("--strategy", default="rge-efr")
+    p.add_argument("--resumes", type=int, default=3, help="safety stops resumed, as the guide says")
     p.add_argument("--compare", action="store_true", help="also in one process, same seed")
     p.add_argument("--out", type=Path, default=None, help="keep the folders here")
     p.add_argument("--verbose", action="store_true", help="print every command's output")

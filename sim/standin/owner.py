@@ -196,6 +196,7 @@ class Owner:
         self.spec: ArmSpec = ergo_jr_spec()
         self.env = {**rig.env, "ERGO_CALIBRATION_DIR": str(self.calibration_dir)}
         self.steps: list[Step] = []
+        self.stops: list[str] = []  # safety stops of explorations, resumed
 
     # ---- running a command -------------------------------------------------------------
     def _finish(self, step: Step, check: bool) -> Step:
@@ -399,16 +400,25 @@ class Owner:
         strategy: str = "rge-efr",
         extra: Sequence[str] = (),
         check: bool = True,
+        resumes: int = 0,
     ) -> Step:
         """``ergo explore --rig BUS --rig-id ID ... --camera URL``: the hands let go as the
-        torque comes on."""
+        torque comes on. A run paused by a safety stop (its last line says ``resume with
+        ergo explore --resume OUT``) is resumed as the guide says, up to ``resumes`` times;
+        ``self.stops`` keeps each stop's line."""
         rig = "dynamixel" if self.rig.bus_kind == "dynamixel" else "canopen"
-        return self.run(
+        bound = max(STEP_BOUND_S, EPISODE_BOUND_S * episodes)
+        step = self.run(
             "explore", "--rig", rig, "--rig-id", self.rig_id, *self.rig.bus_flags(),
             "--camera", self.rig.camera_url, "--strategy", strategy,
             "--episodes", str(episodes), "--seed", str(seed), "--out", str(out), *extra,
-            check=check, timeout=max(STEP_BOUND_S, EPISODE_BOUND_S * episodes),
+            check=False, timeout=bound,
         )  # fmt: skip
+        while step.rc != 0 and "ergo explore --resume" in step.stderr and resumes > 0:
+            self.stops.append(step.stderr.strip().splitlines()[-1])
+            resumes -= 1
+            step = self.run("explore", "--resume", str(out), check=False, timeout=bound)
+        return self._finish_checked(step, check)
 
 
 def read_saved(calibration_dir: Path, rig_id: str, kind: str) -> dict[str, Any]:
