@@ -209,8 +209,14 @@ def _sae_train(args: argparse.Namespace) -> int:
     except (VaeError, ValueError) as exc:
         return _error(str(exc))
     kept = distinct_features(sae.config.code_std, sae.config.code_corr)
-    print(f"{args.out}: spatial autoencoder saved; {len(kept)} of its {sae.config.features} "
-          f"features move and follow distinct things (feature{'s' * (len(kept) > 1)} "
-          f"{', '.join(map(str, kept))}: one goal-space module each); "
+    n = sae.config.features
+    features = (
+        f"{len(kept)} of its {n} features move and follow distinct things "
+        f"(feature{'s' * (len(kept) > 1)} {', '.join(map(str, kept))}: one goal-space module "
+        "each)"
+        if kept
+        else f"none of its {n} features moves: a goal space of it would have no module"
+    )
+    print(f"{args.out}: spatial autoencoder saved; {features}; "
           f"{_explained(sae.config.heldout_explained_variance)}")  # fmt: skip
     return 0

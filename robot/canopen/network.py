@@ -50,6 +50,20 @@ from robot.torque_guardian import EmergencyPayload
 
 log = logging.getLogger(__name__)
 
+
+class _SdoTimeoutEcho(logging.Filter):
+    """Drops the canopen library's own log line of an SDO transfer it aborts ("Transfer aborted
+    by client with code 0x05040000" on a timeout; every abort is followed by its
+    ``SdoCommunicationError``): the network and ``ergo bus scan`` turn that error into one
+    line naming the node and the object; the library's line came first, two lines for one
+    fault (``ergo explore --can slcan:`` on a port of garbage)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not str(record.msg).startswith("Transfer aborted by client")
+
+
+logging.getLogger("canopen.sdo.client").addFilter(_SdoTimeoutEcho())
+
 PDO_NOT_VALID = 1 << 31  # COB-ID bit 31 of a PDO communication parameter (CiA 301)
 # Synchronous transmission type: RPDO applied at the next SYNC, TPDO sent at every SYNC.
 TRANS_SYNC = 1

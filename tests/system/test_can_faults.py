@@ -29,7 +29,14 @@ from sim.canopen.drives import EmulatedDrives
 from sim.twin import Twin
 
 PERIOD_S = 0.025  # 40 Hz, the episode's control rate
-HEARTBEAT_MS = 200  # as tests/robot/canopen/test_arm.py: tolerant of a loaded shared machine
+# the drives' heartbeat, ms, on both adapters: 200 (x 1.5 = 0.3 s) was missed at load 13 on
+# 2 cores (0.41 s), and the pty rigs' 500 at load 10 (0.79 s against 0.75 s), before any
+# fault was injected ("no heartbeat"); no test here waits for a heartbeat loss
+HEARTBEAT_MS = 1000
+# SDO answer timeout at connect, s: the emulated drives answer from their own threads, which
+# wait for a CPU at load 10 on 2 cores (0.3 s, canopen's default, was missed there:
+# "does not answer SDO 0x1000"; a real drive answers within milliseconds)
+SDO_TIMEOUT_S = 2.0
 BOUND_S = 10.0  # a bound against hangs, not an expectation
 TARGET = np.array([0.3, 0.2, -0.3, 0.2, 0.2, -0.2])
 
@@ -48,6 +55,7 @@ def rig() -> Iterator[tuple[Twin, EmulatedDrives, str]]:
 
 
 def make_arm(can: str, recovery: RecoveryPolicy | None = None, **kw: object) -> CanArm:
+    kw.setdefault("sdo_timeout_s", SDO_TIMEOUT_S)
     return CanArm(can, config=CanArmConfig(heartbeat_ms=HEARTBEAT_MS, **kw), recovery=recovery)
 
 
@@ -131,7 +139,9 @@ def test_an_slcan_adapter_unplugged_from_its_pty_and_plugged_back_is_reopened(ri
     bridge_bus = can.Bus(interface="virtual", channel=can_spec.split(":", 1)[1])
     try:
         with SlcanPtyBridge(bridge_bus, link=tmp_path / "ttyCAN") as bridge:
-            cfg = CanArmConfig(heartbeat_ms=500, pdo_timeout_s=0.05)  # the pty rig's defaults
+            cfg = CanArmConfig(  # the pty rig's PDO timeout
+                heartbeat_ms=HEARTBEAT_MS, pdo_timeout_s=0.05, sdo_timeout_s=SDO_TIMEOUT_S
+            )
             with CanArm(f"slcan:{bridge.port}", config=cfg) as arm:
                 arm.set_torque(True)
                 for _ in range(5):
@@ -189,7 +199,9 @@ def test_a_reconnection_that_fails_still_turns_the_drives_off_blind(rig, adapter
     try:
         spec = can_spec if adapter == "virtual" else f"slcan:{bridge.port}"
         fast = RecoveryPolicy(attempts=2, first_delay_s=0.05, max_delay_s=0.05)
-        cfg = CanArmConfig(heartbeat_ms=500, pdo_timeout_s=0.05)
+        cfg = CanArmConfig(
+            heartbeat_ms=HEARTBEAT_MS, pdo_timeout_s=0.05, sdo_timeout_s=SDO_TIMEOUT_S
+        )
         with CanArm(spec, config=cfg, recovery=fast) as arm:
             arm.set_torque(True)
             arm.command(TARGET)

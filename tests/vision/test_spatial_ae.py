@@ -159,3 +159,30 @@ def test_distinct_features_keep_one_feature_per_moving_thing():
     space = spatial_goal_space(lambda im: code[: len(im)], std, modular=True, code_corr=corr)
     assert space.dim == 4 and [m.tolist() for m in space.modules] == [[0, 1], [2, 3]]
     np.testing.assert_array_equal(space.outcomes(np.zeros((3, 64, 64, 3)))[:, 2:], ball[:3])
+
+
+def test_sae_train_command_says_which_features_move_in_words(tmp_path, capsys):
+    """``ergo sae train`` names the features it keeps as a count of all of them, never as
+    "features: 6 of 8" (which read as six kept when six was the index of the one kept)."""
+    import re
+
+    from explore.cli import main
+    from vision.spatial_ae import load_sae
+    from vision.spatial_code import distinct_features
+
+    images, _ = disc_images(24)
+    data = tmp_path / "d.npz"
+    np.savez(data, images=images)
+    out = tmp_path / "sae"
+    assert main(["sae", "train", "--data", str(data), "--out", str(out), "--iterations", "2",
+                 "--features", "3", "--no-progress"]) == 0  # fmt: skip
+    printed = capsys.readouterr().out
+    config = load_sae(out).config
+    kept = distinct_features(config.code_std, config.code_corr)
+    if kept:
+        listed = ", ".join(map(str, kept))
+        assert f"{len(kept)} of its 3 features move and follow distinct things" in printed
+        assert re.search(rf"\(features? {listed}: one goal-space module each\)", printed), printed
+    else:
+        assert "none of its 3 features moves" in printed, printed
+    assert "held-out explained pixel variance" in printed and printed.count("\n") == 1

@@ -93,9 +93,9 @@ def test_a_damaged_last_record_is_moved_aside_not_deleted(run, capsys):
     assert len(RunStore.read(run).records) == N  # the episode run again
 
 
-def test_readers_say_what_they_leave_out(run, caplog):
+def test_readers_say_what_they_leave_out(run, caplog, capsys):
     """A torn tail left in place (a reader never repairs): ``read_history`` counts its bytes,
-    which export and report name."""
+    which export and report name; ``runs check`` names it too."""
     hist = run / "history.bin"
     data = hist.read_bytes()
     last = _starts(run)[-1]
@@ -105,6 +105,16 @@ def test_readers_say_what_they_leave_out(run, caplog):
     assert history.torn_bytes == len(data) - 7 - last
     assert ergo("report", str(run), "--out", str(run.parent / "report")) == 0
     assert f"left out a torn last record ({history.torn_bytes} bytes" in caplog.text
+    capsys.readouterr()
+    out = run.parent / "ds"
+    assert ergo("export", "lerobot", str(run), "--out", str(out), "--no-video") == 0
+    err = capsys.readouterr().err
+    assert f"left out a torn last record ({history.torn_bytes} bytes" in err, err
+    info = json.loads((out / "meta" / "info.json").read_text())
+    assert info["total_episodes"] == N - 1
+    assert ergo("runs", "check", str(run)) == 0
+    assert f"a torn tail of {history.torn_bytes} bytes" in capsys.readouterr().out
+    assert hist.read_bytes() == data[:-7]  # no reader repaired it
 
 
 # ---- the damage battery ------------------------------------------------------------------------
@@ -140,21 +150,22 @@ def _damage(
     return bytes(out), {i for i, (a, b) in enumerate(pieces) if not a <= at < b}
 
 
-@settings(max_examples=40, deadline=None, suppress_health_check=list(HealthCheck))
-@given(draw=st.data())
-def test_no_single_bit_flip_or_cut_loses_an_undamaged_record(small, tmp_path_factory, draw):
-    data, pieces, source = small
-    originals = [r.to_bytes() for r in RunStore.read(source).records]
-    run = tmp_path_factory.mktemp("battery") / "run"
+def _resume_keeps_every_undamaged_record(
+    source: Path, run: Path, damaged: bytes, intact: set[int], originals: list[bytes]
+) -> None:
+    """``source``'s run copied to ``run`` with ``damaged`` as its history: a reader returns a
+    prefix and counts what it leaves out (or refuses in one line); a resume (or a salvage, then
+    a resume) keeps each ``intact`` record in the history or moves it aside, and every byte of
+    the damaged file is in the history or under ``RUN/salvage/``."""
     shutil.copytree(source, run)
-    damaged, intact = _damage(data, pieces, draw)
     (run / "history.bin").write_bytes(damaged)
 
     # a reader says what it leaves out, or refuses in one line
     try:
         h = read_history(run)
         assert [r.to_bytes() for r in h.records] == originals[: len(h.records)]
-        assert len(damaged) - h.torn_bytes == (pieces[len(h.records) - 1][1] if h.records else 0)
+        kept_end = len(damaged) - h.torn_bytes
+        assert kept_end == (_frame_ends(originals)[len(h.records) - 1] if h.records else 0)
     except RunStoreError as exc:
         assert "\n" not in str(exc)
 
@@ -183,3 +194,47 @@ def test_no_single_bit_flip_or_cut_loses_an_undamaged_record(small, tmp_path_fac
         else 0
     )
     assert (run / "history.bin").stat().st_size + moved == len(damaged)
+
+
+def _frame_ends(originals: list[bytes]) -> list[int]:
+    """Where each record's frame ends in the undamaged history, bytes."""
+    ends, at = [], 0
+    for payload in originals:
+        at += HEADER.size + len(payload)
+        ends.append(at)
+    return ends
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=list(HealthCheck))
+@given(draw=st.data())
+def test_no_single_bit_flip_or_cut_loses_an_undamaged_record(small, tmp_path_factory, draw):
+    data, pieces, source = small
+    originals = [r.to_bytes() for r in RunStore.read(source).records]
+    damaged, intact = _damage(data, pieces, draw)
+    run = tmp_path_factory.mktemp("battery") / "run"
+    _resume_keeps_every_undamaged_record(source, run, damaged, intact, originals)
+
+
+@pytest.mark.slow  # 540 cases: 29 s at load 13 on 2 cores
+def test_every_bit_of_every_record_header_and_every_cut_in_a_header(small, tmp_path):
+    """Exhaustively where the length field misled resume: each of the 96 bits of each record's
+    12-byte frame header (marker, length, checksum) flipped, and the file cut at every byte
+    of each header (the property above samples the rest of the file)."""
+    data, pieces, source = small
+    originals = [r.to_bytes() for r in RunStore.read(source).records]
+    assert [b for _, b in pieces] == _frame_ends(originals)
+    cases = 0
+    for i, (start, _end) in enumerate(pieces):
+        for at in range(start, start + HEADER.size):
+            for bit in range(8):
+                flipped = bytearray(data)
+                flipped[at] ^= 1 << bit
+                intact = {j for j in range(len(pieces)) if j != i}
+                run = tmp_path / f"flip-{at}-{bit}"
+                _resume_keeps_every_undamaged_record(source, run, bytes(flipped), intact, originals)
+                cases += 1
+            intact = set(range(i))  # cut inside record i's header: records 0..i-1 whole
+            run = tmp_path / f"cut-{at}"
+            _resume_keeps_every_undamaged_record(source, run, data[:at], intact, originals)
+            cases += 1
+    assert cases == len(pieces) * HEADER.size * 9

@@ -95,8 +95,11 @@ def test_a_resume_with_a_retrained_model_is_refused(tmp_path):
     kinds = [(e["kind"], e["path"]) for e in run.meta["inputs"]]
     assert kinds == [("model", str(model / "sae.pt")), ("model", str(model / "sae.json"))]
     (model / "sae.pt").write_bytes(b"weights-2")  # retrained
-    with pytest.raises(InputsChanged, match=r"model sae.pt .* changed \(sha256 [0-9a-f]{12} ->"):
+    with pytest.raises(
+        InputsChanged, match=r"model sae.pt .* changed \(sha256 [0-9a-f]{12} ->"
+    ) as info:
         check_inputs(run, config)
+    assert ALLOW_FLAG in str(info.value) and "\n" not in str(info.value)  # the override, 1 line
 
 
 def test_an_older_run_json_without_the_record_resumes_and_gets_one(tmp_path):

@@ -6,6 +6,7 @@ one-line error at connect (docs/reliability.md)."""
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import random
 import termios
@@ -64,7 +65,7 @@ def test_garbled_lines_are_dropped_and_counted_and_good_frames_still_come(pty) -
 
 
 @NO_THREAD_TRACEBACK
-def test_a_port_sending_only_garbage_fails_the_connect_in_one_line(pty) -> None:
+def test_a_port_sending_only_garbage_fails_the_connect_in_one_line(pty, caplog) -> None:
     master, path = pty
     stop = threading.Event()
 
@@ -89,3 +90,5 @@ def test_a_port_sending_only_garbage_fails_the_connect_in_one_line(pty) -> None:
     assert "\n" not in message
     assert "does not answer SDO 0x1000" in message and "garbled line(s)" in message, message
     assert not arm.is_connected
+    # nor a second line from the canopen library ("Transfer aborted by client ...")
+    assert not [r for r in caplog.records if r.levelno >= logging.WARNING], caplog.text
