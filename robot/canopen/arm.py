@@ -454,7 +454,7 @@ class CanArm(Arm):
                 logging.DEBUG if said else logging.WARNING, "torque off %s", self.torque_off_report
             )
             return
-        self.torque_off_report = None
+        before, self.torque_off_report = self.torque_off_report, None
         for attempt in range(2):
             try:
                 with net.guard.hold():
@@ -476,7 +476,9 @@ class CanArm(Arm):
                 self.torque_off_report = (
                     f"not confirmed by {names} (silent): {net.blind_torque_off()}"
                 )
-                log.warning("torque off %s", self.torque_off_report)
+                # said once: the disconnect after a stop sends it again, without a second line
+                level = logging.DEBUG if self.torque_off_report == before else logging.WARNING
+                log.log(level, "torque off %s", self.torque_off_report)
 
     def _drive_to(self, target: State) -> list[int]:
         """Walk every node to ``target`` (OPERATION_ENABLED or SWITCHED_ON) through the
