@@ -438,6 +438,7 @@ class CanArm(Arm):
             except CyclePreemptedError:
                 self._check()  # a safety stop preempted us: say so (SafetyStop)
                 raise
+            self.torque_off_report = None  # an earlier unconfirmed torque off is history
         else:
             self._torque_off()
 
@@ -476,8 +477,9 @@ class CanArm(Arm):
                 self.torque_off_report = (
                     f"not confirmed by {names} (silent): {net.blind_torque_off()}"
                 )
-                # said once: the disconnect after a stop sends it again, without a second line
-                level = logging.DEBUG if self.torque_off_report == before else logging.WARNING
+                # said once: the disconnect after a stop sends it again (to the nodes still
+                # silent), without a second line
+                level = logging.DEBUG if before is not None else logging.WARNING
                 log.log(level, "torque off %s", self.torque_off_report)
 
     def _drive_to(self, target: State) -> list[int]:
