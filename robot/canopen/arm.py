@@ -459,6 +459,7 @@ class CanArm(Arm):
             except CyclePreemptedError:
                 self._check()  # a safety stop preempted us: say so (SafetyStop)
                 raise
+            self.torque_off_report = None  # an earlier unconfirmed torque off is history
         else:
             self._torque_off()
 
@@ -475,7 +476,7 @@ class CanArm(Arm):
                 logging.DEBUG if said else logging.WARNING, "torque off %s", self.torque_off_report
             )
             return
-        self.torque_off_report = None
+        before, self.torque_off_report = self.torque_off_report, None
         for attempt in range(2):
             try:
                 with net.guard.hold():
@@ -497,7 +498,10 @@ class CanArm(Arm):
                 self.torque_off_report = (
                     f"not confirmed by {names} (silent): {net.blind_torque_off()}"
                 )
-                log.warning("torque off %s", self.torque_off_report)
+                # said once: the disconnect after a stop sends it again (to the nodes still
+                # silent), without a second line
+                level = logging.DEBUG if before is not None else logging.WARNING
+                log.log(level, "torque off %s", self.torque_off_report)
 
     def _drive_to(self, target: State) -> list[int]:
         """Walk every node to ``target`` (OPERATION_ENABLED or SWITCHED_ON) through the

@@ -77,6 +77,22 @@ def test_a_linked_file_in_a_received_run_is_refused_and_left_alone(run, victim, 
         assert name in _one_line(capsys) and victim.read_bytes() == before
 
 
+@pytest.mark.parametrize("link", ["symbolic", "hard"])
+def test_a_linked_frames_file_is_refused_and_left_alone(run, victim, capsys, link):
+    """The camera frames the writer would write next (``frames/episode-000003.npz``) linked to
+    a file elsewhere."""
+    target = run / "frames" / "episode-000003.npz"
+    target.parent.mkdir()
+    if link == "symbolic":
+        target.symlink_to(victim)
+    else:
+        os.link(victim, target)
+    assert ergo("explore", "--resume", str(run), "--episodes", "5") == 2
+    line = _one_line(capsys)
+    assert "episode-000003.npz" in line and f"{link} link" in line, line
+    assert victim.read_bytes() == VICTIM
+
+
 def test_a_salvage_folder_linked_elsewhere_is_refused(run, tmp_path, capsys):
     hist = run / "history.bin"
     hist.write_bytes(hist.read_bytes()[:-50] + b"x" * 10)  # damaged: salvage has work

@@ -13,6 +13,7 @@ under load is tests/system/test_signals_bus.py's).
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import select
 import signal
@@ -308,7 +309,7 @@ def _limp_within(backend, seconds: float) -> bool:
 
 @pytest.mark.filterwarnings("error::pytest.PytestUnhandledThreadExceptionWarning")
 @pytest.mark.parametrize("fault", list(WIRE_FAULTS))
-def test_wire_faults_end_with_the_arm_limp_and_at_most_one_line(backend, fault) -> None:
+def test_wire_faults_end_with_the_arm_limp_and_at_most_one_line(backend, fault, caplog) -> None:
     """The arm holds its pose (torque on) through a proxy that garbles, drops, truncates or
     delays what the servos send; it either rides the fault out or stops with one line (a
     ``RobotError``, never another exception, never a thread's traceback). Stopped by a
@@ -344,6 +345,9 @@ def test_wire_faults_end_with_the_arm_limp_and_at_most_one_line(backend, fault) 
         faults = {k: v for k, v in proxy.to_host.counts.__dict__.items() if v}
     assert not backend.torque().any(), (stop, faults, counts)
     print(f"{backend.name} {fault}: {faults}; {stop or 'rode it out'}; {counts}")
+    # an unconfirmed torque off is said once, not again by the disconnect after the stop
+    unconfirmed = [r for r in caplog.records if "torque off not confirmed" in r.getMessage()]
+    assert len([r for r in unconfirmed if r.levelno >= logging.WARNING]) <= 1, caplog.text
     if fault == "garbage-50ms":
         assert stop is None, stop
     if backend.kind == "canopen" and fault.startswith("garbage"):
