@@ -126,6 +126,8 @@ def test_the_preset_s_settings_are_what_the_published_config_says(strategy, algo
     assert str(opts["window"]) in published["win_size"].split()
     assert opts["random_episodes"] == 0 and opts["interest"] == "exponential"
     assert opts["competence"] == "distance"
+    # explauto's NonParametric, the original's inverse model (docs/results_armballs.md, stalls)
+    assert opts["one_outcome"] == "random" and opts["ties"] == "spread"
     goals = {"uniform": "box", "normal": "normal"}[published["interest_model"]]
     assert opts["goals"] == goals
     if goals == "normal":
