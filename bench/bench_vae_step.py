@@ -8,7 +8,7 @@ against ``channels_last`` (model and batch), and ``torch.compile`` of the loss (
 backend; reported as failed, with the reason, where it does not work here).
 
     .venv/bin/python bench/bench_vae_step.py [--steps 40] [--warmup 5] [--batch 64] \
-        [--no-compile]
+        [--no-compile | --compiled-only]
 
 Prints, per variant: the median wall and CPU milliseconds of a step over ``--steps`` steps after
 ``--warmup`` (the first compiled steps include compilation, reported apart), and the steps per
@@ -80,6 +80,7 @@ def main() -> None:
     ap.add_argument("--warmup", type=int, default=5)
     ap.add_argument("--batch", type=int, default=BATCH)
     ap.add_argument("--no-compile", action="store_true")
+    ap.add_argument("--compiled-only", action="store_true", help="only the torch.compile rows")
     args = ap.parse_args()
     load = os.getloadavg()[0]
     print(f"torch {torch.__version__}, {os.cpu_count()} CPUs, load average {load:.1f}, "
@@ -87,9 +88,11 @@ def main() -> None:
     print("| threads | memory format | compiled | wall ms/step | CPU ms/step | steps/s (wall) | "
           "warm-up s |")  # fmt: skip
     print("|---|---|---|---|---|---|---|")
-    variants = [(t, cl, False) for t in (1, 2) for cl in (False, True)]
+    variants = (
+        [] if args.compiled_only else [(t, cl, False) for t in (1, 2) for cl in (False, True)]
+    )
     if not args.no_compile:
-        variants += [(t, False, True) for t in (1, 2)]
+        variants += [(t, cl, True) for t in (1, 2) for cl in (False, True)]
     for threads, channels_last, compiled in variants:
         name = f"| {threads} | {'channels_last' if channels_last else 'contiguous'} | " + (
             "yes" if compiled else "no") + " |"  # fmt: skip
