@@ -9,10 +9,12 @@ For every run of ``CAMPAIGN/STRATEGY/seed-*`` (default strategy ``mge-efr``):
 - the share of the goal-directed episodes 100-999 whose goal was in the ball's module (module 0:
   ``EngineeredGoalSpace`` puts the ball first) and the largest share any one module took;
 - the share of the ball module's episodes played while that module had only ever seen one
-  outcome (the ball at its start), and the random share of the episodes.
+  outcome (the ball at its start), and the random share of the episodes;
+- with ``--interest``, the share of episodes 100-999 after which the ball module's interest
+  exceeded the distractor's (the histories replayed through the runs' own strategies).
 
     .venv/bin/python experiments/armballs_stalls.py runs/stalls/before runs/stalls/after \\
-        [--strategy mge-efr] [--figure docs/img/armballs_stalls.png]
+        [--strategy mge-efr] [--figure docs/img/armballs_stalls.png] [--interest]
 
 Prints one Markdown table per campaign (one row a run), then the summary table (mean +- sd over
 runs, ddof 1; the minimum; runs below the published minimum; Welch's p of each campaign against
@@ -52,6 +54,8 @@ class RunFigures:
     top_share_early: float  # largest share of one module there
     random_share: float  # share of all episodes with random parameters
     blind_ball_share: float  # ball-module episodes played before it saw a second outcome
+    ball_lead_early: float = float("nan")  # share of episodes 100-999 after which the ball's
+    # interest exceeded the distractor's (NaN: not computed); ``--interest``
 
 
 def published_runs(algorithm: str = "MGE-EFR") -> dict[int, np.ndarray]:
@@ -113,16 +117,45 @@ def run_figures(run: Path) -> RunFigures:
     )
 
 
-def campaign_figures(campaign: Path, strategy: str) -> list[RunFigures]:
+def ball_lead_early(run: Path) -> float:
+    """The share of episodes 100-999 after which the ball module's interest (module 0) exceeded
+    the distractor's (module 1), rebuilt by replaying the history through the run's own
+    strategy."""
+    from explore.runs.config import RunConfig
+    from explore.runs.open_run import strategy_for
+    from explore.runs.store import RunStore
+
+    store = RunStore.read(run)  # a reader: cuts nothing
+    strategy = strategy_for(RunConfig.from_dict(store.config, run / "run.json"))
+    lead = []
+    try:
+        for rec in store:
+            strategy.update(rec)
+            if rec.episode >= EARLY[1]:
+                break
+            if rec.episode >= EARLY[0]:
+                interest = strategy.interest.interests()
+                lead.append(interest[BALL_MODULE] > interest[1])
+    finally:
+        store.close()
+    return float(np.mean(lead)) if lead else float("nan")
+
+
+def campaign_figures(campaign: Path, strategy: str, interest: bool = False) -> list[RunFigures]:
     runs = sorted((campaign / strategy).glob("seed-*"), key=lambda p: int(p.name.split("-")[1]))
-    return [run_figures(r) for r in runs if (r / "metrics.csv").exists()]
+    out = [run_figures(r) for r in runs if (r / "metrics.csv").exists()]
+    if interest:
+        for fig, run in zip(out, [r for r in runs if (r / "metrics.csv").exists()], strict=True):
+            fig.ball_lead_early = ball_lead_early(run)
+    return out
 
 
 def runs_table(runs: list[RunFigures], floor: dict[int, float]) -> str:
     """One row a run; ratios below the published minimum in bold."""
     head = ("| seed | bootstrap moves | first move | ball share 100-999 | top module share "
-            "100-999 | " + " | ".join(f"at {n}" for n in AT) + " |")  # fmt: skip
-    lines = [head, "|" + "---|" * (5 + len(AT))]
+            "100-999 | ball's interest above the distractor's, 100-999 | "
+            + " | ".join(f"at {n}" for n in AT) + " |")  # fmt: skip
+    lines = [head, "|" + "---|" * (6 + len(AT))]
     for r in runs:
         cells = [
             f"**{v:.3f}**" if v < floor[n] else f"{v:.3f}"
@@ -130,7 +163,7 @@ def runs_table(runs: list[RunFigures], floor: dict[int, float]) -> str:
         ]
         lines.append(
             f"| {r.seed} | {r.bootstrap_moves} | {r.first_move} | {r.ball_share_early:.2f} | "
-            f"{r.top_share_early:.2f} | " + " | ".join(cells) + " |"
+            f"{r.top_share_early:.2f} | {r.ball_lead_early:.2f} | " + " | ".join(cells) + " |"
         )
     return "\n".join(lines)
 
@@ -202,6 +235,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("campaigns", nargs="+", type=Path, help="campaign folders, first = reference")
     ap.add_argument("--strategy", default="mge-efr")
     ap.add_argument("--figure", type=Path, default=None, help="PNG of every run's curve")
+    ap.add_argument(
+        "--interest", action="store_true", help="replay: how long the ball's interest led early"
+    )
     args = ap.parse_args(argv)
     pub = published_runs()
     floor = {n: float(pub[n].min()) for n in AT}
@@ -211,7 +247,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"ergo: error: {c} has no {args.strategy}/ folder: give a campaign folder of "
                   f"`ergo experiment`", file=sys.stderr)  # fmt: skip
             return 2
-        runs = campaign_figures(c, args.strategy)
+        runs = campaign_figures(c, args.strategy, args.interest)
         named[c.name] = runs
         print(f"## {c}\n\n{runs_table(runs, floor)}\n")
         print(f"random episodes: {np.mean([r.random_share for r in runs]):.4f} of all; "
