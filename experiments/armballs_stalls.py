@@ -157,13 +157,14 @@ def runs_table(runs: list[RunFigures], floor: dict[int, float]) -> str:
             + " | ".join(f"at {n}" for n in AT) + " |")  # fmt: skip
     lines = [head, "|" + "---|" * (6 + len(AT))]
     for r in runs:
+        lead = "-" if np.isnan(r.ball_lead_early) else f"{r.ball_lead_early:.2f}"
         cells = [
             f"**{v:.3f}**" if v < floor[n] else f"{v:.3f}"
             for n, v in zip(AT, r.ratios, strict=True)
         ]
         lines.append(
             f"| {r.seed} | {r.bootstrap_moves} | {r.first_move} | {r.ball_share_early:.2f} | "
-            f"{r.top_share_early:.2f} | {r.ball_lead_early:.2f} | " + " | ".join(cells) + " |"
+            f"{r.top_share_early:.2f} | {lead} | " + " | ".join(cells) + " |"
         )
     return "\n".join(lines)
 
