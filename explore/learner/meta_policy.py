@@ -21,6 +21,7 @@ tail, and at 100k stored episodes a query was no faster than a brute-force scan 
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Sequence
 
 import numpy as np
@@ -32,6 +33,7 @@ REBUILD_TAIL = 1024  # most points left outside the tree below 32k points (bench
 TAIL_FRACTION = 32  # beyond, at most n / 32 outside the tree (rebuild cost amortised, guess)
 TREE_MAX_DIM = 8  # above, a k-d tree query costs about a full scan (bench_meta_policy: 6-D vs 20-D)
 SMALL_SCAN = 256  # below, a plain distance scan beats the matrix-vector one (guess)
+TIES = ("first", "spread")
 
 
 class NearestNeighbourIndex:
@@ -147,6 +149,23 @@ class NearestNeighbourIndex:
                 best_i, best_d = j, dj
         return best_i, best_d
 
+    def nearest_spread(self, query: np.ndarray) -> tuple[int, float]:
+        """Like ``nearest``, but among the points at exactly the smallest distance the one
+        picked by a hash of ``query`` (uniform over them as queries vary, the same for the same
+        query and points: a run stays a function of its seed). Scans every point."""
+        if self._n == 0:
+            raise ValueError("nearest neighbour of an empty index")
+        q = np.asarray(query, dtype=float).reshape(-1)
+        if q.shape != (self.dim,):
+            raise ValueError(f"query has shape {q.shape}, expected ({self.dim},)")
+        dist = np.linalg.norm(self._points[: self._n] - q, axis=1)
+        best = float(dist.min())
+        tied = np.flatnonzero(dist == best)
+        if len(tied) == 1:
+            return int(tied[0]), best
+        key = int.from_bytes(hashlib.blake2b(q.tobytes(), digest_size=8).digest(), "little")
+        return int(tied[key % len(tied)]), best
+
 
 class MetaPolicy:
     """One nearest-neighbour database per goal-space module, sharing the parameters.
@@ -155,14 +174,29 @@ class MetaPolicy:
         context_dim: size of the context vector c (may be 0).
         module_dims: size of each module's goal/outcome vector.
         n_params: size of the parameter vector theta (48 for the DMPs).
+        ties: which of several equally near episodes answers a query: ``"first"`` (the
+            default: the earliest, the same one for every query) or ``"spread"`` (one picked
+            by a hash of the query, ``NearestNeighbourIndex.nearest_spread``).
+
+    ``varied(module)`` says whether a module has seen two different (context, outcome) points:
+    explauto's ``NonParametric`` (the original ArmBalls campaign's inverse model,
+    ``sensorimotor_model/non_parametric.py``, ``bootstrapped_s``) answers a module that has
+    not with uniform random parameters instead of a neighbour (docs/results_armballs.md,
+    "Stalls: cause and fix"); the strategy decides.
     """
 
-    def __init__(self, context_dim: int, module_dims: Sequence[int], n_params: int) -> None:
+    def __init__(
+        self, context_dim: int, module_dims: Sequence[int], n_params: int, ties: str = "first"
+    ) -> None:
+        if ties not in TIES:
+            raise ValueError(f"ties must be one of {', '.join(TIES)}, got {ties!r}")
         self.context_dim = context_dim
         self.module_dims = tuple(int(d) for d in module_dims)
         self.n_params = n_params
+        self.ties = ties
         self.indexes = [NearestNeighbourIndex(context_dim + d) for d in self.module_dims]
         self.thetas: list[list[np.ndarray]] = [[] for _ in self.module_dims]
+        self._varied = [False] * len(self.module_dims)
 
     def add(self, context: np.ndarray, outcomes: Sequence[np.ndarray | None], theta: np.ndarray):
         """Record an episode: ``context`` (context_dim,), ``outcomes[k]`` (module_dims[k],) or
@@ -174,16 +208,25 @@ class MetaPolicy:
         for k, o in enumerate(outcomes):
             if o is None or not np.all(np.isfinite(o)):
                 continue
-            self.indexes[k].add(np.concatenate([c, np.asarray(o, dtype=float).reshape(-1)]))
+            point = np.concatenate([c, np.asarray(o, dtype=float).reshape(-1)])
+            index = self.indexes[k]
+            if not self._varied[k] and len(index) and not np.array_equal(point, index.points[0]):
+                self._varied[k] = True
+            index.add(point)
             self.thetas[k].append(theta)
 
     def size(self, module: int) -> int:
         return len(self.indexes[module])
 
+    def varied(self, module: int) -> bool:
+        """Whether ``module`` has recorded two different (context, outcome) points."""
+        return self._varied[module]
+
     def nearest_theta(self, module: int, context: np.ndarray, goal: np.ndarray) -> np.ndarray:
         """Parameters of the episode nearest to (context, goal) in ``module``, shape (n_params,)."""
         q = np.concatenate([np.asarray(context, float).reshape(-1), np.asarray(goal, float)])
-        i, _ = self.indexes[module].nearest(q)
+        index = self.indexes[module]
+        i, _ = index.nearest_spread(q) if self.ties == "spread" else index.nearest(q)
         return self.thetas[module][i]
 
     def infer(

@@ -16,6 +16,11 @@ and its scripts (``mge_efr.py``, ``mge_representation.py``, ``exploactors.py``,
   (``n_explore`` 4; only the exploit updates interest), the exponential interest average with
   ``win_size`` 1000 (the learned runs' and half of the engineered ones'; the other half's
   500 differ by under 0.02 in exploration ratio, docs/armballs.md), competence -min(d, 2);
+  the original's inverse model (explauto's ``NonParametric`` with nearest-neighbour models):
+  ``one_outcome`` "random" (a module whose recorded outcomes are all one point plays uniform
+  parameters, ``bootstrapped_s`` in ``non_parametric.py``) and ``ties`` "spread" (equally near
+  episodes are not all answered by the earliest: explauto's kd-tree returns one of them that
+  changes as its tree is rebuilt; docs/results_armballs.md, "Stalls: cause and fix");
 - engineered (``rge-efr``, ``mge-efr``): 100 bootstrap episodes, goals uniform in the fixed
   box [-1, 1]^d (interest model ``uniform`` over its sensory bounds), the balls' positions as
   features (form ``cartesian``), the distractor's exactly when the rig's scene has one, no hand
@@ -48,6 +53,8 @@ CORL2018_COMMON: dict[str, Any] = {
     "interest": "exponential",
     "window": 1000,
     "competence": "distance",
+    "one_outcome": "random",
+    "ties": "spread",
 }
 CORL2018_ENGINEERED: dict[str, Any] = {
     "bootstrap": 100,

@@ -89,6 +89,13 @@ class GoalExplorationOptions:
             "exponential" (the original's average, time constant ``window``).
         competence: "scaled" (default: distance over the module's outcome diagonal, capped at
             1) or "distance" (the original's: the distance capped at 2).
+        ties: which of several equally near past episodes the inverse model replays: "first"
+            (default: the earliest) or "spread" (one picked by a hash of the goal;
+            ``MetaPolicy``).
+        one_outcome: what a module plays while every episode it recorded had the same
+            outcome: "nearest" (default: the neighbour, which is then any of them) or "random"
+            (uniform parameters, explore and exploit alike: explauto's ``NonParametric``,
+            the original ArmBalls campaign's inverse model).
     """
 
     bootstrap: int = BOOTSTRAP
@@ -103,6 +110,8 @@ class GoalExplorationOptions:
     n_explore: int = N_EXPLORE
     interest: Literal["window", "exponential"] = "window"
     competence: Literal["scaled", "distance"] = "scaled"
+    ties: Literal["first", "spread"] = "first"
+    one_outcome: Literal["nearest", "random"] = "nearest"
 
     def __post_init__(self) -> None:
         for key in ("bootstrap", "sigma"):
@@ -169,7 +178,8 @@ class GoalExploration(Strategy):
         self.cycle_length = s.n_explore + 1
         self.n_seen = 0
         self.n_goal_episodes = 0  # goal-directed episodes learnt from (the cycle's position)
-        self._goal_cycle: tuple[int, np.ndarray, np.ndarray] | None = None  # module, goal, base
+        # module, goal, base (None: uniform parameters, ``one_outcome="random"``)
+        self._goal_cycle: tuple[int, np.ndarray, np.ndarray | None] | None = None
         self.space: GoalSpace | None = None
         self._last_latent: np.ndarray | None = None  # latent spaces: context of the next move
         self._pending: list[Experience] = []  # records seen before the space exists
@@ -187,7 +197,7 @@ class GoalExploration(Strategy):
             return
         dims = [len(m) for m in space.modules]
         context_dim = 0 if self.scene.resets else space.context_dim
-        self.policy = MetaPolicy(context_dim, dims, self.n_params)
+        self.policy = MetaPolicy(context_dim, dims, self.n_params, ties=self.settings.ties)
         self.low = [np.full(d, np.inf) for d in dims]
         self.high = [np.full(d, -np.inf) for d in dims]
         s = self.settings
@@ -241,7 +251,8 @@ class GoalExploration(Strategy):
             if self.cycle and self.n_goal_episodes % self.cycle_length == 0:
                 # a new goal: its noisy episodes vary the parameters nearest to it now (before
                 # this record joins the database), as ``propose`` computed them
-                base = self.policy.nearest_theta(k, context, record.goal)
+                base = None if self._plays_random(k) else self.policy.nearest_theta(
+                    k, context, record.goal)  # fmt: skip
                 self._goal_cycle = (k, np.asarray(record.goal, dtype=float), base)
             self.n_goal_episodes += 1
         self.policy.add(context, parts, record.theta)
@@ -258,6 +269,11 @@ class GoalExploration(Strategy):
             )  # fmt: skip
         if outcome is not None and isinstance(space, LatentGoalSpace):
             self._last_latent = outcome
+
+    def _plays_random(self, module: int) -> bool:
+        """Whether ``module`` answers with uniform parameters (``one_outcome="random"`` and
+        every outcome it recorded the same)."""
+        return self.settings.one_outcome == "random" and not self.policy.varied(module)
 
     def _scale(self, module: int) -> float:
         """Competence scale of a module: the diagonal of its outcome bounds (at least 1e-6)."""
@@ -291,9 +307,12 @@ class GoalExploration(Strategy):
             return self._random(rng)
         goal = self.sample_goal(module, rng)
         exploit = self.exploit > 0 and rng.random() < self.exploit
-        theta = self.policy.infer(
-            module, self._propose_context(context), goal, rng, 0.0 if exploit else self.sigma
-        )
+        if self._plays_random(module):
+            theta = rng.uniform(-1.0, 1.0, self.n_params)
+        else:
+            theta = self.policy.infer(
+                module, self._propose_context(context), goal, rng, 0.0 if exploit else self.sigma
+            )
         return Proposal(
             theta=theta, goal=goal, module=module, kind="exploit" if exploit else "explore"
         )
@@ -307,14 +326,23 @@ class GoalExploration(Strategy):
             if self.policy.size(module) == 0:
                 return self._random(rng)
             goal = self.sample_goal(module, rng)
-            base = self.policy.nearest_theta(module, ctx, goal)
+            base = None if self._plays_random(module) else self.policy.nearest_theta(
+                module, ctx, goal)  # fmt: skip
         else:
             assert self._goal_cycle is not None
             module, goal, base = self._goal_cycle
         if position < self.cycle_length - 1:
-            noisy = base + rng.normal(0.0, self.sigma, self.n_params) if self.sigma > 0 else base
+            if base is None:  # a module that has seen one outcome (``one_outcome="random"``)
+                noisy = rng.uniform(-1.0, 1.0, self.n_params)
+            elif self.sigma > 0:
+                noisy = base + rng.normal(0.0, self.sigma, self.n_params)
+            else:
+                noisy = base
             return Proposal(np.clip(noisy, -1.0, 1.0), goal.copy(), module, "explore")
-        theta = self.policy.nearest_theta(module, ctx, goal)
+        if self._plays_random(module):
+            theta = rng.uniform(-1.0, 1.0, self.n_params)
+        else:
+            theta = self.policy.nearest_theta(module, ctx, goal)
         return Proposal(np.clip(theta, -1.0, 1.0), goal.copy(), module, "exploit")
 
     def phase(self) -> str:

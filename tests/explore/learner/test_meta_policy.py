@@ -97,3 +97,36 @@ def test_meta_policy_returns_the_nearest_parameters_with_noise_and_clipping():
     around = np.array([policy.infer(0, np.zeros(1), np.zeros(2), rng) for _ in range(2000)])
     assert np.std(around - 0.1) == pytest.approx(0.05, rel=0.05)
     assert np.mean(around) == pytest.approx(0.1, abs=0.005)
+
+
+def test_spread_ties_pick_among_equally_near_points_by_the_query_and_first_picks_the_earliest():
+    first = MetaPolicy(context_dim=0, module_dims=[2], n_params=3)
+    spread = MetaPolicy(context_dim=0, module_dims=[2], n_params=3, ties="spread")
+    rest = np.array([0.6, 0.6])  # where the ball lies in most episodes: all equally near
+    for i in range(40):
+        for policy in (first, spread):
+            policy.add(np.zeros(0), [rest], np.full(3, i / 100))
+    for policy in (first, spread):
+        policy.add(np.zeros(0), [np.array([-0.9, -0.9])], np.full(3, 0.99))
+    rng = np.random.default_rng(1)
+    goals = rng.uniform(0.0, 1.0, (200, 2))  # every one nearer to the rest position
+    picked = [spread.nearest_theta(0, np.zeros(0), g)[0] for g in goals]
+    assert {first.nearest_theta(0, np.zeros(0), g)[0] for g in goals} == {0.0}
+    assert len(set(picked)) >= 35  # spread over the 40 tied episodes
+    assert 0.99 not in picked  # never a farther point
+    again = [spread.nearest_theta(0, np.zeros(0), g)[0] for g in goals]
+    assert picked == again  # a function of the query: a resumed run replays the same
+    assert spread.nearest_theta(0, np.zeros(0), np.array([-1.0, -1.0]))[0] == 0.99
+    with pytest.raises(ValueError, match="ties"):
+        MetaPolicy(0, [2], 3, ties="random")
+
+
+def test_a_module_is_varied_once_it_has_recorded_two_different_points():
+    policy = MetaPolicy(context_dim=1, module_dims=[2, 2], n_params=2)
+    for _ in range(5):
+        policy.add(np.zeros(1), [np.array([0.6, 0.6]), None], np.zeros(2))
+    assert not policy.varied(0) and not policy.varied(1)
+    policy.add(np.zeros(1), [np.array([0.6, 0.6]), np.array([0.1, 0.2])], np.zeros(2))
+    assert not policy.varied(0) and not policy.varied(1)  # one point each so far
+    policy.add(np.ones(1), [np.array([0.6, 0.6]), np.array([0.1, 0.2])], np.zeros(2))
+    assert policy.varied(0) and policy.varied(1)  # the context differs: another point

@@ -86,15 +86,21 @@ def test_the_published_preset_cycles_four_noisy_episodes_and_one_exploit_per_goa
     opts = {**preset_options("corl2018", "mge-efr"), "bootstrap": 20}
     recs = run(tmp_path / "r", "mge-efr", opts, "arm2balls", 120)
     goal_directed = recs[20:]
+    rest = recs[0].ball
+    ball_moved = any(not np.array_equal(r.ball, rest) for r in recs[:20])
     for start in range(0, len(goal_directed), 5):
         cycle = goal_directed[start : start + 5]
         assert [r.kind for r in cycle] == ["explore"] * 4 + ["exploit"]
         assert len({r.module for r in cycle}) == 1
         assert all(np.array_equal(r.goal, cycle[0].goal) for r in cycle)
         assert cycle[0].goal.shape == (2,) and np.all(np.abs(cycle[0].goal) <= 1)
-        # the noisy episodes vary one set of parameters by sigma 0.05 (clipped to [-1, 1])
-        thetas = np.array([r.theta for r in cycle[:4]])
-        assert np.max(np.abs(thetas - thetas.mean(axis=0))) < 0.3
+        # the noisy episodes vary one set of parameters by sigma 0.05 (clipped to [-1, 1]),
+        # except in a ball module that has seen the ball at rest only (uniform parameters:
+        # test_a_module_that_saw_one_outcome_plays_uniform_parameters_in_the_preset)
+        if cycle[0].module == 1 or ball_moved:
+            thetas = np.array([r.theta for r in cycle[:4]])
+            assert np.max(np.abs(thetas - thetas.mean(axis=0))) < 0.3
+        ball_moved = ball_moved or any(not np.array_equal(r.ball, rest) for r in cycle)
     # two modules (ball, distractor), no hand; RGE-EFR: (ball, distractor) as one 4-D goal
     assert {r.module for r in goal_directed} == {0, 1}
     rge = run(tmp_path / "g", "rge-efr", {**preset_options("corl2018", "rge-efr"),
@@ -126,6 +132,8 @@ def test_the_preset_s_settings_are_what_the_published_config_says(strategy, algo
     assert str(opts["window"]) in published["win_size"].split()
     assert opts["random_episodes"] == 0 and opts["interest"] == "exponential"
     assert opts["competence"] == "distance"
+    # explauto's NonParametric, the original's inverse model (docs/results_armballs.md, stalls)
+    assert opts["one_outcome"] == "random" and opts["ties"] == "spread"
     goals = {"uniform": "box", "normal": "normal"}[published["interest_model"]]
     assert opts["goals"] == goals
     if goals == "normal":
@@ -247,3 +255,38 @@ def test_rig_outcome_datasets_spread_both_balls_over_the_square(tmp_path):
     assert images[..., 2].max() == 255 and images[..., 0].max() == 255
     assert main(["dataset", "outcomes", "--rig", "armballs", "--n", "5", "--distractor",
                  "--out", str(out)]) == 2  # fmt: skip
+
+
+def _blind_ball_cycles(records) -> tuple[list[float], list[float]]:
+    """Spread (sd) of the noisy parameters of each goal cycle of the ball's module (module 0),
+    split by whether the ball had ever left its start when the cycle began."""
+    start = records[0].ball
+    blind, seeing, varied = [], [], False
+    goal_directed = [r for r in records if r.module >= 0]
+    first = records.index(goal_directed[0])
+    varied = any(not np.array_equal(r.ball, start) for r in records[:first])
+    for c in range(0, len(goal_directed) - 4, 5):
+        cycle = goal_directed[c : c + 5]
+        if cycle[0].module == 0:
+            spread = float(np.std(np.diff([r.theta for r in cycle[:4]], axis=0)))
+            (seeing if varied else blind).append(spread)
+        varied = varied or any(not np.array_equal(r.ball, start) for r in cycle)
+    return blind, seeing
+
+
+def test_a_module_that_saw_one_outcome_plays_uniform_parameters_in_the_preset(tmp_path):
+    opts = {**preset_options("corl2018", "mge-efr"), "bootstrap": 5}
+    records = run(tmp_path / "random", "mge-efr", opts, "arm2balls", 150, seed=3)
+    blind, seeing = _blind_ball_cycles(records)
+    assert len(blind) >= 1  # the ball lay still through the bootstrap and a cycle or more
+    assert min(blind) > 0.5  # independent uniform draws in [-1, 1]: sd of a difference 0.82
+    assert all(s < 0.15 for s in seeing)  # afterwards: one base, noise 0.05
+    nearest = run(tmp_path / "nearest", "mge-efr", {**opts, "one_outcome": "nearest"},
+                  "arm2balls", 150, seed=3)  # fmt: skip
+    blind, _ = _blind_ball_cycles(nearest)
+    assert blind and max(blind) < 0.15  # the earliest episode, varied by the noise
+    for cut in (23, 24, 25, 26, 27):  # resumed anywhere in a cycle: the same history
+        out = tmp_path / f"cut-{cut}"
+        run(out, "mge-efr", opts, "arm2balls", cut, seed=3)
+        resumed = run(out, "mge-efr", opts, "arm2balls", 150, seed=3)
+        assert all(a.equals(b) for a, b in zip(records, resumed, strict=True)), cut
