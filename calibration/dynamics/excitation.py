@@ -40,6 +40,7 @@ SINE_TONES_HZ = (0.4, 1.1, 2.7)
 SINE_S = 3.0
 HELD_OUT_TONES_HZ = (0.6, 1.7)
 HELD_OUT_S = 3.0
+HELD_OUT_NAME = "held_out"
 HOLD_S = 0.5  # the base pose held before each segment: the arm starts still
 
 
@@ -102,7 +103,7 @@ def held_out_segment(spec: ArmSpec, rate_hz: float = CONTROL_RATE_HZ) -> Segment
         axis=1,
     )
     commands = np.clip(np.concatenate([hold, moving, hold]), spec.lower, spec.upper)
-    return Segment("held_out", commands)
+    return Segment(HELD_OUT_NAME, commands)
 
 
 def plan(spec: ArmSpec, joints: list[int] | None = None) -> list[Segment]:

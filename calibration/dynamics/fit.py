@@ -26,6 +26,7 @@ Units: rad, s, N.m, kg.m^2.
 
 from __future__ import annotations
 
+import io
 import logging
 import math
 import time
@@ -34,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from calibration.dynamics.excitation import HELD_OUT_NAME as HELD_OUT
 from calibration.dynamics.recording import Recording, RecordingError
 from calibration.store import CalibrationError
 from sim.servo_model import NOMINAL, ServoModel
@@ -55,8 +57,10 @@ MAX_DELAY_S = 0.08  # the fit's bound on the delay (guess: no USB-serial link is
 DELAY_GRID_S = 0.005  # the first estimate's grid: the twin's physics step
 POSITION_SCALE = 0.01  # rad: residuals are in units of about half a degree
 MAX_ITERS = 40  # Gauss-Newton iterations (measured: 8-15 reach the optimum on the twin)
+# A fitted twin this close to the arm on the held-out trajectory is good whatever the nominal
+# does (an arm like the nominal twin): a tenth of an XL-320 position step (0.29 deg; guess)
+RMS_FLOOR_RAD = math.radians(0.03)
 ALPHA = 0.05  # confidence level of the intervals: 95 %
-HELD_OUT = "held_out"
 
 
 class FitError(CalibrationError):
@@ -320,9 +324,11 @@ def fit(rec: Recording, max_iters: int = MAX_ITERS, verbose: bool = False) -> Fi
         n_threads=2,
     )
     try:
+        quiet = {} if verbose else {"output": io.StringIO()}  # the backend's iteration log
         opt_params, result = sysid.optimize(
-            params, residual_fn, optimizer="mujoco", verbose=verbose, max_iters=max_iters
-        )
+            params, residual_fn, optimizer="mujoco", verbose=verbose, max_iters=max_iters,
+            **quiet,
+        )  # fmt: skip
         # The cost has kinks where the delay crosses a physics step (a command lands in the
         # next step), where Gauss-Newton can stop short: the delay is searched again on a
         # 1 ms grid with the other parameters fitted, and the fit resumed from the best.
@@ -330,7 +336,7 @@ def fit(rec: Recording, max_iters: int = MAX_ITERS, verbose: bool = False) -> Fi
         if moved:
             opt_params, result = sysid.optimize(
                 opt_params, residual_fn, optimizer="mujoco", verbose=verbose,
-                max_iters=max_iters,
+                max_iters=max_iters, **quiet,
             )  # fmt: skip
         x = opt_params.as_vector()
         residuals, _, _ = residual_fn(x, opt_params)
@@ -376,7 +382,7 @@ def fit(rec: Recording, max_iters: int = MAX_ITERS, verbose: bool = False) -> Fi
         iterations=len(result.extras.get("objective", [])) if hasattr(result, "extras") else 0,
         fit_s=time.monotonic() - t_start,
     )
-    if not out.held_out_rms_fitted < out.held_out_rms_nominal:
+    if out.held_out_rms_fitted > max(out.held_out_rms_nominal, RMS_FLOOR_RAD):
         raise FitError(
             f"the fitted twin is no closer to the arm than the nominal one on the held-out "
             f"trajectory (RMS {math.degrees(out.held_out_rms_fitted):.2f} deg against "
