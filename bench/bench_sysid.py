@@ -40,6 +40,7 @@ TOLERANCE = 0.15  # the issue's: within 15 % of the hidden value (or the interva
 
 def serve(bus: str, seed: int, hidden: Path) -> tuple[subprocess.Popen, str]:
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    log = open(hidden.with_suffix(".server.log"), "w")  # noqa: SIM115 - lives with the server
     proc = subprocess.Popen(
         [
             *ERGO,
@@ -56,7 +57,7 @@ def serve(bus: str, seed: int, hidden: Path) -> tuple[subprocess.Popen, str]:
         cwd=ROOT,
         env=env,
         stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
+        stderr=log,
         text=True,
     )
     queue: Queue[str] = Queue()
@@ -75,7 +76,7 @@ def serve(bus: str, seed: int, hidden: Path) -> tuple[subprocess.Popen, str]:
         started = line.startswith("stand-in")
     if port is None or not started:
         proc.kill()
-        raise SystemExit(f"server did not start: {proc.stderr.read()[-2000:]}")
+        raise SystemExit(f"server did not start: {hidden.with_suffix('.server.log').read_text()}")
     return proc, port
 
 
@@ -123,6 +124,8 @@ def one(bus: str, seed: int, work: Path) -> dict:
     out = {"bus": bus, "seed": seed, "rc": done.returncode, "wall_s": round(wall, 1)}
     if done.returncode != 0:
         out["error"] = (done.stderr.strip().splitlines() or ["?"])[-1]
+        out["server_log_tail"] = hidden_path.with_suffix(".server.log").read_text()[-1500:]
+        out["server_rc"] = proc.returncode
         return out
     data = store.load("dynamics", rig, work)
     truth = read_hidden(hidden_path).servos
@@ -172,10 +175,16 @@ def main() -> int:
         for bus in args.buses:
             for seed in args.seeds:
                 r = one(bus, seed, Path(tmp))
+                if "cut short" in r.get("error", ""):  # the link lost on a loaded machine: again
+                    print(f"== {bus} seed {seed}: {r['error'][:160]}... once more", flush=True)
+                    first = r["error"]
+                    r = one(bus, seed, Path(tmp))
+                    r["first_attempt_error"] = first
                 results.append(r)
                 print(f"== {bus} seed {seed}: rc {r['rc']}, wall {r['wall_s']} s", flush=True)
                 if "error" in r:
                     print(f"   error: {r['error']}")
+                    print(f"   server (rc {r['server_rc']}): {r['server_log_tail']}")
                     continue
                 print(
                     f"   record {r['record_s']} s, fit {r['fit_s']} s; held-out RMS nominal "

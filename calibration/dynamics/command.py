@@ -44,6 +44,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help=f"readings per 25 ms tick (default {TWIN_READS_PER_TICK} on the twin, "
         f"{BUS_READS_PER_TICK} on a bus)",
     )  # fmt: skip
+    p.add_argument(
+        "--joints", nargs="+", default=None, metavar="NAME",
+        help="excite only these joints (default all); the others keep the nominal servos",
+    )  # fmt: skip
     p.add_argument("--no-report", action="store_true", help="write no report")
 
 
@@ -115,6 +119,20 @@ def _arm(args: argparse.Namespace) -> tuple[Any, Any, str]:
     return arm, _RealClock(), bus.kind
 
 
+def _joint_indices(spec: Any, joints: list[str] | None) -> list[int] | None:
+    from calibration.store import CalibrationError
+
+    if joints is None:
+        return None
+    unknown = [j for j in joints if j not in spec.names]
+    if unknown:
+        raise CalibrationError(
+            f"--joints: unknown joint(s) {', '.join(unknown)}; the arm's are "
+            f"{', '.join(spec.names)}"
+        )
+    return [spec.names.index(j) for j in dict.fromkeys(joints)]
+
+
 def run(args: argparse.Namespace) -> int:
     """The command; raises ``CalibrationError`` (one line) on any failure."""
     from calibration import store
@@ -133,7 +151,7 @@ def run(args: argparse.Namespace) -> int:
         reads = args.reads_per_tick or (
             TWIN_READS_PER_TICK if backend == "twin" else BUS_READS_PER_TICK
         )
-        segments = excitation.plan(arm.spec)
+        segments = excitation.plan(arm.spec, _joint_indices(arm.spec, args.joints))
         total = sum(len(s.commands) for s in segments) / 40.0
         print(f"recording on {backend}: {len(segments)} segments, {total:.0f} s; Ctrl-C stops")
         import time

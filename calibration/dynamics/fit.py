@@ -253,6 +253,8 @@ def fit(rec: Recording, max_iters: int = MAX_ITERS, verbose: bool = False) -> Fi
     spec = arm_spec()
     delay0 = first_delay(rec, spec)
     params = sysid.ParameterDict()
+    # a joint without its own segment keeps the nominal servo (frozen: not fitted)
+    excited = [name for name in JOINTS if name in rec.segment_names]
     for k, name in enumerate(JOINTS):
         for field_name in FITTED:
             lo, hi = RATIO_BOUNDS[field_name]
@@ -260,6 +262,7 @@ def fit(rec: Recording, max_iters: int = MAX_ITERS, verbose: bool = False) -> Fi
             params.add(
                 sysid.Parameter(
                     f"{name}.{field_name}", 0.0, math.log(lo), math.log(hi),
+                    frozen=name not in excited,
                     modifier=_modifier(name, field_name, nominal),
                 )
             )  # fmt: skip
@@ -348,11 +351,13 @@ def fit(rec: Recording, max_iters: int = MAX_ITERS, verbose: bool = False) -> Fi
         raise FitError(f"the fit diverged (parameters {x.tolist()})")
     values: dict[str, np.ndarray] = {}
     intervals: dict[str, np.ndarray] = {}
-    names = opt_params.keys()
+    names = opt_params.get_non_frozen_parameter_names()  # the Jacobian's columns
     for field_name in FITTED:
         nominal = NOMINAL.array(field_name)
         xs = np.array([float(opt_params[f"{j}.{field_name}"].value[0]) for j in JOINTS])
-        hs = np.array([half[names.index(f"{j}.{field_name}")] for j in JOINTS])
+        hs = np.array(
+            [half[names.index(f"{j}.{field_name}")] if j in excited else 0.0 for j in JOINTS]
+        )
         values[field_name] = nominal * np.exp(xs)
         with np.errstate(over="ignore"):
             intervals[field_name] = np.stack(
@@ -389,6 +394,9 @@ def fit(rec: Recording, max_iters: int = MAX_ITERS, verbose: bool = False) -> Fi
             f"{math.degrees(out.held_out_rms_nominal):.2f} deg): the recording does not "
             "show the servos' dynamics (an arm blocked, loose, or not this model)"
         )
+    if len(excited) < len(JOINTS):
+        kept = [j for j in JOINTS if j not in excited]
+        out.notes.append(f"{', '.join(kept)} not recorded: nominal servos kept")
     for field_name in FITTED:
         lo, hi = RATIO_BOUNDS[field_name]
         ratio = values[field_name] / NOMINAL.array(field_name)
