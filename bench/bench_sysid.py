@@ -169,9 +169,12 @@ def main() -> int:
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     p.add_argument("--buses", nargs="+", default=["dynamixel", "canopen"])
     p.add_argument("--out", type=Path, default=None, help="also write the JSON summary here")
+    p.add_argument("--keep", type=Path, default=None, help="keep recordings and reports here")
     args = p.parse_args()
     results = []
-    with tempfile.TemporaryDirectory(prefix="bench-sysid-") as tmp:
+    with tempfile.TemporaryDirectory(prefix="bench-sysid-") as scratch:
+        tmp = args.keep or scratch
+        Path(tmp).mkdir(parents=True, exist_ok=True)
         for bus in args.buses:
             for seed in args.seeds:
                 r = one(bus, seed, Path(tmp))

@@ -277,7 +277,9 @@ def fit(rec: Recording, max_iters: int = MAX_ITERS, verbose: bool = False) -> Fi
     )
     segments = _segments(rec)
     sensors = [f"{j}_pos" for j in JOINTS]
-    raw: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+    # each segment's commands, by index: the control series given to mujoco.sysid carries
+    # only that index (the rollout builds the delayed targets from the commands themselves)
+    raw: list[tuple[np.ndarray, np.ndarray]] = []
     sequences = []
     model0 = spec.compile()
     _, _, qpos_idx = _indices(model0)
@@ -288,9 +290,11 @@ def fit(rec: Recording, max_iters: int = MAX_ITERS, verbose: bool = False) -> Fi
         qpos = np.zeros(model0.nq)
         qpos[qpos_idx] = meas[0]
         state0 = sysid.create_initial_state(model0, qpos, np.zeros(model0.nv))
-        raw[state0.tobytes()] = (ct - t0, cmd)
         n_steps = math.ceil((mt[-1] - t0) / dt) + 1
-        control = sysid.TimeSeries(np.arange(n_steps) * dt, np.zeros((n_steps, model0.nu)))
+        control = sysid.TimeSeries(
+            np.arange(n_steps) * dt, np.full((n_steps, model0.nu), float(len(raw)))
+        )
+        raw.append((ct - t0, cmd))
         measured = sysid.TimeSeries.from_names(mt - t0, meas, model0, names=sensors)
         sequences.append(
             sysid.ModelSequences(
@@ -305,7 +309,7 @@ def fit(rec: Recording, max_iters: int = MAX_ITERS, verbose: bool = False) -> Fi
         shifted = []
         for i, ts in enumerate(control_signal):
             delay = float(param_dicts[i // n_chunks]["delay"].value[0]) * DELAY_UNIT_S
-            ct, cmd = raw[np.asarray(initial_states[i]).tobytes()]
+            ct, cmd = raw[round(float(ts.data[0, 0]))]
             u = np.zeros((len(ts.times), model0.nu))
             u[:, act_idx] = delayed_control(ct, cmd, ts.times, delay, dt)
             shifted.append(sysid.TimeSeries(ts.times, u))

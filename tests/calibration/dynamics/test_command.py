@@ -121,3 +121,20 @@ def test_the_twin_rig_builds_its_servos_from_the_fit_and_run_json_records_it(tmp
     path.write_text("{")
     with pytest.raises(RigError, match=r"dynamics.json: not valid JSON .* not ignored"):
         make_rig(RigConfig("sim", "arm7"))
+
+
+def test_the_gymnasium_env_takes_the_rig_id(tmp_path, monkeypatch):
+    gym = pytest.importorskip("gymnasium")
+    import explore.export.gym_env  # noqa: F401 - registers the environments
+
+    monkeypatch.setenv(store.ENV_DIR, str(tmp_path))
+    store.save(
+        "dynamics", "arm8",
+        {"servos": TRUTH.to_dict(), "recording": {"path": "r.npz", "sha256": "0" * 64},
+         "held_out_rms_rad": {"nominal": 0.02, "fitted": 0.001}},
+    )  # fmt: skip
+    env = gym.make("ergo_explore/ArmBall-v0", rig_id="arm8")
+    try:
+        assert env.unwrapped.rig.twin.servos == TRUTH
+    finally:
+        env.close()
