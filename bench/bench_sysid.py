@@ -99,6 +99,31 @@ def joints_from_truth(hidden_path: Path, rig: str, cal_dir: Path) -> None:
     )
 
 
+def truth_floor(rec_path: Path, hidden_path: Path) -> dict:
+    """The held-out RMS error of the hidden servos themselves (their delay plus the bus's
+    transport, the best of 0-30 ms more), deg: how close any fit can come on this recording."""
+    from calibration.dynamics.fit import arm_spec, segment_error
+    from calibration.dynamics.recording import Recording
+
+    rec = Recording.load_file(rec_path)
+    truth = read_hidden(hidden_path).servos
+    spec = arm_spec()
+    best = min(
+        (
+            math.degrees(
+                float(
+                    np.sqrt(
+                        np.mean(segment_error(truth.replace(delay_s=d), rec, "held_out", spec) ** 2)
+                    )
+                )
+            ),
+            d,
+        )
+        for d in truth.delay_s + np.arange(0.0, 0.031, 0.002)
+    )
+    return {"held_out_rms_deg": best[0], "delay_s": best[1]}
+
+
 def one(bus: str, seed: int, work: Path) -> dict:
     hidden_path = work / f"hidden-{bus}-{seed}.json"
     rig = f"s{seed}-{bus}"
@@ -151,6 +176,7 @@ def one(bus: str, seed: int, work: Path) -> dict:
         "ok": bool(abs(vd / td - 1.0) <= TOLERANCE or lo <= td <= hi),
     }
     rms = data["held_out_rms_rad"]
+    out["truth_floor"] = truth_floor(work / rig / "dynamics_recording.npz", hidden_path)
     out.update(
         params=verdict,
         held_out_rms_deg={
@@ -193,6 +219,11 @@ def main() -> int:
                     f"   record {r['record_s']} s, fit {r['fit_s']} s; held-out RMS nominal "
                     f"{r['held_out_rms_deg']['nominal']:.3f} deg, fitted "
                     f"{r['held_out_rms_deg']['fitted']:.3f} deg ({r['ratio']:.1f}x)"
+                )
+                floor = r["truth_floor"]
+                print(
+                    f"   the hidden servos: held-out RMS {floor['held_out_rms_deg']:.3f} "
+                    f"deg (at delay {floor['delay_s'] * 1e3:.1f} ms)"
                 )
                 for f in FIELDS:
                     v = r["params"][f]
