@@ -89,3 +89,13 @@ def test_a_fit_that_does_not_reach_the_held_out_motion_is_refused(truth_recordin
     spliced.measured[mask] = other.measured[mask]
     with pytest.raises(FitError, match=r"no closer to the arm than the nominal one"):
         fit(spliced)
+
+
+def test_a_hole_in_the_readings_ends_a_run_at_the_ceiling():
+    from calibration.dynamics.checks import _longest_run
+
+    held = np.array([1, 1, 1, 1, 1, 0], bool)
+    stalled = np.array([0.0, 0.1, 0.2, 1.2, 1.3, 1.4])  # the host stalled 1 s after 0.2 s
+    assert _longest_run(held, stalled) == pytest.approx(0.2)
+    steady = np.array([0.0, 0.1, 0.2, 0.3, 0.4, 0.5])
+    assert _longest_run(held, steady) == pytest.approx(0.5)
