@@ -97,5 +97,5 @@ def test_a_hole_in_the_readings_ends_a_run_at_the_ceiling():
     held = np.array([1, 1, 1, 1, 1, 0], bool)
     stalled = np.array([0.0, 0.1, 0.2, 1.2, 1.3, 1.4])  # the host stalled 1 s after 0.2 s
     assert _longest_run(held, stalled) == pytest.approx(0.2)
-    steady = np.array([0.0, 0.1, 0.2, 0.3, 0.4, 0.5])
-    assert _longest_run(held, steady) == pytest.approx(0.5)
+    steady = np.array([0.0, 0.05, 0.1, 0.15, 0.2, 0.25])
+    assert _longest_run(held, steady) == pytest.approx(0.25)
