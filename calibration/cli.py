@@ -117,6 +117,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     joints.add_argument("--joints", nargs="*", default=None, help="joint names (default all)")
     joints.set_defaults(func=_joints)
 
+    dyn = cal.add_parser(
+        "dynamics", help="the twin's servos fitted to the arm's recorded motion (mujoco.sysid)"
+    )
+    common(dyn)
+    from calibration.dynamics.command import add_arguments as dynamics_arguments
+
+    dynamics_arguments(dyn)
+    dyn.set_defaults(func=lambda a: _run(_dynamics_impl, a))
+
     show = cal.add_parser("show", help="validate and summarise a rig's calibration files")
     common(show)
     show.set_defaults(func=_show)
@@ -481,7 +490,17 @@ def _show(args: argparse.Namespace) -> int:
     return _run(_show_impl, args)
 
 
+def _dynamics_impl(args: argparse.Namespace) -> int:
+    from calibration.dynamics.command import run
+
+    return run(args)
+
+
 def _summary(kind: str, data: dict[str, Any]) -> str:
+    if kind == "dynamics":
+        from calibration.dynamics.command import describe
+
+        return describe(data)
     if kind == "camera":
         k = data["camera_matrix"]
         sd = data.get("std_px") or {}

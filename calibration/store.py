@@ -1,4 +1,5 @@
-"""Calibration files: one versioned JSON file per kind (camera, arena, joints) per rig id.
+"""Calibration files: one versioned JSON file per kind (camera, arena, joints, dynamics) per
+rig id (dynamics: the twin's servos fitted to the rig's arm, ``calibration.dynamics``).
 
 Layout: ``<root>/<rig_id>/<kind>.json`` where ``root`` is, in order of precedence, the
 ``--dir`` option, the ``ERGO_CALIBRATION_DIR`` environment variable, or
@@ -27,9 +28,9 @@ from typing import Any
 SCHEMA = "ergo-explore/calibration"
 ENV_DIR = "ERGO_CALIBRATION_DIR"
 DEFAULT_DIR = Path("~/.config/ergo-explore/calibration")
-KINDS = ("camera", "arena", "joints")
+KINDS = ("camera", "arena", "joints", "dynamics")
 # Current payload version per kind; bump when a payload's fields change meaning.
-VERSIONS = {"camera": 1, "arena": 1, "joints": 1}
+VERSIONS = {"camera": 1, "arena": 1, "joints": 1, "dynamics": 1}
 _RIG_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
 
 
@@ -228,10 +229,28 @@ def _validate_joints(c: _Checker) -> None:
             c.fail("lower", f"of joint {name} must be below its upper limit")
 
 
+def _validate_dynamics(c: _Checker) -> None:
+    from sim.servo_model import ServoModel, ServoModelError
+
+    try:
+        ServoModel.from_dict(c.get("servos"))
+    except ServoModelError as exc:
+        c.fail("servos", f"is not a servo model ({exc})")
+    rec = c.get("recording")
+    if not isinstance(rec, dict) or not isinstance(rec.get("sha256"), str):
+        c.fail("recording", "must name the recording fitted (path, sha256)")
+    rms = c.get("held_out_rms_rad")
+    if not isinstance(rms, dict) or not all(
+        _is_matrix(rms.get(k), ()) for k in ("nominal", "fitted")
+    ):
+        c.fail("held_out_rms_rad", "must hold the held-out RMS errors nominal and fitted, rad")
+
+
 VALIDATORS: dict[str, Callable[[_Checker], None]] = {
     "camera": _validate_camera,
     "arena": _validate_arena,
     "joints": _validate_joints,
+    "dynamics": _validate_dynamics,
 }
 
 

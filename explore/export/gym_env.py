@@ -69,11 +69,12 @@ class _TwinGoalEnv(gym.Env):
     # whether every step ends the episode (the goal does not: reaching it ends nothing)
     TERMINATES_EVERY_STEP: ClassVar[bool] = False
 
-    def __init__(self, render_mode: str | None = None) -> None:
+    def __init__(self, render_mode: str | None = None, rig_id: str = "twin") -> None:
+        # rig_id: the twin's servos are that rig's fit (``ergo calibrate dynamics``), if any
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.render_mode = render_mode
-        self.rig: Rig = make_rig(RigConfig("sim", "twin", {"render_size": [RENDER_SIDE] * 2}))
+        self.rig: Rig = make_rig(RigConfig("sim", rig_id, {"render_size": [RENDER_SIDE] * 2}))
         self.rig.connect()
         self.spec_arm = self.rig.arm.spec
         n = self.spec_arm.n
@@ -173,8 +174,10 @@ class ArmBallEnv(_TwinGoalEnv):
     with Gaussian policies want ``normalized_actions=True``, on which Gymnasium's checker has
     nothing to remark."""
 
-    def __init__(self, render_mode: str | None = None, normalized_actions: bool = False) -> None:
-        super().__init__(render_mode)
+    def __init__(
+        self, render_mode: str | None = None, normalized_actions: bool = False, rig_id: str = "twin"
+    ) -> None:
+        super().__init__(render_mode, rig_id)
         spec = self.spec_arm
         self.normalized_actions = bool(normalized_actions)
         if self.normalized_actions:

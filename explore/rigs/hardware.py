@@ -199,12 +199,14 @@ def joint_setup(
 def calibration_files(config: RigConfig) -> list[tuple[str, Path]]:
     """(kind, path) of the calibration files a physical rig reads that exist: its joint
     calibration, its arena calibration and the camera calibration beside it (which the arena
-    file is checked against); none for a rig with nothing physical attached."""
+    file is checked against); for the ``sim`` rig its fitted servos (``dynamics.json``), if
+    any; none for other rigs with nothing physical attached."""
     from calibration.store import calibration_path
     from explore.rigs.rig import is_physical
 
-    if not is_physical(config.name):
-        return []
+    if not is_physical(config.name):  # the twin reads its rig id's fitted servos, if any
+        dynamics = calibration_path("dynamics", config.rig_id)
+        return [("dynamics", dynamics)] if config.name == "sim" and dynamics.is_file() else []
     named = config.options.get("arena_calibration")
     arena = Path(named).expanduser() if named else calibration_path("arena", config.rig_id)
     files = [

@@ -12,7 +12,7 @@ from explore.learner.scene import TWIN_ARENA, Scene
 from explore.options import BadOption
 from explore.rigs.ball import tracker_locator, twin_arena_model
 from explore.rigs.clock import TwinClock
-from explore.rigs.rig import Rig, RigConfig
+from explore.rigs.rig import Rig, RigConfig, RigError
 from explore.rigs.video import VideoOptions
 from robot.watchdog import Watchdog
 from sim import RENDER_QUALITIES
@@ -102,7 +102,10 @@ def make_rig(config: RigConfig, options: Options) -> Rig:
     """The twin rig (unconnected) with ``options``."""
     walk = options.distractor == "walk"
     scene = SCENE_DISTRACTOR if walk else SCENE
-    twin = Twin(scene, render_size=options.render_size, render_quality=options.render_quality)
+    twin = Twin(
+        scene, render_size=options.render_size, render_quality=options.render_quality,
+        servos=rig_servos(config),
+    )  # fmt: skip
     camera = SimCamera(twin)
     locator = tracker_locator(twin_arena_model(camera)) if options.ball == "tracker" else None
     reset = options.ball_reset == "start"
@@ -131,6 +134,18 @@ def make_rig(config: RigConfig, options: Options) -> Rig:
             else None
         ),
     )  # fmt: skip
+
+
+def rig_servos(config: RigConfig):
+    """The twin's servos for ``config.rig_id``: its fitted ``dynamics.json`` (``ergo calibrate
+    dynamics``) when there is one, else None (the nominal twin's); a bad file is a RigError."""
+    from calibration.dynamics.twin_servos import fitted_servos
+    from calibration.store import CalibrationError
+
+    try:
+        return fitted_servos(config.rig_id)[0]
+    except CalibrationError as exc:
+        raise RigError(f"{exc} (a damaged twin calibration is not ignored)") from None
 
 
 def scene(config: RigConfig, options: Options) -> Scene:

@@ -176,8 +176,10 @@ def test_calibrate_show_gives_each_file_with_its_age_and_hash(tmp_path, capsys):
     paths["joints"].write_text(json.dumps(doc))
     assert main(["calibrate", "show", "--rig-id", "r", "--dir", str(tmp_path)]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
-    assert [line.split(":")[0] for line in lines] == ["camera", "arena", "joints"]
-    for line, path in zip(lines, paths.values(), strict=True):
+    kinds = ["camera", "arena", "joints", "dynamics"]
+    assert [line.split(":")[0] for line in lines] == kinds
+    assert lines[3].startswith("dynamics: none (")  # no servo fit made (tests/calibration/dynamics)
+    for line, path in zip(lines, paths.values(), strict=False):
         assert f"({path}, made " in line and f"sha256 {store.file_sha256(path)[:12]})" in line
     assert "made just now" in lines[0] and "fx 600.0 +-1.2" in lines[0]
     assert re.search(r"made \d+ days ago", lines[2]) and "m2 -11.5 deg -1 [-86, +115]" in lines[2]

@@ -1,0 +1,457 @@
+"""The fit of the twin's servos to a recording, with ``mujoco.sysid`` (Gauss-Newton least
+squares over rollouts of the twin's arm).
+
+The model fitted is the twin's arm alone (``sim/models/ergo_jr.xml``: its links, masses and
+joints; the scene's physics step and integrator; no contacts, as the excitation touches
+nothing), with a joint-position sensor per joint. Its parameters (a ``mujoco.sysid``
+``ParameterDict``), per joint: kp (N.m/rad), damping (N.m.s/rad), armature (kg.m^2) and
+frictionloss (N.m), each fitted as the log of its ratio to the nominal twin's
+(``sim.servo_model.NOMINAL``), so that all are of one scale; and the command transport delay,
+in units of 10 ms. The torque ceiling is not fitted: it is the XL-320's stall torque
+(datasheet), where the twin has it.
+
+The delay first: the nominal servos are rolled out at delays from 0 to ``MAX_DELAY_S`` in
+``DELAY_GRID_S`` steps and the best one starts the fit. A rollout applies each command from
+its time plus the delay, averaged over the physics step it lands in (so that the cost is
+continuous in the delay; ``delayed_control``).
+
+Residual: predicted minus measured joint angles at the measured times, every joint, over
+every training segment (one ``ModelSequences`` per segment), divided by ``POSITION_SCALE``.
+Confidence intervals: ``mujoco.sysid.calculate_intervals`` (95 %) on the log-parameters, from
+the Jacobian at the optimum, turned back into values (so they are not symmetric).
+
+The held-out segment is never fitted: its RMS error, nominal against fitted, is the check.
+Units: rad, s, N.m, kg.m^2.
+"""
+
+from __future__ import annotations
+
+import io
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from calibration.dynamics.excitation import HELD_OUT_NAME as HELD_OUT
+from calibration.dynamics.recording import Recording, RecordingError
+from calibration.store import CalibrationError
+from sim.servo_model import NOMINAL, ServoModel
+
+log = logging.getLogger(__name__)
+
+FITTED = ("kp", "damping", "armature", "frictionloss")
+# Bounds of each fitted ratio to nominal (log-space): a factor of 6 either way holds every
+# stand-in draw (factors in [1/2.3, 2.3]) and any servo near the XL-320 (guess).
+RATIO_BOUNDS = {
+    "kp": (1 / 6, 6.0),
+    "damping": (1 / 6, 6.0),
+    "armature": (1 / 10, 10.0),
+    # nominal 0.001 N.m: 0.0001-0.06 N.m, up to 15 % of the stall torque (guess)
+    "frictionloss": (0.1, 60.0),
+}
+DELAY_UNIT_S = 0.01
+MAX_DELAY_S = 0.08  # the fit's bound on the delay (guess: no USB-serial link is slower)
+DELAY_GRID_S = 0.005  # the first estimate's grid: the twin's physics step
+POSITION_SCALE = 0.01  # rad: residuals are in units of about half a degree
+MAX_ITERS = 40  # Gauss-Newton iterations (measured: 8-15 reach the optimum on the twin)
+# A fitted twin this close to the arm on the held-out trajectory is good whatever the nominal
+# does (an arm like the nominal twin): a tenth of an XL-320 position step (0.29 deg; guess)
+RMS_FLOOR_RAD = math.radians(0.03)
+ALPHA = 0.05  # confidence level of the intervals: 95 %
+
+
+class FitError(CalibrationError):
+    """The fit could not be made or is not to be trusted; the message is one line."""
+
+
+@dataclass
+class FitResult:
+    """What a fit found.
+
+    Attributes:
+        servos: the fitted servo model (force limit: nominal).
+        intervals: per fitted field, (6, 2) lower and upper 95 % bounds; ``delay_s``: (2,).
+        held_out_rms_nominal, held_out_rms_fitted: RMS over the held-out segment of all
+            joints, rad.
+        held_out_rms_per_joint: {"nominal": (6,), "fitted": (6,)}, rad.
+        train_rms_fitted: RMS over the training segments, rad.
+        delay_first_s: the grid's first estimate of the delay, s.
+        iterations: optimiser iterations; fit_s: wall time of the fit, s.
+    """
+
+    servos: ServoModel
+    intervals: dict[str, np.ndarray]
+    held_out_rms_nominal: float
+    held_out_rms_fitted: float
+    held_out_rms_per_joint: dict[str, np.ndarray]
+    train_rms_fitted: float
+    delay_first_s: float
+    iterations: int
+    fit_s: float
+    notes: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The payload of ``dynamics.json`` (without the recording's reference)."""
+        return {
+            "servos": self.servos.to_dict(),
+            "intervals_95": {k: np.asarray(v).tolist() for k, v in self.intervals.items()},
+            "held_out_rms_rad": {
+                "nominal": self.held_out_rms_nominal,
+                "fitted": self.held_out_rms_fitted,
+                "nominal_per_joint": self.held_out_rms_per_joint["nominal"].tolist(),
+                "fitted_per_joint": self.held_out_rms_per_joint["fitted"].tolist(),
+            },
+            "train_rms_rad": self.train_rms_fitted,
+            "delay_first_s": self.delay_first_s,
+            "iterations": self.iterations,
+            "fit_s": round(self.fit_s, 2),
+            "notes": list(self.notes),
+        }
+
+
+# ---- the model ---------------------------------------------------------------------------
+def arm_spec() -> Any:
+    """The twin's arm as a ``mujoco.MjSpec`` for the fit: ergo_jr.xml with the scene's step and
+    integrator, contacts off, a ``<joint>_pos`` joint-position sensor per joint."""
+    import mujoco
+
+    from sim.twin import JOINTS, MODELS, SCENE
+
+    spec = mujoco.MjSpec.from_file(str(MODELS / "ergo_jr.xml"))
+    scene = mujoco.MjSpec.from_file(str(SCENE))  # its <option>: one place for step and solver
+    spec.option.timestep = scene.option.timestep
+    spec.option.integrator = scene.option.integrator
+    spec.option.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
+    for name in JOINTS:
+        spec.add_sensor(
+            name=f"{name}_pos",
+            type=mujoco.mjtSensor.mjSENS_JOINTPOS,
+            objtype=mujoco.mjtObj.mjOBJ_JOINT,
+            objname=name,
+        )
+    return spec
+
+
+def _indices(model: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    from sim.twin import JOINTS
+
+    act = np.array([model.actuator(j).id for j in JOINTS])
+    dof = np.array([model.joint(j).dofadr[0] for j in JOINTS])
+    qpos = np.array([model.joint(j).qposadr[0] for j in JOINTS])
+    return act, dof, qpos
+
+
+def delayed_control(
+    command_t: np.ndarray, command: np.ndarray, times: np.ndarray, delay: float, dt: float
+) -> np.ndarray:
+    """The actuators' targets per physics step: each command held from ``command_t + delay``
+    (before the first: the first), averaged over each step ``[t, t + dt)`` (continuous in the
+    delay). Shapes: (C,), (C, n), (K,) -> (K, n); s, rad."""
+    c = np.asarray(command, float)
+    s = np.asarray(command_t, float) + delay
+    # F(t) = integral of the held command; piecewise linear with knots at the switch times
+    knots = np.concatenate([[s[0] - 1.0], s, [max(s[-1], times[-1] + dt) + 1.0]])
+    values = np.concatenate([c[:1], c, c[-1:]])
+    seg = np.diff(knots)[:, None] * values[:-1]
+    cum = np.vstack([np.zeros((1, c.shape[1])), np.cumsum(seg, axis=0)])
+
+    def integral(t: np.ndarray) -> np.ndarray:
+        return np.stack([np.interp(t, knots, cum[:, j]) for j in range(c.shape[1])], axis=1)
+
+    return (integral(times + dt) - integral(times)) / dt
+
+
+def simulate(
+    servos: ServoModel,
+    command_t: np.ndarray,
+    command: np.ndarray,
+    measured_t: np.ndarray,
+    q0: np.ndarray,
+    spec: Any = None,
+) -> np.ndarray:
+    """Roll the twin's arm with ``servos`` through a segment's commands from rest at ``q0``;
+    its joint angles at ``measured_t``. Shapes: (C,), (C, n), (M,), (n,) -> (M, n); s, rad."""
+    import mujoco
+    from mujoco import rollout
+
+    from sim.servo_model import write_model
+
+    model = (spec if spec is not None else arm_spec()).compile()
+    act, dof, qpos = _indices(model)
+    write_model(model, act, dof, servos)
+    data = mujoco.MjData(model)
+    dt = float(model.opt.timestep)
+    steps = math.ceil((measured_t[-1] - command_t[0]) / dt) + 1
+    times = command_t[0] + np.arange(steps) * dt
+    ctrl = np.zeros((steps, model.nu))
+    ctrl[:, act] = delayed_control(command_t, command, times, servos.delay_s, dt)
+    data.qpos[qpos] = q0
+    data.time = command_t[0]
+    mujoco.mj_forward(model, data)
+    state0 = np.empty(mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_FULLPHYSICS))
+    mujoco.mj_getState(model, data, state0, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    states, _ = rollout.rollout(model, data, state0, ctrl)
+    states = np.squeeze(states, axis=0)
+    t = np.concatenate([[command_t[0]], states[:, 0]])
+    q = np.vstack([q0[None, :], states[:, 1 + qpos]])
+    return np.stack([np.interp(measured_t, t, q[:, j]) for j in range(q.shape[1])], axis=1)
+
+
+# ---- the fit -----------------------------------------------------------------------------
+def _segments(rec: Recording) -> list[str]:
+    return [s for s in rec.segment_names if s != HELD_OUT]
+
+
+def _servos_from(values: dict[str, np.ndarray], delay: float) -> ServoModel:
+    return NOMINAL.replace(**{k: tuple(values[k]) for k in FITTED}, delay_s=float(delay))
+
+
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(x)))) if x.size else math.nan
+
+
+def segment_error(servos: ServoModel, rec: Recording, name: str, spec: Any = None) -> np.ndarray:
+    """Predicted minus measured joint angles over one segment, shape (M, n), rad."""
+    ct, cmd, mt, meas = rec.segment(name)
+    pred = simulate(servos, ct, cmd, mt, meas[0], spec)
+    return pred - meas
+
+
+def first_delay(rec: Recording, spec: Any) -> float:
+    """The delay on ``DELAY_GRID_S`` steps whose nominal rollout fits the training best, s."""
+    best, best_cost = 0.0, math.inf
+    for d in np.arange(0.0, MAX_DELAY_S / 2 + 1e-9, DELAY_GRID_S):
+        cost = sum(
+            float(np.sum(segment_error(NOMINAL.replace(delay_s=float(d)), rec, s, spec) ** 2))
+            for s in _segments(rec)
+        )
+        if cost < best_cost:
+            best, best_cost = float(d), cost
+    return best
+
+
+def fit(rec: Recording, max_iters: int = MAX_ITERS, verbose: bool = False) -> FitResult:
+    """Fit the servos to ``rec``'s training segments; check on its held-out segment.
+
+    Raises:
+        FitError: the optimiser failed, or its result is not finite, or it does not move the
+            held-out trajectory closer to the arm than the nominal twin does.
+    """
+    from sim.twin import JOINTS
+
+    t_start = time.monotonic()
+    try:
+        from mujoco import sysid
+    except ImportError:  # pragma: no cover - the dependency is declared
+        raise FitError("mujoco.sysid is missing: pip install 'mujoco[sysid]==4.0.0'") from None
+    logging.getLogger("absl").setLevel(logging.WARNING if not verbose else logging.INFO)
+    if HELD_OUT not in rec.segment_names:
+        raise RecordingError("the recording has no held-out segment: record again")
+    spec = arm_spec()
+    delay0 = first_delay(rec, spec)
+    params = sysid.ParameterDict()
+    # a joint without its own segment keeps the nominal servo (frozen: not fitted)
+    excited = [name for name in JOINTS if name in rec.segment_names]
+    for k, name in enumerate(JOINTS):
+        for field_name in FITTED:
+            lo, hi = RATIO_BOUNDS[field_name]
+            nominal = NOMINAL.array(field_name)[k]
+            params.add(
+                sysid.Parameter(
+                    f"{name}.{field_name}", 0.0, math.log(lo), math.log(hi),
+                    frozen=name not in excited,
+                    modifier=_modifier(name, field_name, nominal),
+                )
+            )  # fmt: skip
+    params.add(
+        sysid.Parameter(
+            "delay",
+            delay0 / DELAY_UNIT_S,
+            0.0,
+            MAX_DELAY_S / DELAY_UNIT_S,
+            modifier=lambda s, p: None,
+        )
+    )
+    segments = _segments(rec)
+    sensors = [f"{j}_pos" for j in JOINTS]
+    # each segment's commands, by index: the control series given to mujoco.sysid carries
+    # only that index (the rollout builds the delayed targets from the commands themselves)
+    raw: list[tuple[np.ndarray, np.ndarray]] = []
+    sequences = []
+    model0 = spec.compile()
+    _, _, qpos_idx = _indices(model0)
+    dt = float(model0.opt.timestep)
+    for name in segments:
+        ct, cmd, mt, meas = rec.segment(name)
+        t0 = ct[0]
+        qpos = np.zeros(model0.nq)
+        qpos[qpos_idx] = meas[0]
+        state0 = sysid.create_initial_state(model0, qpos, np.zeros(model0.nv))
+        n_steps = math.ceil((mt[-1] - t0) / dt) + 1
+        control = sysid.TimeSeries(
+            np.arange(n_steps) * dt, np.full((n_steps, model0.nu), float(len(raw)))
+        )
+        raw.append((ct - t0, cmd))
+        measured = sysid.TimeSeries.from_names(mt - t0, meas, model0, names=sensors)
+        sequences.append(
+            sysid.ModelSequences(
+                name, spec, name, state0, control, measured, allow_missing_sensors=True
+            )
+        )
+
+    act_idx, _, _ = _indices(model0)
+
+    def rollout_with_delay(models, datas, control_signal, initial_states, param_dicts, **mapping):
+        n_chunks = len(control_signal) // len(param_dicts)
+        shifted = []
+        for i, ts in enumerate(control_signal):
+            delay = float(param_dicts[i // n_chunks]["delay"].value[0]) * DELAY_UNIT_S
+            ct, cmd = raw[round(float(ts.data[0, 0]))]
+            u = np.zeros((len(ts.times), model0.nu))
+            u[:, act_idx] = delayed_control(ct, cmd, ts.times, delay, dt)
+            shifted.append(sysid.TimeSeries(ts.times, u))
+        return sysid.sysid_rollout(models, datas, shifted, initial_states, **mapping)
+
+    def positions_residual(params, pred, meas, model, return_pred_all, state=None, **_):
+        # The joint angles from the rolled-out states, stamped with their own times (a
+        # rollout's sensor rows are computed before each step, a step earlier than the times
+        # they are given: 5 ms of delay the fit would miss).
+        pred = sysid.TimeSeries(state[:, 0], state[:, 1 + qpos_idx], meas.signal_mapping)
+        meas = sysid.apply_delayed_ts_window(meas, pred, 0.0, 0.0)
+        pred = pred.resample(meas.times)
+        return (pred.data - meas.data) / POSITION_SCALE, pred, meas
+
+    residual_fn = sysid.build_residual_fn(
+        models_sequences=sequences,
+        custom_rollout=rollout_with_delay,
+        modify_residual=positions_residual,
+        n_threads=2,
+    )
+    try:
+        quiet = {} if verbose else {"output": io.StringIO()}  # the backend's iteration log
+        opt_params, result = sysid.optimize(
+            params, residual_fn, optimizer="mujoco", verbose=verbose, max_iters=max_iters,
+            **quiet,
+        )  # fmt: skip
+        # The cost has kinks where the delay crosses a physics step (a command lands in the
+        # next step), where Gauss-Newton can stop short: the delay is searched again on a
+        # 1 ms grid with the other parameters fitted, and the fit resumed from the best.
+        moved = _refine_delay(opt_params, rec, segments, spec)
+        if moved:
+            opt_params, result = sysid.optimize(
+                opt_params, residual_fn, optimizer="mujoco", verbose=verbose,
+                max_iters=max_iters, **quiet,
+            )  # fmt: skip
+        x = opt_params.as_vector()
+        residuals, _, _ = residual_fn(x, opt_params)
+        jac = np.asarray(result.jac)
+        _, half = sysid.calculate_intervals(residuals, jac, alpha=ALPHA)
+    except (ValueError, RuntimeError, FloatingPointError, np.linalg.LinAlgError) as exc:
+        raise FitError(f"the optimiser failed ({type(exc).__name__}: {exc})") from None
+    if not np.all(np.isfinite(x)):
+        raise FitError(f"the fit diverged (parameters {x.tolist()})")
+    values: dict[str, np.ndarray] = {}
+    intervals: dict[str, np.ndarray] = {}
+    names = opt_params.get_non_frozen_parameter_names()  # the Jacobian's columns
+    for field_name in FITTED:
+        nominal = NOMINAL.array(field_name)
+        xs = np.array([float(opt_params[f"{j}.{field_name}"].value[0]) for j in JOINTS])
+        hs = np.array(
+            [half[names.index(f"{j}.{field_name}")] if j in excited else 0.0 for j in JOINTS]
+        )
+        values[field_name] = nominal * np.exp(xs)
+        with np.errstate(over="ignore"):
+            intervals[field_name] = np.stack(
+                [nominal * np.exp(xs - hs), nominal * np.exp(xs + hs)], axis=1
+            )
+    delay = float(opt_params["delay"].value[0]) * DELAY_UNIT_S
+    dh = half[names.index("delay")] * DELAY_UNIT_S
+    intervals["delay_s"] = np.array([max(0.0, delay - dh), delay + dh])
+    try:
+        servos = _servos_from(values, min(delay, MAX_DELAY_S))
+    except ValueError as exc:
+        raise FitError(f"the fitted servos are not valid ({exc})") from None
+    nominal_err = segment_error(NOMINAL, rec, HELD_OUT, spec)
+    fitted_err = segment_error(servos, rec, HELD_OUT, spec)
+    train = np.concatenate([segment_error(servos, rec, s, spec) for s in segments])
+    out = FitResult(
+        servos=servos,
+        intervals=intervals,
+        held_out_rms_nominal=_rms(nominal_err),
+        held_out_rms_fitted=_rms(fitted_err),
+        held_out_rms_per_joint={
+            "nominal": np.sqrt(np.mean(nominal_err**2, axis=0)),
+            "fitted": np.sqrt(np.mean(fitted_err**2, axis=0)),
+        },
+        train_rms_fitted=_rms(train),
+        delay_first_s=delay0,
+        iterations=len(result.extras.get("objective", [])) if hasattr(result, "extras") else 0,
+        fit_s=time.monotonic() - t_start,
+    )
+    if out.held_out_rms_fitted > max(out.held_out_rms_nominal, RMS_FLOOR_RAD):
+        raise FitError(
+            f"the fitted twin is no closer to the arm than the nominal one on the held-out "
+            f"trajectory (RMS {math.degrees(out.held_out_rms_fitted):.2f} deg against "
+            f"{math.degrees(out.held_out_rms_nominal):.2f} deg): the recording does not "
+            "show the servos' dynamics (an arm blocked, loose, or not this model)"
+        )
+    if len(excited) < len(JOINTS):
+        kept = [j for j in JOINTS if j not in excited]
+        out.notes.append(f"{', '.join(kept)} not recorded: nominal servos kept")
+    for field_name in FITTED:
+        lo, hi = RATIO_BOUNDS[field_name]
+        ratio = values[field_name] / NOMINAL.array(field_name)
+        at = [JOINTS[k] for k in range(6) if ratio[k] < lo * 1.01 or ratio[k] > hi * 0.99]
+        if at:
+            out.notes.append(f"{field_name} of {', '.join(at)} at the fit's bound")
+    return out
+
+
+def _values(opt_params: Any) -> dict[str, np.ndarray]:
+    from sim.twin import JOINTS
+
+    return {
+        f: NOMINAL.array(f) * np.exp([float(opt_params[f"{j}.{f}"].value[0]) for j in JOINTS])
+        for f in FITTED
+    }
+
+
+def _refine_delay(opt_params: Any, rec: Recording, segments: list[str], spec: Any) -> bool:
+    """Set the delay to the best of a 1 ms grid within +-``2 DELAY_GRID_S`` of the fitted one,
+    the other parameters as fitted; whether it moved."""
+    values = _values(opt_params)
+    fitted = float(opt_params["delay"].value[0]) * DELAY_UNIT_S
+    grid = fitted + np.arange(-2 * DELAY_GRID_S, 2 * DELAY_GRID_S + 1e-9, 0.001)
+    grid = grid[(grid >= 0.0) & (grid <= MAX_DELAY_S)]
+    costs = [
+        sum(
+            float(np.sum(segment_error(_servos_from(values, float(d)), rec, s, spec) ** 2))
+            for s in segments
+        )
+        for d in np.append(grid, fitted)
+    ]
+    best = int(np.argmin(costs))
+    if best == len(grid) or costs[best] >= costs[-1]:
+        return False
+    opt_params["delay"].value[:] = grid[best] / DELAY_UNIT_S
+    return True
+
+
+def _modifier(joint: str, field_name: str, nominal: float):
+    """The ``mujoco.sysid`` modifier that writes one log-ratio parameter into the spec."""
+
+    def apply(spec: Any, p: Any) -> None:
+        value = nominal * math.exp(float(p.value[0]))
+        if field_name == "kp":
+            act = spec.actuator(joint)
+            act.gainprm[0] = value
+            act.biasprm[1] = -value
+        elif field_name == "damping":
+            spec.joint(joint).damping[0] = value
+        else:
+            setattr(spec.joint(joint), field_name, value)
+
+    return apply
