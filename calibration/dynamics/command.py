@@ -23,10 +23,6 @@ REPORT_DIR = "dynamics_report"
 # (a sync read of six XL-320 at 1 Mbit/s, one CANopen SYNC cycle), so 2 (80 Hz; guess)
 TWIN_READS_PER_TICK = 5
 BUS_READS_PER_TICK = 2
-# A CANopen arm on a pty (the emulator) keeps a 500 ms heartbeat as the canopen rig does
-# there (explore/rigs/canopen.py PTY_HEARTBEAT_MS; a real adapter's 100 ms is too short for the
-# emulator on a loaded machine, docs/standin.md).
-PTY_HEARTBEAT_MS = 500
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -92,14 +88,11 @@ def _arm(args: argparse.Namespace) -> tuple[Any, Any, str]:
             offsets=tuple(float(o) for o in cal.offsets),
         )  # fmt: skip
     else:
-        from robot.canopen.arm import CanArm, CanArmConfig
+        from robot.canopen.arm import CanArm, config_for
 
         offsets = tuple(float(-d * o) for d, o in zip(cal.directions, cal.offsets, strict=True))
-        config = CanArmConfig(directions=directions, offsets=offsets)
-        if "/dev/pts/" in bus.where:
-            config = CanArmConfig(
-                directions=directions, offsets=offsets, heartbeat_ms=PTY_HEARTBEAT_MS
-            )
+        # on the emulator's pty, its settings (500 ms heartbeat, 2 s SDO), as every command
+        config = config_for(bus.where, directions=directions, offsets=offsets)
         arm = CanArm(bus.where, bus.rate, spec=spec, config=config)
     import time
 
