@@ -22,6 +22,7 @@ Used by ``tests/system/test_guide.py`` and ``bench/rehearse_real_arm.py``::
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import re
@@ -203,10 +204,7 @@ class Owner:
         self.steps.append(step)
         self.log(step.text())
         self.log((step.stdout + step.stderr).rstrip())
-        if check and step.rc != 0:
-            last = (step.stderr.strip() or step.stdout.strip() or "no output").splitlines()[-1]
-            raise OwnerError(f"ergo {step.command[0]} {step.command[1]} failed: {last}")
-        return step
+        return self._finish_checked(step, check)
 
     def run(self, *args: str, check: bool = True, timeout: float = STEP_BOUND_S) -> Step:
         """``ergo ARGS`` with stdin closed."""
@@ -305,8 +303,9 @@ class Owner:
                     proc.kill()
                     return
                 answered[0] = len(prompts)
-                proc.stdin.write(b"\n")
-                proc.stdin.flush()
+                with contextlib.suppress(BrokenPipeError):  # it ended meanwhile: its rc says
+                    proc.stdin.write(b"\n")
+                    proc.stdin.flush()
 
             step = self._run_with(args, answer, check=False)
             if failure:
