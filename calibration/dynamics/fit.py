@@ -247,7 +247,10 @@ def fit(rec: Recording, max_iters: int = MAX_ITERS, verbose: bool = False) -> Fi
         from mujoco import sysid
     except ImportError:  # pragma: no cover - the dependency is declared
         raise FitError("mujoco.sysid is missing: pip install 'mujoco[sysid]==4.0.0'") from None
-    logging.getLogger("absl").setLevel(logging.WARNING if not verbose else logging.INFO)
+    # absl's WARNING "Sensor data dimension 6 does not match model sensor dimension 9" comes
+    # once per rollout: the fit compares rolled-out joint states, not the model's sensors (on
+    # purpose, below); it told a user nothing, so only errors are shown
+    logging.getLogger("absl").setLevel(logging.INFO if verbose else logging.ERROR)
     if HELD_OUT not in rec.segment_names:
         raise RecordingError("the recording has no held-out segment: record again")
     spec = arm_spec()
