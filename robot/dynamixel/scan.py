@@ -3,27 +3,47 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
+from collections.abc import Sequence
 
 from robot.dynamixel.bus import DEFAULT_BAUD, DynamixelBus, DynamixelError, NoStatusError, PingReply
 from robot.dynamixel.control_table import MODELS
 from robot.dynamixel.protocol import MAX_SERVO_ID
 from robot.errors import BusError
+from robot.spec import ergo_jr_spec
+
+ARM_IDS = tuple(ergo_jr_spec().ids)  # m1..m6
 
 # Slack per PING while scanning, s: a missing id costs this long, so it is short (the FTDI
 # default latency timer of 16 ms plus a little; guess). 253 ids take about 5 s.
 SCAN_LATENCY_S = 0.02
 
 
-def scan(bus: DynamixelBus, ids: list[int]) -> list[PingReply]:
-    """PING each id once (no retries); the servos that answered, in id order."""
-    found = []
+# The ids asked a second time, slowly, when they missed the quick sweep: a servo whose reply
+# came late (the emulator of `ergo twin serve` on a loaded machine answered 1 of 6 in a test
+# run, 2026-12-02; a USB adapter's latency timer at its worst) is then not reported missing.
+# Guess: 0.1 s of slack and 2 retries each, a second at most for the arm's six ids.
+SECOND_LOOK_LATENCY_S = 0.1
+SECOND_LOOK_RETRIES = 2
+
+
+def scan(bus: DynamixelBus, ids: list[int], again: Sequence[int] = ()) -> list[PingReply]:
+    """PING each id once (no retries), then each id of ``again`` that did not answer once more
+    with ``SECOND_LOOK_LATENCY_S`` of slack; the servos that answered, in id order."""
+    found: dict[int, PingReply] = {}
     for sid in ids:
         try:
-            found.append(bus.ping(sid, retries=0))
+            found[sid] = bus.ping(sid, retries=0)
         except NoStatusError:
             continue
-    return found
+    late = [sid for sid in again if sid in ids and sid not in found]
+    if late:
+        bus.latency_s = max(bus.latency_s, SECOND_LOOK_LATENCY_S)
+        for sid in late:
+            with contextlib.suppress(NoStatusError):
+                found[sid] = bus.ping(sid, retries=SECOND_LOOK_RETRIES)
+    return [found[sid] for sid in sorted(found)]
 
 
 def format_reply(reply: PingReply) -> str:
@@ -42,7 +62,8 @@ def scan_cli(args: argparse.Namespace) -> int:
     baud = int(getattr(args, "baud", None) or DEFAULT_BAUD)
     try:
         with DynamixelBus(args.port, baud, retries=0, latency_s=SCAN_LATENCY_S) as bus:
-            found = scan(bus, ids)
+            # the arm's own ids (or the ids asked for) get a second, slower look
+            found = scan(bus, ids, again=list(args.ids) if args.ids else list(ARM_IDS))
     except (BusError, DynamixelError) as exc:
         print(f"ergo: error: {exc}", file=sys.stderr)
         return 2

@@ -21,7 +21,7 @@ from robot.dynamixel.bus import (
     ServoError,
 )
 from robot.dynamixel.control_table import XL320, XL330_M288
-from robot.dynamixel.scan import scan, scan_cli
+from robot.dynamixel.scan import SCAN_LATENCY_S, scan, scan_cli
 from robot.errors import BusError
 from sim.dynamixel.emulator import DynamixelEmulator, EmulatedSerial, FaultConfig
 
@@ -142,6 +142,18 @@ def test_scan_finds_the_six_servos() -> None:
     found = scan(bus, list(range(10)))
     assert [r.id for r in found] == [1, 2, 3, 4, 5, 6]
     assert {r.model_number for r in found} == {350}
+
+
+def test_scan_looks_again_slowly_at_the_arms_ids_that_answered_late() -> None:
+    """Replies 50 ms late miss the quick sweep's slack (20 ms, as ``ergo bus scan``); the
+    arm's ids are asked again with more slack and found, the others are not asked twice."""
+    bus, _ = fake_bus(FaultConfig(extra_delay_s=0.05), retries=0)
+    bus.latency_s = SCAN_LATENCY_S
+    bus.latency.cap = SCAN_LATENCY_S  # no adapting during the sweep: every reply misses it
+    assert scan(bus, list(range(10))) == []
+    bus.latency.cap = 1.0
+    found = scan(bus, list(range(10)), again=[1, 2, 3, 4, 5, 6])
+    assert [r.id for r in found] == [1, 2, 3, 4, 5, 6]
 
 
 def test_scan_cli_reports_a_bad_port_in_one_line(capsys) -> None:
