@@ -84,6 +84,7 @@ def rehearse(bus: str, seed: int, args: argparse.Namespace, tmp: Path) -> dict[s
         t = time.monotonic()
         owner.calibrate_joints()
         row["joints s"] = time.monotonic() - t
+        row["limp after joints"] = not any(owner.torque_read_back())
         err, row["directions"] = joint_errors(hidden, saved("joints"))
         row["offset err deg"] = float(err.max())
         t = time.monotonic()
@@ -99,11 +100,16 @@ def rehearse(bus: str, seed: int, args: argparse.Namespace, tmp: Path) -> dict[s
         run = tmp / f"run-{bus}-{seed}"
         t = time.monotonic()
         owner.explore(run, args.episodes, args.explore_seed, args.strategy, resumes=args.resumes)
+        row["limp after explore"] = not any(owner.torque_read_back())
         row["stops resumed"] = len(owner.stops)
         for stop in owner.stops:
             print(f"  {bus} {seed}: {stop}", flush=True)
         row["explore s"] = time.monotonic() - t
         row["cells"], row["tracked"], row["moved"] = run_summary(run)
+        if args.faults:  # Ctrl-C in the middle of a run; a bus fault ends in the explore above
+            stopped = owner.interrupt_explore(tmp / f"run-{bus}-{seed}-ctrl-c", after_s=20.0)
+            row["ctrl-c rc"] = stopped.rc
+            row["limp after ctrl-c"] = not any(owner.torque_read_back())
     row["total s"] = time.monotonic() - t0
     if args.compare:
         cells, moved = in_process_cells(
@@ -131,6 +137,9 @@ def main() -> None:
     p.add_argument("--explore-seed", type=int, default=0)
     p.add_argument("--strategy", default="rge-efr")
     p.add_argument("--resumes", type=int, default=3, help="safety stops resumed, as the guide says")
+    p.add_argument(
+        "--faults", action="store_true", help="also stop a run with Ctrl-C; torque read back"
+    )
     p.add_argument("--compare", action="store_true", help="also in one process, same seed")
     p.add_argument("--out", type=Path, default=None, help="keep the folders here")
     p.add_argument("--verbose", action="store_true", help="print every command's output")

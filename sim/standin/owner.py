@@ -275,6 +275,34 @@ class Owner:
     def hands(self) -> HandsClient:
         return HandsClient(self.rig.hands_port)
 
+    def torque_read_back(self) -> list[bool]:
+        """Whether each servo (m1..m6) has its torque on, read over the bus by a reader of its
+        own after a step has ended (not the arm that ran it): the XL-320's Torque Enable
+        register, or the CiA 402 statusword (0x6041) by SDO, OPERATION ENABLED counting as on."""
+        ids = self.spec.ids
+        if self.rig.bus_kind == "dynamixel":
+            from robot.dynamixel.bus import DynamixelBus
+
+            with DynamixelBus(self.rig.where, latency_s=0.05, retries=5) as bus:
+                return [bool(bus.read_register(i, "torque")) for i in ids]
+        import canopen
+
+        from robot.canopen.bus import parse_can_spec
+        from robot.canopen.cia402 import State, decode_statusword
+
+        network = canopen.Network()
+        network.connect(**parse_can_spec(self.rig.where, None).bus_kwargs())
+        try:
+            on = []
+            for i in ids:
+                node = network.add_node(canopen.RemoteNode(i, canopen.ObjectDictionary()))
+                node.sdo.RESPONSE_TIMEOUT = 2.0  # the emulator on a loaded machine
+                word = int.from_bytes(node.sdo.upload(0x6041, 0), "little")
+                on.append(decode_statusword(word) == State.OPERATION_ENABLED)
+            return on
+        finally:
+            network.disconnect()
+
     # ---- the guide's steps -------------------------------------------------------------
     def scan(self, check: bool = True) -> Step:
         """``ergo bus scan``: which servos answer."""
@@ -418,6 +446,26 @@ class Owner:
             resumes -= 1
             step = self.run("explore", "--resume", str(out), check=False, timeout=bound)
         return self._finish_checked(step, check)
+
+    def interrupt_explore(self, out: Path, after_s: float, seed: int = 0) -> Step:
+        """``ergo explore`` as in ``explore``, stopped with Ctrl-C (SIGINT) ``after_s`` wall
+        seconds after it started, as a person stops a run."""
+        import signal
+
+        rig = "dynamixel" if self.rig.bus_kind == "dynamixel" else "canopen"
+        args = ["explore", "--rig", rig, "--rig-id", self.rig_id, *self.rig.bus_flags()]
+        args += ["--camera", self.rig.camera_url, "--episodes", "1000", "--seed", str(seed)]
+        args += ["--out", str(out), "--no-progress"]
+        t0 = time.monotonic()
+        proc = subprocess.Popen(
+            [*ERGO, *args], env=self.env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        time.sleep(after_s)
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=STEP_BOUND_S)
+        step = Step(args, proc.returncode, stdout, stderr, time.monotonic() - t0)
+        return self._finish(step, check=False)
 
 
 def read_saved(calibration_dir: Path, rig_id: str, kind: str) -> dict[str, Any]:
