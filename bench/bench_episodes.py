@@ -101,7 +101,7 @@ def measure(
         episodes=episodes,
     )
     rig = make_rig(config.rig)
-    twin = rig.twin
+    twin = rig.sensor.twin
     bound_twin = Twin(render_size=twin.render_size, render_quality=quality)
     bound_camera = SimCamera(bound_twin)
     run_s = bound_s = run_cpu = bound_cpu = 0.0

@@ -38,9 +38,9 @@ from gymnasium import spaces
 from explore.learner.dmp import N_PARAMS
 from explore.learner.experience import Observation
 from explore.learner.goal_spaces import R_MAX, R_MIN
+from explore.rigs.arm_episodes import EpisodeRunner
+from explore.rigs.episodes import EpisodeConfig
 from explore.rigs.rig import Rig, RigConfig, make_rig
-from explore.runs.config import EpisodeConfig
-from explore.runs.episode import EpisodeRunner
 from robot.spec import CONTROL_RATE_HZ
 from sim.models.make_scene import BALL_RADIUS, OUTER_RADIUS
 from vision.observation import OBSERVATION_SIZE
@@ -75,6 +75,7 @@ class _TwinGoalEnv(gym.Env):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.render_mode = render_mode
         self.rig: Rig = make_rig(RigConfig("sim", rig_id, {"render_size": [RENDER_SIDE] * 2}))
+        self.twin = self.rig.sensor.twin  # type: ignore[union-attr]  # the twin rig's TwinSensor
         self.rig.connect()
         self.spec_arm = self.rig.arm.spec
         n = self.spec_arm.n
@@ -119,7 +120,7 @@ class _TwinGoalEnv(gym.Env):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         super().reset(seed=seed)
-        twin = self.rig.twin
+        twin = self.twin
         twin.reset(ball_xy=tuple(ring_point(self.np_random)))
         self.rig.arm.resync()
         self.goal = ring_point(self.np_random)
@@ -134,16 +135,16 @@ class _TwinGoalEnv(gym.Env):
     def close(self) -> None:
         if self.rig.arm.is_connected:
             self.rig.disconnect()  # torque off
-        self.rig.twin.close()
+        self.twin.close()
 
     # ---- helpers ---------------------------------------------------------------------------
     def _observe(self) -> dict[str, np.ndarray]:
         rig = self.rig
-        image = rig.square_view(OBSERVATION_SIZE)  # BGR
+        image = rig.sensor.locate(OBSERVATION_SIZE).image  # BGR, rendered at its size
         return {
             "observation": rig.arm.read().positions.astype(np.float32),
             "image": np.ascontiguousarray(image[..., ::-1]),
-            "achieved_goal": rig.twin.ball_position()[:2].astype(np.float32),
+            "achieved_goal": self.twin.ball_position()[:2].astype(np.float32),
             "desired_goal": self.goal.astype(np.float32),
         }
 
@@ -222,7 +223,7 @@ class ArmBallDmpEnv(_TwinGoalEnv):
         self, action: np.ndarray
     ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         theta = np.clip(np.asarray(action, dtype=float), -1.0, 1.0)
-        context = Observation(ball=self.rig.twin.ball_position()[:2])
+        context = Observation(ball=self.twin.ball_position()[:2])
         result = self.runner.run(theta, context)
         obs = self._observe()
         info = self._info(obs)

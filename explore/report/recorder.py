@@ -56,7 +56,8 @@ import numpy as np
 from explore.learner.goal_outcomes import goal_outcome_of, strategy_outcome_of
 from explore.learner.scene import TWIN_ARENA, Scene
 from explore.report.blueprint import default_blueprint
-from explore.runs.config import EpisodeConfig, RunConfig
+from explore.rigs.episodes import EpisodeConfig
+from explore.runs.config import RunConfig
 from explore.runs.metrics import CellCounter
 from robot.spec import ERGO_JR_JOINTS
 

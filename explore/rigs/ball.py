@@ -1,18 +1,78 @@
-"""Where the ball is: the tracker on camera frames (real rigs, or the twin seen as a real rig),
-or the twin's ground truth.
+"""Where the ball is, for an episode: the rig's ``BallSensor``, and the ball locators it uses.
+
+Every rig with an arm has a ball sensor (``Rig.sensor``), the one place that decides where the
+ball (and the distractor, and the tool tip) are, whether the ball is still, the observation
+image, and the scene's state a resumed run restores:
+
+- ``TwinSensor``: the MuJoCo twin in-process: its ground truth (or the tracker on its frames,
+  as on a real rig, with the rig option ``ball=tracker``), its state, the scene's changes
+  between episodes (the ball put back, the distractor's walk);
+- ``CameraSensor``: a physical rig: the tracker on the camera's frames with the rig's arena
+  calibration; without one it reports the ball unknown (NaN), never guessed, and says why
+  (``blind``). Nothing of a real arena can be snapshot or restored: those are no-ops.
 
 A ball locator maps a BGR frame (H, W, 3) uint8 to the ball's centre (x, y) on the arena,
 metres, shape (2,), NaN when the tracker did not see it (hidden by the arm, ambiguous).
+Positions in metres (arena frame: origin at the arm's base, z up), speeds in m/s, durations in
+seconds.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
+from explore.learner.experience import Observation
+from vision.camera import Camera
+from vision.observation import square_observation
+
 BallLocator = Callable[[np.ndarray], np.ndarray]
+UNKNOWN = np.full(2, np.nan)  # a position not seen, (2,)
+NO_STATE = np.zeros(0)  # the state of a scene nothing can restore
+
+
+class BallSensor(Protocol):
+    """Where the ball is, for the episode player (``explore.rigs.arm_episodes``).
+
+    Attributes:
+        blind: why the sensor cannot locate the ball (a physical rig's missing arena
+            calibration), or None when it can.
+    """
+
+    blind: str | None
+
+    def locate(self, image_side: int | None = None) -> Observation:
+        """The ball and the distractor now, (2,) m each, NaN where unknown; with
+        ``image_side``, also the square observation (side, side, 3) BGR uint8 (and the full
+        frame it was cut from, when one was taken), from the same view."""
+        ...
+
+    def watch(self) -> None:
+        """Take the reference that the next ``still`` compares with (a settle begins)."""
+        ...
+
+    def still(self, speed: float, interval_s: float) -> bool:
+        """Whether the ball moves slower than ``speed`` m/s, judged over the last
+        ``interval_s`` s (since ``watch`` or the previous ``still``)."""
+        ...
+
+    def tool_tip(self) -> np.ndarray:
+        """The arm's tool tip now, (3,) m; NaN where the rig cannot know it."""
+        ...
+
+    def prepare(self, scene_rng: np.random.Generator) -> None:
+        """The scene's changes before an episode, drawn from the episode's own stream."""
+        ...
+
+    def snapshot(self) -> np.ndarray:
+        """The scene's state after an episode, (k,) (empty: nothing to restore)."""
+        ...
+
+    def restore(self, state: np.ndarray) -> None:
+        """Put the scene back in a ``snapshot``'s state (a resumed run)."""
+        ...
 
 
 def tracker_locator(arena: Any, tracker_config: Any = None) -> BallLocator:
@@ -28,27 +88,6 @@ def tracker_locator(arena: Any, tracker_config: Any = None) -> BallLocator:
         return np.asarray(obs.xy, dtype=float)
 
     return locate
-
-
-def twin_arena_model(camera: Any) -> Any:
-    """The exact ``ArenaModel`` of a twin ``SimCamera`` (its known projection, no calibration
-    error), over the arena's bounding square."""
-    from sim.models.make_scene import ARENA_RADIUS
-    from vision.rectify import (
-        ArenaModel,
-        estimate_camera_position,
-        fit_homography,
-        undistort_points,
-    )
-
-    k, d = camera.intrinsics()
-    h = ARENA_RADIUS
-    xy = np.array([[x, y] for x in (-h, 0.0, h) for y in (-h, 0.0, h)])
-    px = camera.project(np.column_stack([xy, np.zeros(len(xy))]))
-    homography = fit_homography(undistort_points(px, k, d), xy)
-    position = estimate_camera_position(px, xy, k, d)
-    size = (camera.size[1], camera.size[0])  # (width, height)
-    return ArenaModel(k, d, size, homography, np.zeros(2), h, position)
 
 
 def calibrated_locator(rig_id: str, directory: str | None = None) -> BallLocator:
@@ -70,11 +109,17 @@ def locator_from_calibration(data: dict[str, Any]) -> BallLocator:
     return tracker_locator(ArenaModel.from_dict(data), tracker_config_from_arena(data))
 
 
+def camera_sensor(config: Any, camera: Camera) -> CameraSensor:
+    """The ball sensor of a physical rig (``config``, a ``RigConfig``) on ``camera``."""
+    locator, why = rig_ball_locator(config)
+    return CameraSensor(camera, locator, why)
+
+
 def rig_ball_locator(config: Any) -> tuple[BallLocator | None, str | None]:
     """The tracker for a physical rig from its arena calibration (found by ``rig_id``, or the
     file named by the rig option ``arena_calibration``), and None; without one, (None, why):
     ball positions are then recorded as unknown (NaN), never guessed, and ``open_run`` warns
-    once, or refuses a run whose strategy needs the ball."""
+    once, or refuses a run whose strategy needs the ball (``CameraSensor.blind``)."""
     from calibration.store import CalibrationError, CalibrationMissing
     from explore.rigs.rig import RigError
 
@@ -89,3 +134,121 @@ def rig_ball_locator(config: Any) -> tuple[BallLocator | None, str | None]:
         return None, str(exc)
     except CalibrationError as exc:  # a file that is there but wrong: never run without it
         raise RigError(f"{exc} (a damaged or foreign arena calibration is not ignored)") from exc
+
+
+class TwinSensor:
+    """The twin in-process: ground truth, or the tracker on its frames (``locator``).
+
+    Args:
+        twin: the ``sim.twin.Twin``.
+        camera: its ``sim.camera.SimCamera`` (the overhead view).
+        locator: the tracker on the camera's frames, or None: the twin's ground truth.
+        square: with the ground truth, render the observation directly at its own size (no
+            full frame); False: cut it from the full frame (the images of the legacy render
+            mode were made so).
+        prepare: the scene's changes before each episode (the ball put back, the
+            distractor's walk), or None.
+    """
+
+    blind: str | None = None
+
+    def __init__(
+        self,
+        twin: Any,
+        camera: Any,
+        locator: BallLocator | None = None,
+        square: bool = True,
+        prepare: Callable[[np.random.Generator], None] | None = None,
+    ) -> None:
+        self.twin = twin
+        self.camera = camera
+        self.locator = locator
+        self.square = square and locator is None
+        self._prepare = prepare
+
+    def locate(self, image_side: int | None = None) -> Observation:
+        distractor = self.twin.distractor_position()[:2]
+        if self.locator is None and image_side is None:
+            return Observation(ball=self._true_ball(), distractor=distractor)
+        if self.square:
+            # only the observation is used: rendered at its own size, no full frame
+            image = self.camera.read_square(image_side).image
+            return Observation(ball=self._true_ball(), image=image, distractor=distractor)
+        frame = self.camera.read().image
+        ball = self._true_ball() if self.locator is None else self.locator(frame)
+        if image_side is None:
+            return Observation(ball=ball, distractor=distractor)
+        image = square_observation(frame, image_side)
+        return Observation(ball=ball, image=image, frame=frame, distractor=distractor)
+
+    def _true_ball(self) -> np.ndarray:
+        return self.twin.ball_position()[:2]
+
+    def watch(self) -> None:
+        """Nothing to take: the twin knows the ball's speed."""
+
+    def still(self, speed: float, interval_s: float) -> bool:
+        """The ball's true speed now (also with the tracker: the twin knows it)."""
+        return bool(self.twin.ball_speed() < speed)
+
+    def tool_tip(self) -> np.ndarray:
+        return self.twin.end_effector_position()
+
+    def prepare(self, scene_rng: np.random.Generator) -> None:
+        if self._prepare is not None:
+            self._prepare(scene_rng)
+
+    def snapshot(self) -> np.ndarray:
+        return self.twin.get_state()
+
+    def restore(self, state: np.ndarray) -> None:
+        self.twin.set_state(state)
+
+
+class CameraSensor:
+    """A physical rig's camera and tracker (``locator``, from its arena calibration), or no
+    tracker (``blind`` says why): the ball unknown (NaN) then, and always still."""
+
+    def __init__(
+        self, camera: Camera, locator: BallLocator | None, blind: str | None = None
+    ) -> None:
+        self.camera = camera
+        self.locator = locator
+        self.blind = None if locator is not None else (blind or "no ball locator")
+        self._previous = UNKNOWN
+
+    def _ball(self, frame: np.ndarray) -> np.ndarray:
+        return UNKNOWN.copy() if self.locator is None else self.locator(frame)
+
+    def locate(self, image_side: int | None = None) -> Observation:
+        frame = self.camera.read().image
+        ball = self._ball(frame)
+        if image_side is None:
+            return Observation(ball=ball)
+        return Observation(ball=ball, image=square_observation(frame, image_side), frame=frame)
+
+    def watch(self) -> None:
+        if self.locator is not None:
+            self._previous = self._ball(self.camera.read().image)
+
+    def still(self, speed: float, interval_s: float) -> bool:
+        """The tracked position against the previous one ``interval_s`` earlier; a ball not
+        seen in both counts as still moving (the settle then waits up to its cap)."""
+        if self.locator is None:
+            return True
+        here = self._ball(self.camera.read().image)
+        step = float(np.linalg.norm(here - self._previous))  # NaN if either is unseen
+        self._previous = here
+        return step / interval_s < speed
+
+    def tool_tip(self) -> np.ndarray:
+        return np.full(3, np.nan)
+
+    def prepare(self, scene_rng: np.random.Generator) -> None:
+        """Nothing: a real arena changes only by the arm."""
+
+    def snapshot(self) -> np.ndarray:
+        return NO_STATE
+
+    def restore(self, state: np.ndarray) -> None:
+        """Nothing to restore: the arena is where the arm left it."""

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from explore.rigs.ball import rig_ball_locator
+from explore.rigs.ball import camera_sensor
 from explore.rigs.clock import RealClock
 from explore.rigs.hardware import (
     HardwareOptions,
@@ -86,9 +86,8 @@ def make_rig(config: RigConfig, options: Options) -> Rig:
         arm = CanArm(bus_spec, spec=joints.spec, config=config_for(bus_spec, **arm_config))
     except (CanBusError, ValueError) as exc:
         raise RigError(f"rig 'canopen': {exc}") from exc
-    locator, why = rig_ball_locator(config)
     return Rig(
         arm=arm, camera=camera, clock=RealClock(), config=config,
-        ball_locator=locator, ball_locator_error=why,
+        sensor=camera_sensor(config, camera),
         video_frame=camera_video_frame(camera, options.record_video),
     )  # fmt: skip

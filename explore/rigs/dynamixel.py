@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from explore.options import BadOption
-from explore.rigs.ball import rig_ball_locator
+from explore.rigs.ball import camera_sensor
 from explore.rigs.clock import RealClock
 from explore.rigs.hardware import HardwareOptions, check_rig_id, joint_setup, rig_camera, scene
 from explore.rigs.rig import Rig, RigConfig, RigError
@@ -75,10 +75,9 @@ def make_rig(config: RigConfig, options: Options) -> Rig:
         )
     except (ValueError, KeyError, TypeError, BusError) as exc:
         raise RigError(f"dynamixel rig: {exc}") from exc
-    locator, why = rig_ball_locator(config)
     camera = rig_camera(options, config.name)
     return Rig(
         arm=arm, camera=camera, clock=RealClock(), config=config,
-        ball_locator=locator, ball_locator_error=why,
+        sensor=camera_sensor(config, camera),
         video_frame=camera_video_frame(camera, options.record_video),
     )  # fmt: skip

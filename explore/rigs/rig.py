@@ -1,6 +1,8 @@
-"""A ``Rig`` is an Arm + a Camera + a Clock + a motor primitive (+ the twin, when there is one,
-for ground truth), or a simulated scene that plays whole episodes itself (``player``: ArmBalls),
-and the scene the learner and the metric see (``scene``).
+"""A ``Rig`` is an Arm + a Camera + a Clock + a ball sensor + a motor primitive, or a simulated
+scene that plays whole episodes itself (ArmBalls), and the scene the learner and the metric see
+(``scene``). The exploration loop asks it for its episode player (``Rig.episodes``), its scene's
+state after an episode (``snapshot``) and to restore it on resume (``restore``), and never
+asks which rig it is.
 
 Rigs are built by name from ``RIGS``, a table of name -> module imported lazily
 (``robot.registry.LazyTable``), so a user without a CAN adapter library never imports it. Each
@@ -15,6 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -22,8 +25,9 @@ import numpy as np
 from explore.learner.dmp import Dmp, MotorPrimitive
 from explore.learner.scene import Scene
 from explore.options import OptionsError, parse_options
+from explore.rigs.ball import NO_STATE, BallSensor
 from explore.rigs.clock import Clock
-from explore.rigs.episodes import EpisodePlayer
+from explore.rigs.episodes import EpisodeConfig, EpisodePlayer
 from robot.arm import Arm
 from robot.registry import LazyTable
 from vision.camera import Camera
@@ -71,47 +75,63 @@ class RigConfig:
 class Rig:
     """Everything an episode needs.
 
-    A rig with an arm has ``arm``, ``camera`` and ``clock``, and its episodes are played by
-    ``explore.runs.episode.EpisodeRunner``; ``twin`` is the MuJoCo twin for simulated rigs,
-    else None; ``ball_locator`` finds the ball in camera frames (the tracker); a rig needs one
-    unless it is the twin, whose ground truth is used then. A simulated scene that plays whole
-    episodes at once has neither arm, camera nor clock, and a ``player`` instead. ``motor``
-    turns motor parameters into joint trajectories (the Ergo Jr's DMPs unless the rig has its
-    own)."""
+    A rig with an arm has ``arm``, ``camera``, ``clock`` and ``sensor`` (where the ball is:
+    the twin's ground truth or the tracker, ``explore.rigs.ball``), and its episodes are played
+    by ``explore.rigs.arm_episodes.EpisodeRunner``. A simulated scene that plays whole
+    episodes at once has neither arm, camera, clock nor sensor, and its own ``player``
+    instead. ``motor`` turns motor parameters into joint trajectories (the Ergo Jr's DMPs
+    unless the rig has its own)."""
 
     config: RigConfig
     arm: Arm | None = None
     camera: Camera | None = None
     clock: Clock | None = None
-    twin: Any = None
-    #: frame (H, W, 3) BGR -> ball (x, y) m or NaN; None on the twin = its ground truth
-    ball_locator: Callable[[np.ndarray], np.ndarray] | None = None
-    #: called with the arm at rest before each episode's context is observed, with the
-    #: episode's own random stream for the scene (twin: ball reset, the distractor's walk)
-    before_episode: Callable[[np.random.Generator], None] | None = None
-    #: side (pixels) -> the square observation (side, side, 3) BGR uint8, rendered directly
-    #: at that size; set where nothing needs the full frame (the twin with its ground truth)
-    square_view: Callable[[int], np.ndarray] | None = None
+    sensor: BallSensor | None = None
     #: motor parameters (n_params,) -> joint trajectory (T, n_joints) rad
     motor: MotorPrimitive = field(default_factory=Dmp)
     #: a rig that plays its own episodes: the run's ``EpisodeConfig`` -> its player; None: the
     #: arm's ``EpisodeRunner``
-    player: Callable[[Any], EpisodePlayer] | None = None
+    player: Callable[[EpisodeConfig], EpisodePlayer] | None = None
     #: seconds between two fsyncs of the run's history (0: after every episode, the default;
     #: ``explore.runs.store.RunStore.sync_interval_s``): a rig whose episode costs well under
     #: a millisecond of computing, which a crash of the machine can only make it redo, need
     #: not wait 2 ms for the disk at each one (a killed process loses nothing either way)
     sync_interval_s: float = 0.0
-    #: why a physical rig has no ``ball_locator`` (its arena calibration's error), else None
-    ball_locator_error: str | None = None
     #: the rig option ``record_video``: () -> the overhead camera now, a square (side, side, 3)
     #: BGR uint8 frame, taken at every control tick of a movement (``RUN/frames/``); else None
     video_frame: Callable[[], np.ndarray] | None = None
 
-    @property
+    @cached_property
     def scene(self) -> Scene:
-        """The scene the learner and the metric see (``rig_scene``)."""
+        """The scene the learner and the metric see (``rig_scene``, read once)."""
         return rig_scene(self.config)
+
+    def episodes(self, config: EpisodeConfig | None = None) -> EpisodePlayer:
+        """The player of this rig's episodes with timing ``config``: its own, or the arm's."""
+        config = config or EpisodeConfig()
+        if self.player is not None:
+            return self.player(config)
+        from explore.rigs.arm_episodes import EpisodeRunner
+
+        return EpisodeRunner(self, config=config)
+
+    def snapshot(self) -> np.ndarray:
+        """The scene's state after an episode (the twin's), (k,); empty where nothing can be
+        restored (a real arena, a scene reset before every episode)."""
+        return self.sensor.snapshot() if self.sensor is not None else NO_STATE
+
+    def restore(self, state: np.ndarray) -> None:
+        """Put the scene back in ``state`` (a resumed run's last ``snapshot``; connected), and
+        let the arm's step bound start from where its joints are now."""
+        if self.sensor is None or not np.size(state):
+            return
+        self.sensor.restore(state)
+        if self.arm is not None:
+            self.arm.resync()
+
+    def fault_counts(self) -> dict[str, float] | None:
+        """The arm's fault and recovery counters (``Arm.fault_counts``); None without an arm."""
+        return self.arm.fault_counts() if self.arm is not None else None
 
     def connect(self) -> None:
         """The arm first (a port that is missing or busy is the error to name, before any

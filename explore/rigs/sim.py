@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
 from explore.learner.scene import TWIN_ARENA, Scene
 from explore.options import BadOption
-from explore.rigs.ball import tracker_locator, twin_arena_model
+from explore.rigs.ball import TwinSensor, tracker_locator
 from explore.rigs.clock import TwinClock
 from explore.rigs.rig import Rig, RigConfig, RigError
 from explore.rigs.video import VideoOptions
@@ -18,6 +18,7 @@ from robot.watchdog import Watchdog
 from sim import RENDER_QUALITIES
 from sim.arm import SimArm
 from sim.camera import SimCamera
+from sim.models.make_scene import ARENA_RADIUS
 from sim.twin import SCENE, SCENE_DISTRACTOR, Twin
 
 # Rendered frame side, pixels: below 16 the tracker has nothing to see, above 2048 a software
@@ -110,30 +111,49 @@ def make_rig(config: RigConfig, options: Options) -> Rig:
     locator = tracker_locator(twin_arena_model(camera)) if options.ball == "tracker" else None
     reset = options.ball_reset == "start"
 
-    def before_episode(rng: np.random.Generator) -> None:
+    def prepare(rng: np.random.Generator) -> None:
         if reset:
             twin.place_ball()
         if walk:
             xy = twin.distractor_position()[:2]
             twin.place_distractor(distractor_walk(xy, options.distractor_step, rng))
 
+    sensor = TwinSensor(
+        twin, camera, locator,
+        # with the ground truth, the outcome image is all a frame is for: render it at its
+        # size; legacy: reduced from the full frame, as those images were made
+        square=options.render_quality == "chosen",
+        prepare=prepare if reset or walk else None,
+    )  # fmt: skip
     return Rig(
         arm=SimArm(twin, watchdog=Watchdog(hold_s=options.watchdog_hold_s)), camera=camera,
-        clock=TwinClock(twin), config=config, twin=twin,
-        ball_locator=locator,
-        before_episode=before_episode if reset or walk else None,
-        # with the ground truth, the outcome image is all a frame is for: render it at its size
-        square_view=(
-            (lambda side: camera.read_square(side).image)
-            if locator is None and options.render_quality == "chosen"
-            else None  # legacy: reduced from the full frame, as those images were made
-        ),
+        clock=TwinClock(twin), config=config, sensor=sensor,
         video_frame=(
             (lambda: camera.read_square(options.record_video).image)
             if options.record_video
             else None
         ),
     )  # fmt: skip
+
+
+def twin_arena_model(camera: Any) -> Any:
+    """The exact ``ArenaModel`` of a twin ``SimCamera`` (its known projection, no calibration
+    error), over the arena's bounding square."""
+    from vision.rectify import (
+        ArenaModel,
+        estimate_camera_position,
+        fit_homography,
+        undistort_points,
+    )
+
+    k, d = camera.intrinsics()
+    h = ARENA_RADIUS
+    xy = np.array([[x, y] for x in (-h, 0.0, h) for y in (-h, 0.0, h)])
+    px = camera.project(np.column_stack([xy, np.zeros(len(xy))]))
+    homography = fit_homography(undistort_points(px, k, d), xy)
+    position = estimate_camera_position(px, xy, k, d)
+    size = (camera.size[1], camera.size[0])  # (width, height)
+    return ArenaModel(k, d, size, homography, np.zeros(2), h, position)
 
 
 def rig_servos(config: RigConfig):

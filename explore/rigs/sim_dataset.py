@@ -2,7 +2,7 @@
 
 Each scene: the ball placed uniformly over its ring (uniform in area between radii 0.13 and 0.17
 m, where the ball's centre can lie; uniform angle), the arm at its rest pose (``arm="rest"``,
-the default: an episode's outcome is observed there, explore/runs/episode.py) or driven towards
+the default: an episode's outcome is observed there, explore/rigs/arm_episodes.py) or driven towards
 random joint targets inside its limits (``arm="random"``, the paper's database, in which the
 arm's pose varies), ``settle_s`` seconds of physics, then the overhead view rendered at 64x64
 exactly as an episode's outcome on the twin (``sim.camera.SimCamera.read_square``). The ball's

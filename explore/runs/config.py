@@ -19,11 +19,10 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from explore.rigs.episodes import EpisodeConfig
 from explore.rigs.rig import RIGS, RigConfig
 from explore.runs.store import RunStoreError
 from robot.registry import did_you_mean
-from robot.spec import CONTROL_RATE_HZ
-from vision.observation import OBSERVATION_SIZE
 
 # Seeds feed numpy.random.default_rng([seed, episode]): non-negative integers only.
 MAX_SEED = 2**63 - 1
@@ -46,34 +45,6 @@ TOP_LEVEL = ("rig", "strategy", "seed", "episodes", "episode")
 
 class RunConfigError(RunStoreError):
     """A run config field is missing, of the wrong type or out of range (one line)."""
-
-
-@dataclass(frozen=True)
-class EpisodeConfig:
-    """Timing of an episode.
-
-    Attributes:
-        rate_hz: control rate (40 Hz: the DMP's 40 points last 1 s, as in the paper's rig).
-        reset_s: time to go back to the rest pose (1 s, original implementation).
-        settle_speed: the ball counts as still below this speed, m/s (guess: 1 cm/s).
-        arm_settle_speed: the arm counts as back at rest when no joint moves faster than this,
-            rad/s (guess, checked on the twin: it stops within 0.2-0.3 s). 0.05 rad/s over a
-            0.1 s check is 0.286 degrees, just under one XL-320 position unit (0.293 degrees,
-            datasheet), so a joint that moved by at most one unit of its reading
-            (``Arm.position_resolution``) also counts as still: a reading that flickers by one
-            unit at rest would otherwise hold every settle to ``settle_max_s``.
-        settle_max_s: longest wait for the ball and the arm to settle (the original waited 3 s).
-        settle_check_s: interval between two settle checks.
-        obs_size: side of the square observation the representation sees, pixels (64, paper).
-    """
-
-    rate_hz: float = CONTROL_RATE_HZ
-    reset_s: float = 1.0
-    settle_speed: float = 0.01
-    arm_settle_speed: float = 0.05
-    settle_max_s: float = 3.0
-    settle_check_s: float = 0.1
-    obs_size: int = OBSERVATION_SIZE
 
 
 @dataclass(frozen=True)

@@ -13,10 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from explore.learner.strategies.base import Strategy
-from explore.rigs.episodes import EpisodePlayer
+from explore.rigs.episodes import EpisodeConfig, EpisodePlayer
 from explore.rigs.rig import Rig
-from explore.runs.config import EpisodeConfig
-from explore.runs.episode import EpisodeRunner
 from explore.runs.metrics import METRICS_FILE, MetricsLog
 from explore.runs.record import EpisodeRecord
 from explore.runs.store import RunStore, RunStoreError
@@ -54,7 +52,7 @@ def add_fault_counts(run_path: Path, counts: dict[str, float]) -> dict[str, floa
     return totals
 
 
-# The scene's own random stream of an episode (the rig's ``before_episode``: the distractor's
+# The scene's own random stream of an episode (the rig sensor's ``prepare``: the distractor's
 # walk), apart from the strategy's: numpy.random.default_rng([seed, episode, SCENE_STREAM]).
 SCENE_STREAM = 1
 
@@ -104,11 +102,7 @@ class Explorer:
         self.strategy = strategy
         self.store = store
         self.seed = seed
-        self.runner: EpisodePlayer = (
-            rig.player(episode_config or EpisodeConfig())
-            if rig.player is not None
-            else EpisodeRunner(rig, config=episode_config)
-        )
+        self.runner: EpisodePlayer = rig.episodes(episode_config)
         self.metrics = MetricsLog(store.path / METRICS_FILE, rig.scene)
         self.on_episode = on_episode
         self.on_record = on_record
@@ -143,10 +137,11 @@ class Explorer:
         A failure is logged, or only noted in ``unsaved`` while the run is failing anyway
         (a full disk: the caller reports it with the run's own error). A rig without an arm
         has no counters (and no file)."""
-        if self.rig.arm is None:
-            return
         try:
-            add_fault_counts(self.store.path, self.rig.arm.fault_counts())
+            counts = self.rig.fault_counts()
+            if counts is None:
+                return
+            add_fault_counts(self.store.path, counts)
         except Exception as exc:  # counters are a report: losing them must not hide a fault
             self.unsaved.append(f"{FAULTS_FILE} ({exc})")
             if not failing:
@@ -156,10 +151,8 @@ class Explorer:
         arm = self.rig.arm
         guard = torque_off_on_signals(arm) if arm is not None else contextlib.nullcontext()
         with self.rig, guard:
-            if done and self.rig.twin is not None:
-                state = self.store.records[-1].sim_state
-                self.rig.twin.set_state(state)
-                self.rig.arm.resync()  # type: ignore[union-attr]
+            if done:
+                self.rig.restore(self.store.records[-1].sim_state)
             start = time.perf_counter()
             for k in range(done, n_episodes):
                 row = self.step(k)
@@ -210,7 +203,6 @@ class Explorer:
         result = self.runner.run(proposal.theta, context)
         if result.frames is not None:
             self.store.write_frames(k, result.frames)
-        twin = self.rig.twin
         return EpisodeRecord(
             episode=k,
             theta=np.asarray(proposal.theta, dtype=float),
@@ -227,7 +219,7 @@ class Explorer:
             end_effector=result.end_effector,
             start_positions=result.start_positions,
             image=result.outcome.image,  # type: ignore[arg-type]
-            sim_state=twin.get_state() if twin is not None else np.zeros(0),
+            sim_state=self.rig.snapshot(),
             settle_s=result.settle_s,
             duration_s=time.perf_counter() - t0,
         )

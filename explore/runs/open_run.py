@@ -133,11 +133,11 @@ def _check_sees_ball(config: RunConfig, rig: Rig, strategy: Strategy) -> None:
     no ball for the whole run: a ``RigError`` for a strategy that needs it (goal exploration),
     else one warning. A rig with nothing physical attached (the twin, ArmBalls) knows where
     its ball is."""
-    if rig.ball_locator is not None or not is_physical(config.rig.name):
+    why = rig.sensor.blind if rig.sensor is not None else None
+    if why is None or not is_physical(config.rig.name):
         return
     rig_id = config.rig.rig_id
     calibrate = f"ergo calibrate arena --rig-id {rig_id} --camera ..."
-    why = rig.ball_locator_error or "no ball locator"
     if strategy.needs_ball:
         raise RigError(
             f"rig {config.rig.name!r} cannot locate the ball that {strategy.name} sets its goals "

@@ -25,6 +25,7 @@ import collections
 import time
 from pathlib import Path
 
+from explore.rigs.ball import TwinSensor
 from explore.rigs.clock import TwinClock
 from explore.rigs.rig import Rig, RigConfig
 from explore.runs.config import RunConfig
@@ -56,8 +57,9 @@ def build_rig(bus: str, rate: float, seed: int) -> Rig:
         from sim.arm import SimArm
 
         arm = FaultyArm(SimArm(twin), rate=rate, seed=seed)
-    return Rig(arm=arm, camera=SimCamera(twin), clock=TwinClock(twin),
-               config=RigConfig(name="sim"), twin=twin)  # fmt: skip
+    camera = SimCamera(twin)
+    return Rig(arm=arm, camera=camera, clock=TwinClock(twin), config=RigConfig(name="sim"),
+               sensor=TwinSensor(twin, camera, square=False))  # fmt: skip
 
 
 def soak(episodes: int, rate: float, bus: str, seed: int, out: Path) -> dict:
@@ -107,7 +109,7 @@ def soak(episodes: int, rate: float, bus: str, seed: int, out: Path) -> dict:
             counters.update(rig.arm.fault_counts())
             if bus == "arm":
                 counters.update(rig.arm.counts)  # type: ignore[attr-defined]
-            rig.twin.close()
+            rig.sensor.twin.close()  # type: ignore[union-attr]
     wall = time.perf_counter() - t0
     check = RunStore.read(out)  # verifies every checksum, cuts nothing
     ids = [r.episode for r in check]

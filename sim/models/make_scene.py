@@ -27,7 +27,7 @@ GUARD_HEIGHT = 0.30  # m (chosen: above anything the arm can lift the ball to)
 # dragged it against the wall: 3 of the 7 were still jammed 3.5 s later, at full load, and
 # the outcome image showed the arm in that pose (measured 2026-11-23, docs/twin.md). Whether
 # the real arm can reach behind its wall is not known; a real arm that jams is stopped by the
-# load watchdog during the settle (explore/runs/episode.py).
+# load watchdog during the settle (explore/rigs/arm_episodes.py).
 WALL_CONAFFINITY = 2  # ball only (the kerb's and the guard's); 1 would make it stop the arm
 KERB_HEIGHT = 0.02  # m
 N_WALL_BOXES = 32

@@ -24,8 +24,9 @@ import numpy as np
 
 from calibration import store
 from calibration.joints import JointCalibration
+from explore.rigs.episodes import EpisodeConfig
 from explore.rigs.rig import RigConfig
-from explore.runs.config import EpisodeConfig, RunConfig
+from explore.runs.config import RunConfig
 from explore.runs.open_run import open_run
 from robot.dynamixel.control_table import XL320
 from robot.spec import ergo_jr_spec

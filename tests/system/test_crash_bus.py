@@ -30,8 +30,9 @@ from pathlib import Path
 
 import pytest
 
+from explore.rigs.episodes import EpisodeConfig
 from explore.rigs.rig import RigConfig
-from explore.runs.config import EpisodeConfig, RunConfig
+from explore.runs.config import RunConfig
 from explore.runs.open_run import open_run
 from explore.runs.record import EpisodeRecord
 from explore.runs.store import RunStore, _scan

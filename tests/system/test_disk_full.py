@@ -72,7 +72,7 @@ def test_a_full_disk_keeps_the_episodes_and_turns_torque_off(tmp_path, monkeypat
     message = str(info.value)
     assert "\n" not in message and "No space left on device" in message
     assert f"the {FILL_AT} episode(s) before it are kept" in message
-    assert not rig.arm.torque_enabled and not rig.twin.torque_enabled()  # torque off
+    assert not rig.arm.torque_enabled and not rig.sensor.twin.torque_enabled()  # torque off
     monkeypatch.undo()
     assert [r.episode for r in _history(tmp_path / "run")] == list(range(FILL_AT))
 

@@ -64,6 +64,25 @@ def test_the_wings_of_explore_import_downwards_only():
     assert bad == []
 
 
+# The episode's seam (explore/rigs: the Rig, the episode player, the ball sensors) and the
+# exploration loop (explore/runs) know no simulator: a twin is one rig among others, behind its
+# BallSensor. Only the rigs that are simulators build one; the fault soak (explore/runs/soak.py)
+# builds twin rigs with faulty buses on purpose.
+SIMULATED_RIGS = ("sim.py", "sim_dataset.py", "armballs.py")
+SOAK = "soak.py"
+
+
+def test_the_episode_seam_and_the_loop_import_no_simulator():
+    bad = []
+    for wing, exempt in (("rigs", SIMULATED_RIGS), ("runs", (SOAK,))):
+        for path in sorted((ROOT / "explore" / wing).glob("*.py")):
+            if path.name in exempt:
+                continue
+            bad += [f"{path.relative_to(ROOT)} imports {n}" for n in _imports(path)
+                    if n.split(".")[0] == "sim"]  # fmt: skip
+    assert bad == []
+
+
 def test_the_shared_modules_of_explore_import_no_wing():
     for path in (ROOT / "explore" / "options.py", ROOT / "explore" / "__init__.py"):
         wings = {n for n in _imports(path) if n.split(".")[:2][-1] in WINGS}

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from explore.rigs.ball import TwinSensor
 from explore.rigs.clock import TwinClock
 from explore.rigs.rig import Rig, RigConfig
 from explore.runs.config import RunConfig
@@ -58,8 +59,9 @@ def served(tmp: Path) -> Iterator[tuple[Twin, DynamixelEmulator, PtyBusServer]]:
 
 def _rig(twin: Twin, port: str, recovery: RecoveryPolicy | None = None) -> Rig:
     arm = DynamixelArm(port, latency_s=LATENCY_S, recovery=recovery)
-    return Rig(arm=arm, camera=SimCamera(twin), clock=TwinClock(twin),
-               config=RigConfig(name="sim"), twin=twin)  # fmt: skip
+    camera = SimCamera(twin)
+    return Rig(arm=arm, camera=camera, clock=TwinClock(twin), config=RigConfig(name="sim"),
+               sensor=TwinSensor(twin, camera, square=False))  # fmt: skip
 
 
 def _history(path: Path) -> list[int]:

@@ -109,8 +109,8 @@ def test_the_twin_rig_builds_its_servos_from_the_fit_and_run_json_records_it(tmp
     }
     path = store.save("dynamics", "arm7", payload)
     rig = make_rig(RigConfig("sim", "arm7"))
-    assert rig.twin.servos == TRUTH
-    assert make_rig(RigConfig("sim")).twin.servos.kp == (3.5,) * 6  # no file: nominal
+    assert rig.sensor.twin.servos == TRUTH
+    assert make_rig(RigConfig("sim")).sensor.twin.servos.kp == (3.5,) * 6  # no file: nominal
     config = RunConfig.from_dict(
         {**RunConfig().to_dict(), "rig": {"name": "sim", "rig_id": "arm7", "options": {}}}
     )
@@ -135,6 +135,6 @@ def test_the_gymnasium_env_takes_the_rig_id(tmp_path, monkeypatch):
     )  # fmt: skip
     env = gym.make("ergo_explore/ArmBall-v0", rig_id="arm8")
     try:
-        assert env.unwrapped.rig.twin.servos == TRUTH
+        assert env.unwrapped.rig.sensor.twin.servos == TRUTH
     finally:
         env.close()

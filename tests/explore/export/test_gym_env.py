@@ -227,7 +227,7 @@ def test_one_dmp_step_is_one_episode_that_can_move_the_ball():
 def test_closing_turns_the_torque_off():
     env = gym.make(IDS[0]).unwrapped
     env.reset(seed=0)
-    twin = env.rig.twin
+    twin = env.twin
     assert twin.torque_enabled()
     env.close()
     assert not twin.torque_enabled() and not env.rig.arm.is_connected

@@ -59,4 +59,4 @@ def test_the_twin_s_watchdog_lets_a_passing_wedge_through_and_stops_a_stuck_arm(
             for _ in range(40):
                 rig.clock.advance(0.1)
                 rig.arm.read()
-        assert not rig.twin.torque_enabled()
+        assert not rig.sensor.twin.torque_enabled()

@@ -48,13 +48,13 @@ def test_the_camera_sees_it_where_the_state_says(tmp_path):
 
     records = run(tmp_path / "r", 6)
     rig = make_rig(RigConfig(options=WALK))
-    camera = SimCamera(rig.twin, size=(64, 64))
+    camera = SimCamera(rig.sensor.twin, size=(64, 64))
     for r in records:
         hsv = cv2.cvtColor(r.image, cv2.COLOR_BGR2HSV)
         red = ((hsv[..., 0] < 8) | (hsv[..., 0] > 172)) & (hsv[..., 1] > 120)
         ys, xs = np.nonzero(red)
         assert len(xs) > 5
-        projected = camera.project(np.array([[*r.distractor, rig.twin.ball_radius]]))[0]
+        projected = camera.project(np.array([[*r.distractor, rig.sensor.twin.ball_radius]]))[0]
         assert np.hypot(xs.mean() - projected[0], ys.mean() - projected[1]) < 1.0
 
 

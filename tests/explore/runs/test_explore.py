@@ -93,8 +93,8 @@ def test_strategy_options_are_stored_and_kept_on_resume(tmp_path, capsys):
 def test_the_outcome_is_observed_with_the_arm_back_at_rest():
     """The arm lags its last rest command by 1-2 degrees, a few pixels of the 64x64 outcome
     image (more than a ball moved by a centimetre): the outcome waits until it has stopped."""
+    from explore.rigs.arm_episodes import EpisodeRunner
     from explore.rigs.rig import RigConfig, make_rig
-    from explore.runs.episode import EpisodeRunner
 
     with make_rig(RigConfig()) as rig:
         runner = EpisodeRunner(rig)
@@ -105,23 +105,23 @@ def test_the_outcome_is_observed_with_the_arm_back_at_rest():
             theta = np.random.default_rng(seed).uniform(-1, 1, 48)
             result = runner.run(theta, context)
             assert np.array_equal(rig.arm.last_sent, rest)
-            assert np.abs(rig.twin.joint_positions() - rest).max() < np.radians(0.3)
+            assert np.abs(rig.sensor.twin.joint_positions() - rest).max() < np.radians(0.3)
             assert not np.allclose(result.targets[-1], rest, atol=0.05)  # it did move
             rig.clock.advance(1.0)  # a second later the scene is the same
             later = runner.observe(render=True).image
             change = np.abs(later.astype(int) - result.outcome.image.astype(int)).mean()
             assert change < 0.1, f"episode {seed}: the outcome image changed by {change:.2f}"
             context = result.outcome
-        t = rig.twin.time
+        t = rig.sensor.twin.time
         runner.go_rest()  # already there: nothing is sent, no time passes
-        assert rig.twin.time == t
+        assert rig.sensor.twin.time == t
 
 
 def test_a_reading_that_flickers_by_one_servo_unit_does_not_hold_the_settle(monkeypatch):
     """A real XL-320 at rest can read one unit (0.29 degrees) apart from one check to the
     next, just over what arm_settle_speed allows in a check: that is not motion."""
+    from explore.rigs.arm_episodes import EpisodeRunner
     from explore.rigs.rig import RigConfig, make_rig
-    from explore.runs.episode import EpisodeRunner
     from sim.arm import SimArm
 
     unit = np.radians(300.0 / 1023.0)  # XL-320 position unit (e-manual)

@@ -265,7 +265,7 @@ def test_rig_runs_against_the_emulated_arm_and_camera() -> None:
         rig = make_rig(
             RigConfig(name="dynamixel", rig_id="hil", options={"port": port, "camera": camera.url})
         )
-        assert rig.twin is None and isinstance(rig.arm, DynamixelArm)
+        assert type(rig.sensor).__name__ == "CameraSensor" and isinstance(rig.arm, DynamixelArm)
         rig.arm.bus.latency_s = LATENCY_S
         with rig:
             assert all(emulator.torque_states().values())

@@ -1,4 +1,7 @@
-"""One episode on a rig: rest pose, context, DMP at the control rate, back to rest, settle, outcome.
+"""One episode on a rig with an arm: rest pose, context, the motor primitive at the control rate,
+back to rest, settle, outcome: ``EpisodeRunner``, the ``explore.rigs.episodes.EpisodePlayer`` of
+every rig with an arm to drive (the twin and the physical rigs alike: where the ball is, is the
+rig's ``BallSensor``'s to say, ``explore.rigs.ball``).
 
 The outcome is observed with the arm back at its rest pose (upright, over the arena's centre),
 so that the arm hides no part of the ring and the outcome image varies with the ball alone; the
@@ -18,10 +21,8 @@ import numpy as np
 
 from explore.learner.dmp import MotorPrimitive
 from explore.learner.experience import Observation
-from explore.rigs.episodes import EpisodeResult
+from explore.rigs.episodes import EpisodeConfig, EpisodeResult
 from explore.rigs.rig import Rig
-from explore.runs.config import EpisodeConfig
-from vision.observation import square_observation
 
 
 @dataclass
@@ -79,42 +80,14 @@ class EpisodeRunner:
             clock.advance(self.dt)
 
     def observe(self, render: bool = True) -> Observation:
-        """Locate the ball and optionally keep the frame.
-
-        With a ball locator (the tracker) a frame is always taken; without one (the twin),
-        the twin's ground truth is used and, if ``render``, the observation is rendered (at its
-        own size when the rig has a ``square_view``; then ``frame`` is None).
-        """
-        rig = self.rig
-        distractor = self._true_distractor()
-        if rig.ball_locator is None and not render:
-            return Observation(ball=self._true_ball(), distractor=distractor)
-        if rig.ball_locator is None and rig.square_view is not None:
-            # only the observation is used: rendered at its own size, no full frame
-            image = rig.square_view(self.config.obs_size)
-            return Observation(ball=self._true_ball(), image=image, distractor=distractor)
-        frame = rig.camera.read().image
-        ball = self._true_ball() if rig.ball_locator is None else rig.ball_locator(frame)
-        if not render:
-            return Observation(ball=ball, distractor=distractor)
-        return Observation(
-            ball=ball, image=square_observation(frame, self.config.obs_size), frame=frame,
-            distractor=distractor,
-        )  # fmt: skip
-
-    def _true_ball(self) -> np.ndarray:
-        twin = self.rig.twin
-        return twin.ball_position()[:2] if twin is not None else np.full(2, np.nan)
-
-    def _true_distractor(self) -> np.ndarray:
-        twin = self.rig.twin
-        return twin.distractor_position()[:2] if twin is not None else np.full(2, np.nan)
+        """Where the ball is (the rig's sensor), with the observation image if ``render``."""
+        return self.rig.sensor.locate(self.config.obs_size if render else None)
 
     def play(self, theta: np.ndarray) -> Movement:
         """Play the motor primitive of ``theta`` (n_params,) at the control rate: at each tick
         the camera frame (with the rig's ``video_frame``), the command, the clock, the reading."""
         traj = self.motor.trajectory(theta)
-        arm, clock, twin = self.rig.arm, self.rig.clock, self.rig.twin
+        arm, clock, sensor = self.rig.arm, self.rig.clock, self.rig.sensor
         capture = self.rig.video_frame
         t = len(traj)
         n = arm.spec.n
@@ -129,8 +102,7 @@ class EpisodeRunner:
             sent[i] = arm.command(q)
             clock.advance(self.dt)
             measured[i] = arm.read().positions
-            if twin is not None:
-                ee[i] = twin.end_effector_position()
+            ee[i] = sensor.tool_tip()
         video = np.stack(frames) if frames else None
         return Movement(sent, measured, ee, np.asarray(start, dtype=float), video)
 
@@ -145,9 +117,8 @@ class EpisodeRunner:
         ball not seen in both counts as still moving, up to the ``settle_max_s`` cap, as the
         original waited and re-observed).
         """
-        cfg, clock, twin, arm = self.config, self.rig.clock, self.rig.twin, self.rig.arm
-        locator = self.rig.ball_locator if twin is None else None
-        previous = locator(self.rig.camera.read().image) if locator is not None else None
+        cfg, clock, sensor, arm = self.config, self.rig.clock, self.rig.sensor, self.rig.arm
+        sensor.watch()
         joints = arm.read().positions
         # a joint is still when it moved less than arm_settle_speed allows, or by at most one
         # unit of its reading (a real servo's reading can flicker by one unit at rest)
@@ -161,26 +132,17 @@ class EpisodeRunner:
             now = arm.read().positions
             arm_still = bool(np.all(np.abs(now - joints) <= step_max))
             joints = now
-            if twin is not None:
-                ball_still = twin.ball_speed() < cfg.settle_speed
-            elif locator is not None:
-                here = locator(self.rig.camera.read().image)
-                step = float(np.linalg.norm(here - previous))  # NaN if either is unseen
-                ball_still = step / cfg.settle_check_s < cfg.settle_speed
-                previous = here
-            else:
-                ball_still = True
+            ball_still = sensor.still(cfg.settle_speed, cfg.settle_check_s)
             if ball_still and arm_still:
                 break
         return waited
 
     # ---- the whole episode -----------------------------------------------------------------
     def context(self, scene_rng: np.random.Generator, render: bool) -> Observation:
-        """Go to the rest pose, let the rig change its scene (``Rig.before_episode``: the
-        twin's ball reset, the distractor's walk) and observe the context there."""
+        """Go to the rest pose, let the rig's sensor change the scene (``BallSensor.prepare``:
+        the twin's ball reset, the distractor's walk) and observe the context there."""
         self.go_rest()
-        if self.rig.before_episode is not None:
-            self.rig.before_episode(scene_rng)
+        self.rig.sensor.prepare(scene_rng)
         return self.observe(render=render)
 
     def run(self, theta: np.ndarray, context: Observation) -> EpisodeResult:
