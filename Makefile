@@ -32,28 +32,30 @@ lint: $(STAMP)
 format: $(STAMP)
 	$(BIN)/ruff format . && $(BIN)/ruff check --fix .
 
-# Benchmarks that need no data: a few minutes each (bench/*.py say what they measure).
-BENCH_QUICK := canopen dynamixel episodes meta_policy rerun touch
+# Benchmarks that need no data: a few minutes each (bench/README.md says what each measures),
+# then the twin's touch rate (an experiment: experiments/README.md).
+BENCH_QUICK := canopen dynamixel episodes meta_policy rerun
 BENCH_VAE := runs/bench-vae
 
 bench: $(STAMP)
 	for b in $(BENCH_QUICK); do echo "== bench/bench_$$b.py"; $(BIN)/python bench/bench_$$b.py || exit 1; done
+	echo "== experiments/touch_rate.py"; $(BIN)/python experiments/touch_rate.py
 
 # Also Ray against local processes (about 20 min) and the learned goal space: 3000 twin scenes
 # rendered into $(BENCH_VAE) (about 5 CPU min), a VAE trained on them (about 10 CPU min), how
-# faithful its latents are to the ball.
+# faithful its latents are to the ball (experiments/goal_space.py).
 bench-all: bench
 	$(BIN)/python bench/bench_ray.py
 	$(BIN)/python bench/bench_vae.py --out $(BENCH_VAE) --beta 10 --capacity 10 \
 	    --capacity-iterations 500 --iterations 700 --every 100
-	$(BIN)/python bench/bench_goal_space.py --data $(BENCH_VAE)/dataset.npz --vae $(BENCH_VAE)
+	$(BIN)/python experiments/goal_space.py --data $(BENCH_VAE)/dataset.npz --vae $(BENCH_VAE)
 
 # The paper's experiment on the twin (docs/results.md): datasets, representations chosen by a
 # label-free criterion, both conditions x 8 seeds x 5000 episodes. Hours on 2 cores;
 # resumable: run it again after anything stopped it.
 PAPER ?= runs/paper
 paper: $(STAMP)
-	bash bench/paper_campaign.sh $(PAPER) 2
+	bash experiments/paper_campaign.sh $(PAPER) 2
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache

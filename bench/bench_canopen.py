@@ -29,6 +29,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "experiments"))
+
+from script_helpers import stop_process  # noqa: E402  (experiments/script_helpers.py)
 
 from robot.canopen.arm import CanArm, CanArmConfig  # noqa: E402
 
@@ -89,12 +92,7 @@ def bench_pty(cycles: int) -> float:
         with CanArm(f"slcan:{path}", config=CanArmConfig(pdo_timeout_s=0.05)) as arm:
             return run_cycles(arm, cycles)
     finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+        stop_process(proc, timeout_s=10)
 
 
 def main() -> int:

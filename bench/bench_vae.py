@@ -17,6 +17,7 @@ same script with ``--lr 1e-5`` to compare at equal iterations, and ``--device cu
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
@@ -25,20 +26,11 @@ import numpy as np
 from vision.vae import VaeConfig
 from vision.vae_train import CHECKPOINT, TrainConfig, train_vae
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
+from script_helpers import linear_r2  # experiments/script_helpers.py
+
 N_DEFAULT = 3000  # scenes rendered when no dataset is given (about 5 min of CPU; guess: enough)
 HELD_OUT = 0.2  # fraction of the images kept out of training and of the linear fit
-
-
-def linear_r2(
-    z_fit: np.ndarray, y_fit: np.ndarray, z_test: np.ndarray, y_test: np.ndarray
-) -> float:
-    """Held-out R^2 of a least-squares affine map z (n, d) -> y (n, k), averaged over k."""
-    a_fit = np.hstack([z_fit, np.ones((len(z_fit), 1))])
-    w, *_ = np.linalg.lstsq(a_fit, y_fit, rcond=None)
-    pred = np.hstack([z_test, np.ones((len(z_test), 1))]) @ w
-    sse = ((y_test - pred) ** 2).sum(axis=0)
-    sst = ((y_test - y_test.mean(axis=0)) ** 2).sum(axis=0)
-    return float(np.mean(1.0 - sse / sst))
 
 
 def resumed_iteration(folder: Path) -> int:
@@ -108,7 +100,7 @@ def main() -> None:
         cpu = (time.process_time() - cpu0) / 60
         wall = (time.perf_counter() - wall0) / 60
         z_train, z_test = vae.encode_bgr(images[train]), vae.encode_bgr(images[test])
-        r2 = linear_r2(z_train, ball[train], z_test, ball[test])
+        r2 = linear_r2(z_train, ball[train], z_test, ball[test], pooled=False)  # mean over x, y
         last = (args.out / "train_log.csv").read_text().strip().splitlines()[-1].split(",")
         print(f"{stop:9d}  {cpu:7.1f}  {wall:8.1f}  {last[1]}  {last[2]}  {last[3]}  {r2:.3f}")
         if reached is None and r2 >= args.target:

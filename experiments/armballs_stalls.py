@@ -31,6 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from script_helpers import save_figure  # experiments/script_helpers.py, beside this script
 
 ROOT = Path(__file__).resolve().parents[1]
 PUBLISHED_RUNS = ROOT / "docs" / "armballs_published_runs.csv"
@@ -227,8 +228,7 @@ def figure(named: dict[str, list[RunFigures]], out: Path) -> None:
     axes[0][0].set_ylabel("exploration ratio (30 x 30 cells)")
     axes[0][0].legend(fontsize=7, loc="lower right")
     fig.tight_layout()
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
+    save_figure(fig, out)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -256,8 +256,8 @@ def main(argv: list[str] | None = None) -> int:
               f"{np.mean([r.blind_ball_share for r in runs]):.4f}\n")  # fmt: skip
     print(summary_table(named, pub))
     if args.figure:
+        print()
         figure(named, args.figure)
-        print(f"\nwrote {args.figure}")
     return 0
 
 

@@ -16,10 +16,9 @@ Two decoders (``SaeConfig.decoder``), both drawing over the mean training image:
   many features followed the ball only in part (std 0.1-0.3), and goals drawn in the code's
   bounds then favoured some stretches of the ring (coverage 0.82-0.92 against 0.99).
 
-Why here (docs/results.md, "A representation that locates the ball"): the paper's VAE folds
-the ball's position on its ring into mostly one latent and does so for only some training
-seeds; a code made of image positions is, by construction, near for images whose balls are
-near, whatever the seed.
+Why here (docs/results.md, section F2): the paper's VAE folds the ball's position on its ring
+into mostly one latent and does so for only some training seeds; a code made of image positions
+is, by construction, near for images whose balls are near, whatever the seed.
 
 Images enter as BGR uint8 arrays (n, 64, 64, 3), as the rig stores them. A model is saved as a
 folder: ``sae.pt`` (the state dict) and ``sae.json`` (its ``SaeConfig``, with the statistics

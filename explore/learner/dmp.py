@@ -43,7 +43,8 @@ def _deg(values: list[float]) -> tuple[float, ...]:
 # for the twin's arena (docs/twin.md): m1 sweeps the servo's 300 degrees; m2 leans the arm
 # forwards (to 110 degrees) or backwards (to -90, its limit), so the tool reaches the 60-degree
 # sector behind the arm that m1 alone cannot face; m3/m5/m6 fold either way. Measured with
-# bench/bench_touch.py: random parameters move the ball in 7.3-8.0% of episodes (3 seeds x 1000),
+# experiments/touch_rate.py: random parameters move the ball in 7.3-8.0% of episodes (3 seeds x
+# 1000),
 # against 1.0-2.8% for the earlier forward-only ranges, whose dead sector behind the arm
 # collected the ball for good.
 TWIN_LOWER = _deg([-150.0, -90.0, -90.0, -60.0, -90.0, -90.0])

@@ -208,7 +208,7 @@ class LatentGoalSpace(GoalSpace):
             length latent_dim: the latent means' statistics over the outcome database, and the
             outcome is ``(mu - mean) / std``. Raw means of a beta-VAE can spread over 1e-4 in
             one latent and 2e-3 in another, so nearest neighbours in them follow a few latents
-            only (docs/results.md, ``bench/bench_goal_space.py``).
+            only (docs/results.md, ``experiments/goal_space.py``).
     """
 
     def __init__(

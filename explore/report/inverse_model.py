@@ -22,7 +22,8 @@ latent as context, for the learned ones). Prints:
 
 ``figure``: per run, the arena distance of pairs of its outcomes against their distance in its
 goal space, and the distribution of the context mismatch (the first of the two distances
-above) over its goal episodes. ``bench/diagnose_inverse_model.py`` prints both for run folders.
+above) over its goal episodes. ``experiments/diagnose_inverse_model.py`` prints both for run
+folders.
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ The outcome is observed with the arm back at its rest pose (upright, over the ar
 so that the arm hides no part of the ring and the outcome image varies with the ball alone; the
 next episode's context is the same scene. The original implementation observed the outcome with
 the arm where its movement ended: there the arm's pose dominated the image, and a VAE trained on
-such images encoded the arm, not the ball (measured: docs/results.md, section 4).
+such images encoded the arm, not the ball (measured: docs/notebook.md, section 4).
 
 All positions in metres (arena frame: origin at the arm's base, z up), angles in radians,
 durations in seconds.
@@ -112,7 +112,7 @@ class EpisodeRunner:
 
         The arm lags its last rest command by 1-2 degrees per joint on the twin, which shifts
         it by a few pixels in the 64x64 outcome image, more than a ball moved by a centimetre
-        does; it stops within 0.2-0.3 s (measured, docs/results.md). Ball, twin: its true speed.
+        does; it stops within 0.2-0.3 s (measured, docs/twin.md). Ball, twin: its true speed.
         Ball, real rigs: the tracked position between two frames ``settle_check_s`` apart (a
         ball not seen in both counts as still moving, up to the ``settle_max_s`` cap, as the
         original waited and re-observed).

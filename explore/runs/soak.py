@@ -1,5 +1,5 @@
 """Soak: N episodes with ~1% faults; a failed episode is retried by resuming the run
-(``bench/soak.py`` runs it and prints the result).
+(``tests/stress/soak.py`` runs it and prints the result).
 
 ``bus="serial"``: the real ``DynamixelArm`` and ``DynamixelBus`` (retries, typed errors)
 talk Protocol 2.0 to ``sim.dynamixel.emulator.DynamixelEmulator`` driving the twin, through

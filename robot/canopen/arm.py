@@ -120,7 +120,7 @@ class CanArmConfig:
 #   machine; gaps over 150 ms were seen with the camera rendering under load, so 100 ms x 1.5
 #   stopped `ergo calibrate joints` (measured 2026-12-02; 500 is a guess with margin);
 # - SDO timeout 2 s: one SDO of the connect's configuration went unanswered for canopen's
-#   0.3 s at load 6-8, and for 1.0 s at load 13-15 (measured with bench/load.py, 2026-12-02).
+#   0.3 s at load 6-8, and for 1.0 s at load 13-15 (measured with tests/stress/load.py, 2026-12-02).
 # Neither is a safety bound on a real arm, which keeps CanArmConfig's defaults.
 PTY_SETTINGS = {"heartbeat_ms": 500, "sdo_timeout_s": 2.0}
 

@@ -69,7 +69,7 @@ DEFAULT_RETRIES = 2
 MAX_LATENCY_S = 0.5
 # How long a request's reply is still expected after the call gave up on it, s: a reply later
 # than that is taken for one to a later request of the same size. Status packets up to 0.5 s
-# late were measured on 2 cores at load 7 (twin serve over a pty, bench/hil_pty.py); a
+# late were measured on 2 cores at load 7 (twin serve over a pty, tests/stress/hil_pty.py); a
 # reply never expected costs one wait of a later call of the same size (it set the reply
 # aside, then takes it), whatever this is. Guess: ten times that.
 MATCH_HORIZON_S = 5.0

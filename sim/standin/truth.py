@@ -1,9 +1,9 @@
 """Reads a stand-in rig's hidden parameters back (the file ``ergo twin serve --stand-in SEED``
-writes): the truth that tests and bench scripts compare a calibration against.
+writes): the truth that tests, bench and experiment scripts compare a calibration against.
 
-Nothing but tests/ and bench/ may import this module (tests/sim/standin/test_secrecy.py reads
-every import of the project's source to check it): a calibration that read the truth would
-prove nothing.
+Nothing but tests/, bench/ and experiments/ may import this module
+(tests/sim/standin/test_secrecy.py reads every import of the project's source to check it): a
+calibration that read the truth would prove nothing.
 """
 
 from __future__ import annotations

@@ -335,7 +335,7 @@ def test_bad_settings_are_refused():
 
 def test_rpe_is_within_two_published_sd_of_the_published_rpe():
     # RPE is a function of the environment and the motor primitive alone; 8 runs here, the
-    # published table has 40 (docs/armballs_published.csv). bench/armballs_rpe.py: more runs.
+    # published table has 40 (docs/armballs_published.csv). experiments/armballs_rpe.py: more runs.
     with open(PUBLISHED, newline="") as f:
         pub = {int(r["iterations"]): r for r in csv.DictReader(f) if r["algorithm"] == "RPE"}
     checkpoints = (1000, 3000, 5000, 9666)

@@ -6,7 +6,7 @@ exploration; on the Dynamixel rig, the arena step first fails with its markers h
 line, nothing saved lost). What each calibration recovered is checked against the stand-in's hidden
 parameters, and the exploration must track the ball with the calibrations applied.
 
-The seed is the test's (``ERGO_TEST_STANDIN_SEED`` picks another); bench/rehearse_real_arm.py
+The seed is the test's (``ERGO_TEST_STANDIN_SEED`` picks another); experiments/rehearse_real_arm.py
 measures the same on more seeds and longer runs. No assertion is on durations."""
 
 from __future__ import annotations
@@ -28,7 +28,8 @@ OFFSET_BOUND_DEG = 0.5  # issue 27's bounds
 FOCAL_BOUND = 0.01
 CENTRE_BOUND_PX = 3.0
 # Floor points inside the wall mapped by the arena calibration, mm: a guess at what a tracker
-# of a 20 mm ball needs (measured 0.6-2 mm on seeds 31-33 and 41-42, bench/rehearse_real_arm.py)
+# of a 20 mm ball needs (measured 0.6-2 mm on seeds 31-33 and 41-42,
+# experiments/rehearse_real_arm.py)
 ARENA_BOUND_MM = 4.0
 EPISODES = 6
 

@@ -22,7 +22,9 @@ from sim.standin.truth import read_hidden
 
 ROOT = Path(__file__).resolve().parents[3]
 ERGO = [sys.executable, "-m", "explore.cli"]
-SEED = 2  # measured in bench/bench_sysid.py: m3's kp -9 %, damping -4 % over all six joints
+SEED = (
+    2  # measured in experiments/standin_dynamics.py: m3's kp -9 %, damping -4 % over all six joints
+)
 
 
 @pytest.mark.slow

@@ -1,5 +1,5 @@
-"""The inverse-model diagnosis (explore/report/inverse_model.py, bench/diagnose_inverse_model.py)
-re-finds the neighbour the meta-policy really used."""
+"""The inverse-model diagnosis (explore/report/inverse_model.py,
+experiments/diagnose_inverse_model.py) re-finds the neighbour the meta-policy really used."""
 
 from __future__ import annotations
 

@@ -40,7 +40,7 @@ EMULATED_DYNAMIXEL_LATENCY_S = 0.05
 # (a 500 ms heartbeat and 50 ms for the TPDOs ride out a loaded machine).
 CAN_HEARTBEAT_MS = 500
 CAN_PDO_TIMEOUT_S = 0.05
-# SDO response timeout of the emulated drives, s: with bench/load.py --busy 6 beside the
+# SDO response timeout of the emulated drives, s: with tests/stress/load.py --busy 6 beside the
 # lead's campaign (2026-12-02) one SDO of the connect's configuration went unanswered for
 # canopen's default 0.3 s at load 6-8, and for 1.0 s at load 13-15 (the drives, the SLCAN
 # bridge and the notifier threads waiting for a CPU). A bound on the emulator's answers at

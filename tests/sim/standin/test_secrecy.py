@@ -4,10 +4,11 @@ statement, inside functions too, and every string constant), as tests/system/tes
 reads the import direction.
 
 The rules:
-- ``sim.standin.truth`` (the reader of the hidden file) is imported by tests/ and bench/ only;
-- outside ``sim/standin/``, tests/ and bench/, only the two bus servers import the stand-in,
-  and only its serving side, ``sim.standin.served`` (which hands a bus emulator the joints'
-  mounting and the twin, nothing else);
+- ``sim.standin.truth`` (the reader of the hidden file) is imported by tests/, bench/ and
+  experiments/ only;
+- outside ``sim/standin/``, tests/, bench/ and experiments/, only the two bus servers import the
+  stand-in, and only its serving side, ``sim.standin.served`` (which hands a bus emulator the
+  joints' mounting and the twin, nothing else);
 - no module outside those names the hidden file (its suffix ``-hidden.json``).
 """
 
@@ -22,7 +23,7 @@ from sim.standin.hidden import HIDDEN_SUFFIX
 
 ROOT = Path(__file__).resolve().parents[3]
 PACKAGES = ("robot", "vision", "sim", "calibration", "explore")
-FREE = ("tests", "bench")  # may compare against the truth
+FREE = ("tests", "bench", "experiments")  # may compare against the truth
 SERVERS = {"sim/dynamixel/server.py", "sim/canopen/server.py"}
 SERVED = "sim.standin.served"
 READER = "sim.standin.truth"
@@ -121,6 +122,7 @@ def test_the_check_catches(rel, source):
     [
         ("tests/system/test_guide.py", "from sim.standin.truth import read_hidden\n"),
         ("bench/bench_guide.py", "from sim.standin.truth import read_hidden\n"),
+        ("experiments/standin_dynamics.py", "from sim.standin.truth import read_hidden\n"),
         ("sim/canopen/server.py", "from sim.standin.served import open_served_rig\n"),
         ("sim/standin/served.py", "from sim.standin.hidden import draw_hidden\n"),
     ],

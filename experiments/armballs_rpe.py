@@ -9,7 +9,7 @@ fraction of the 30 x 30 cells over [-1, 1]^2 that hold the final ball position o
 of the first n episodes. The published checkpoints are n = int(i * 10000 / 30), i = 0..29, so
 the last one is 9666. The published figures are read from docs/armballs_published.csv.
 
-    .venv/bin/python bench/armballs_rpe.py [--seeds 16] [--config arm2balls|armballs]
+    .venv/bin/python experiments/armballs_rpe.py [--seeds 16] [--config arm2balls|armballs]
 """
 
 from __future__ import annotations

@@ -7,9 +7,9 @@ The exploration ratio after n episodes is the fraction of the 30 x 30 cells of [
 hold the final ball position of one of the first n episodes, bootstrap included, at
 n = int(i * 10000 / 30) (``explore.runs.metrics.exploration_ratio``; the published values:
 docs/armballs_published.csv). Interest is rebuilt by replaying each MGE run's history through
-its own strategy (``bench/distractor_figures.py``), and each module named by what it follows.
+its own strategy (``experiments/distractor_figures.py``), and each module named by what it follows.
 
-    .venv/bin/python bench/armballs_results.py CAMPAIGN [--out docs/img] [--prefix armballs]
+    .venv/bin/python experiments/armballs_results.py CAMPAIGN [--out docs/img] [--prefix armballs]
 
 Prints the Markdown table (mean +- sd over seeds, ddof 1; the published mean +- sd over its
 runs; |ours - published| in published sd; Welch's p) and the campaign's wall time from the runs'
@@ -25,6 +25,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+from script_helpers import save_figure  # experiments/script_helpers.py, beside this script
 
 from explore.runs.metrics import checkpoints, exploration_ratio, read_metrics
 
@@ -153,8 +154,7 @@ def curves_figure(ratios: dict[str, np.ndarray], out: Path) -> Path:
         ax.legend(fontsize=8, loc="upper left")
     axes[0].set_ylabel("exploration ratio (30 x 30 cells of [-1, 1]^2)")
     fig.tight_layout()
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
+    save_figure(fig, out)
     return out
 
 
@@ -189,8 +189,7 @@ def interest_figure(campaign: Path, out: Path) -> Path | None:
         ax.legend(fontsize=7)
     axes[0][0].set_ylabel("interest |exponential average of progress|")
     fig.tight_layout()
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
+    save_figure(fig, out)
     return out
 
 
@@ -254,8 +253,7 @@ def scatter_figure(campaign: Path, out: Path, seed: int | None = None) -> Path:
     fig.suptitle(f"Final ball positions, seed {seed}, {len(recs)} episodes:\nexploration ratio "
                  "and episodes that caught the ball", fontsize=10)  # fmt: skip
     fig.tight_layout()
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
+    save_figure(fig, out)
     return out
 
 
@@ -286,12 +284,11 @@ def main() -> None:
     print()
     print(json.dumps(wall_times(args.campaign)))
     args.out.mkdir(parents=True, exist_ok=True)
-    written = [curves_figure(ratios, args.out / f"{args.prefix}_curves.png"),
-               scatter_figure(args.campaign, args.out / f"{args.prefix}_scatter.png")]  # fmt: skip
+    curves_figure(ratios, args.out / f"{args.prefix}_curves.png")
+    scatter_figure(args.campaign, args.out / f"{args.prefix}_scatter.png")
     if not args.no_interest:
-        written.append(interest_figure(args.campaign, args.out / f"{args.prefix}_interest.png"))
+        interest_figure(args.campaign, args.out / f"{args.prefix}_interest.png")
         print(distractor_goal_share(args.campaign))
-    print("wrote", " ".join(str(p) for p in written if p))
 
 
 if __name__ == "__main__":

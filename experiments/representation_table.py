@@ -5,7 +5,7 @@ VAEs), the selection criterion (held-out explained pixel variance, which never s
 which seed the criterion chose, and the ball cells the model's exploration reached (rge-<kind>,
 seed 100, 1500 episodes, where it was run).
 
-    .venv/bin/python bench/representation_table.py runs/paper
+    .venv/bin/python experiments/representation_table.py runs/paper
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+from script_helpers import linear_r2  # experiments/script_helpers.py, beside this script
 
 from vision.representation_quality import heldout_split
 
@@ -30,13 +31,10 @@ MODELS = {
 HELDOUT = 0.1  # as ergo sae/vae train hold out
 
 
-def linear_r2(code: np.ndarray, target: np.ndarray, train: np.ndarray, test: np.ndarray) -> float:
-    """Held-out R^2 (mean over the target's columns) of an affine fit code -> target."""
-    a = np.hstack([code, np.ones((len(code), 1))])
-    w, *_ = np.linalg.lstsq(a[train], target[train], rcond=None)
-    err = ((a[test] @ w - target[test]) ** 2).sum(axis=0)
-    spread = ((target[test] - target[test].mean(axis=0)) ** 2).sum(axis=0)
-    return float(np.mean(1.0 - err / spread))
+def held_out_r2(code: np.ndarray, target: np.ndarray, train: np.ndarray, test: np.ndarray) -> float:
+    """Held-out R^2 (mean over the target's columns) of an affine fit code (n, d) -> target
+    (n, k) on the rows ``train``, scored on the rows ``test``."""
+    return linear_r2(code[train], target[train], code[test], target[test], pooled=False)
 
 
 def final_cells(run: Path) -> int | None:
@@ -75,9 +73,9 @@ def rows_for(out: Path, name: str) -> list[str]:
                 f"{v:.1f}" for v in sorted(model.config.kl_per_latent or [], reverse=True)
             )
         code = model.encode_bgr(images)
-        r2 = f"{linear_r2(code, ball, train, test):.3f}"
+        r2 = f"{held_out_r2(code, ball, train, test):.3f}"
         if distractor is not None:
-            r2 += f" / {linear_r2(code, distractor, train, test):.3f}"
+            r2 += f" / {held_out_r2(code, distractor, train, test):.3f}"
         crit = model.config.heldout_explained_variance
         # the exploration of this model (the campaign script's per_model/NAME-SEED/rge-NAME)
         cells = final_cells(out / "per_model" / f"{name}-{seed}" / f"rge-{name}" / "seed-100")

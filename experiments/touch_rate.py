@@ -5,7 +5,7 @@ something to work with once random episodes have touched the ball. Prints, per s
 fraction of RPE episodes that moved the ball by more than 1 cm and the ball cells reached
 (30 x 30 grid over the arena's square), then the mean.
 
-    .venv/bin/python bench/bench_touch.py [--episodes 1000] [--seeds 0 1]
+    .venv/bin/python experiments/touch_rate.py [--episodes 1000] [--seeds 0 1]
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """RGE-Online's slope after its switch against RPE's, per seed, from a campaign folder.
 
-    .venv/bin/python bench/online_slope.py runs/paper/stay [--switch 2000] [--end 5000] \
+    .venv/bin/python experiments/online_slope.py runs/paper/stay [--switch 2000] [--end 5000] \
         [--figure docs/img/results_final_online.png]
 
 The slope is the ball cells gained per 1000 episodes from the switch (rge-online's bootstrap
@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy import stats
+from script_helpers import save_figure  # experiments/script_helpers.py, beside this script
 
 
 def cells_per_run(strategy_dir: Path) -> dict[str, list[int]]:
@@ -62,8 +63,7 @@ def figure(runs: dict[str, dict[str, list[int]]], switch: int, end: int, path: P
     ax.set_ylabel("ball cells reached")
     ax.legend(loc="upper left")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    print(f"figure: {path}")
+    save_figure(fig, path)
 
 
 def main() -> None:

@@ -8,7 +8,7 @@ construction (ball, distractor, hand); a spatial autoencoder's by the object its
 position predicts best (held-out free: the linear R^2 over the run's own outcomes, a
 diagnostic of the figure only, never seen by the strategy).
 
-    .venv/bin/python bench/distractor_figures.py CAMPAIGN [--out docs/img] \
+    .venv/bin/python experiments/distractor_figures.py CAMPAIGN [--out docs/img] \
         [--prefix results_distractor]
 """
 
@@ -18,6 +18,10 @@ import argparse
 from pathlib import Path
 
 import numpy as np
+from script_helpers import (
+    linear_r2,
+    save_figure,
+)  # experiments/script_helpers.py, beside this script
 
 from explore.learner.goal_spaces import EngineeredGoalSpace
 from explore.runs.config import RunConfig
@@ -49,13 +53,10 @@ def module_names(space: object, records: list) -> list[str]:
     dis = np.stack([r.distractor for r in records])
     names = []
     for k, idx in enumerate(space.modules):  # type: ignore[attr-defined]
-        x = np.hstack([outcomes[:, idx], np.ones((len(outcomes), 1))])
         fits = {}
         for label, y in (("ball", ball), ("distractor", dis)):
             ok = np.all(np.isfinite(y), axis=1)
-            w, *_ = np.linalg.lstsq(x[ok], y[ok], rcond=None)
-            err = ((x[ok] @ w - y[ok]) ** 2).sum()
-            fits[label] = 1 - err / ((y[ok] - y[ok].mean(axis=0)) ** 2).sum()
+            fits[label] = linear_r2(outcomes[ok][:, idx], y[ok], pooled=True)
         best = max(fits, key=fits.get)  # type: ignore[arg-type]
         names.append(f"feature {k}: {best} (R² {fits[best]:.2f})")
     return names
@@ -94,7 +95,7 @@ def main() -> None:
     fig.tight_layout()
     args.out.mkdir(parents=True, exist_ok=True)
     interest_png = args.out / f"{args.prefix}_interest.png"
-    fig.savefig(interest_png, dpi=110)
+    save_figure(fig, interest_png)
     fig, axes = plt.subplots(1, len(strategies), figsize=(3.2 * len(strategies), 3.4),
                              squeeze=False)  # fmt: skip
     for ax, name in zip(axes[0], strategies, strict=True):
@@ -112,8 +113,7 @@ def main() -> None:
     axes[0][0].legend(fontsize=7, loc="lower left")
     fig.tight_layout()
     scatter_png = args.out / f"{args.prefix}_scatter.png"
-    fig.savefig(scatter_png, dpi=110)
-    print(f"wrote {interest_png} and {scatter_png}")
+    save_figure(fig, scatter_png)
 
 
 if __name__ == "__main__":

@@ -8,7 +8,7 @@ views and on views held out (px), the views the board was found in and how many 
 image cells they covered, and each error over its sd; then the largest error on each board
 against the known camera. A set of views the calibration refuses is printed with its reason.
 
-    .venv/bin/python bench/bench_calibration.py [--views 15] [--seeds 0 1 2]
+    .venv/bin/python experiments/camera_intrinsics.py [--views 15] [--seeds 0 1 2]
 """
 
 from __future__ import annotations

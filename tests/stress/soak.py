@@ -1,9 +1,9 @@
 """Soak: N episodes with ~1% faults; a failed episode is retried by resuming the run
 (explore/runs/soak.py says what is injected and reported).
 
-    python bench/soak.py                        # 2000 episodes over the emulated serial bus
-    python bench/soak.py --episodes 300 --fault-rate 0.01 --bus serial
-    python bench/soak.py --bus arm              # twin rig, faults injected at the Arm level
+    python tests/stress/soak.py                        # 2000 episodes over the emulated serial bus
+    python tests/stress/soak.py --episodes 300 --fault-rate 0.01 --bus serial
+    python tests/stress/soak.py --bus arm              # twin rig, faults injected at the Arm level
 """
 
 from __future__ import annotations

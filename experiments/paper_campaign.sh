@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The paper's experiment on the twin, as docs/results.md reports it: `make paper` (or
-# `bash bench/paper_campaign.sh OUT [JOBS]`). Every step is an ordinary ergo command, skipped
+# `bash experiments/paper_campaign.sh OUT [JOBS]`). Every step is an ordinary ergo command, skipped
 # or resumed when it is already done, so the script can be stopped and rerun at any point.
 #
 # Two conditions, 5000 episodes x exploration seeds 100-107 (never used while developing):
@@ -90,7 +90,7 @@ for kind in sae vae betavae; do
     done
     wait
 done
-"${PYTHON:-.venv/bin/python}" bench/representation_table.py "$OUT"
+"${PYTHON:-.venv/bin/python}" experiments/representation_table.py "$OUT"
 
 # ---- everything else to the full length --------------------------------------------------------
 campaign "$OUT/stay" "$EPISODES" rge-vae,rge-betavae "${LEARNED[@]}"

@@ -1,12 +1,12 @@
 """The paper's experiment on the twin: RPE vs goal exploration (EFR, VAE), several seeds.
 
-Not a test: a benchmark that takes minutes to tens of minutes on a CPU. It runs a campaign of
+Not a test: an experiment that takes minutes to tens of minutes on a CPU. It runs a campaign of
 ordinary, resumable run folders (``ergo experiment``), prints the table of final ball cells
 (mean +- std over seeds) and each strategy's ratio to RPE (the paper's point: goal exploration
 reaches more distinct ball cells than random parameters).
 
 Usage:
-    .venv/bin/python bench/paper_experiment.py --out runs/paper [--episodes 3000]
+    .venv/bin/python experiments/paper_experiment.py --out runs/paper [--episodes 3000]
         [--seeds 0,1,2] [--strategies rpe,rge-efr,mge-efr] [--vae models/vae]
         [--betavae models/betavae] [--jobs 2]
 

@@ -17,7 +17,7 @@ largest KL) and the latent means z-scored over the database, the latent spaces' 
 also for goals drawn from the paper's prior N(0, 1) clipped at 2.5; with ``--sae`` the
 spatial autoencoder's goal space as rge-sae uses it.
 
-    .venv/bin/python bench/bench_goal_space.py --data outcomes.npz --vae models/vae
+    .venv/bin/python experiments/goal_space.py --data outcomes.npz --vae models/vae
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ The joint calibration is written from the hidden mounting (directions, offsets),
 for ``ergo calibrate joints`` driven by the stand-in's hands, which recovers the offsets within
 0.03 deg (docs/standin.md); the dynamics fit itself never reads the hidden file.
 
-    python bench/bench_sysid.py [--seeds 0 1 2] [--buses dynamixel canopen] [--out FILE]
+    python experiments/standin_dynamics.py [--seeds 0 1 2] [--buses dynamixel canopen] [--out FILE]
 """
 
 from __future__ import annotations
@@ -28,6 +28,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from script_helpers import stop_process  # noqa: E402  (beside this script)
 
 from calibration import store  # noqa: E402
 from robot.spec import ERGO_JR_JOINTS, ergo_jr_spec  # noqa: E402
@@ -141,11 +143,7 @@ def one(bus: str, seed: int, work: Path) -> dict:
         )
         wall = time.monotonic() - t0
     finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
+        stop_process(proc, timeout_s=20)
     out = {"bus": bus, "seed": seed, "rc": done.returncode, "wall_s": round(wall, 1)}
     if done.returncode != 0:
         out["error"] = (done.stderr.strip().splitlines() or ["?"])[-1]
@@ -198,7 +196,7 @@ def main() -> int:
     p.add_argument("--keep", type=Path, default=None, help="keep recordings and reports here")
     args = p.parse_args()
     results = []
-    with tempfile.TemporaryDirectory(prefix="bench-sysid-") as scratch:
+    with tempfile.TemporaryDirectory(prefix="standin-dynamics-") as scratch:
         tmp = args.keep or scratch
         Path(tmp).mkdir(parents=True, exist_ok=True)
         for bus in args.buses:

@@ -11,9 +11,9 @@ calibration against the truth (mm), the exploration's ball cells and the share o
 which the camera tracked the ball; with ``--compare``, the same strategy and seed on the twin
 in one process (``--rig sim``) and the ratio of ball cells.
 
-    .venv/bin/python bench/rehearse_real_arm.py --buses dynamixel canopen --seeds 31 32 33 \\
+    .venv/bin/python experiments/rehearse_real_arm.py --buses dynamixel canopen --seeds 31 32 33 \\
         --episodes 20
-    .venv/bin/python bench/rehearse_real_arm.py --buses dynamixel --seeds 31 --episodes 300 \\
+    .venv/bin/python experiments/rehearse_real_arm.py --buses dynamixel --seeds 31 --episodes 300 \\
         --compare
 
 Bounds (issue 27): offsets within 0.5 deg, directions all right; focal length within 1 % and

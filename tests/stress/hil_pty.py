@@ -2,8 +2,8 @@
 it: ``ergo twin serve --bus dynamixel`` in one process, ``ergo explore --rig dynamixel --port
 PTY --camera URL`` in another, beside N busy processes; every stop resumed.
 
-    python bench/hil_pty.py --episodes 30 --busy 4
-    python bench/hil_pty.py --episodes 300 --load 6 --strategy rpe
+    python tests/stress/hil_pty.py --episodes 30 --busy 4
+    python tests/stress/hil_pty.py --episodes 300 --load 6 --strategy rpe
 
 Printed: the episodes stored, the resumes needed and why (the last line of each failed run),
 the bus's fault counters summed over the sessions (``RUN/faults.json``: calls, retries,
@@ -24,9 +24,9 @@ import threading
 import time
 from pathlib import Path
 
-from load import busy, load_average  # bench/load.py, beside this script
+from load import busy, load_average  # tests/stress/load.py, beside this script
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 ERGO = [sys.executable, "-m", "explore.cli"]
 SAMPLE_S = 5.0  # how often the load average is read, s
 

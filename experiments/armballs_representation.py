@@ -11,7 +11,7 @@ A module is object-aligned when it predicts one ball well and the other not at a
 needs to give its interest to the ball and take it from the distractor. The labels are a
 diagnostic of this table only: no strategy and no model choice sees them.
 
-    .venv/bin/python bench/armballs_representation.py --vae runs/armballs/models/vae \
+    .venv/bin/python experiments/armballs_representation.py --vae runs/armballs/models/vae \
         --betavae runs/armballs/models/betavae --sae runs/armballs/models/sae [--n 4000] \
         [--reconstructions docs/img/armballs_reconstructions.png]
 
@@ -25,6 +25,8 @@ import argparse
 
 import numpy as np
 from scipy.spatial import cKDTree
+from script_helpers import linear_r2  # experiments/script_helpers.py, beside this script
+from script_helpers import r2 as prediction_r2
 
 from explore.learner.goal_spaces import kl_ranked_modules, spatial_goal_space
 from explore.rigs.armballs import outcome_dataset
@@ -33,17 +35,10 @@ from explore.rigs.rig import RigConfig, rig_options
 FACTORS = ("ball x", "ball y", "distractor x", "distractor y")
 
 
-def score(pred: np.ndarray, truth: np.ndarray) -> float:
-    """R^2 of predictions ``pred`` of ``truth`` (n, m), over all of its coordinates."""
-    return float(1 - ((pred - truth) ** 2).sum() / ((truth - truth.mean(axis=0)) ** 2).sum())
-
-
 def r2(x: np.ndarray, y: np.ndarray) -> float:
     """R^2 of the least-squares linear prediction (with intercept) of y (n, k) from x (n, d),
     over all of y's coordinates."""
-    a = np.hstack([x, np.ones((len(x), 1))])
-    w, *_ = np.linalg.lstsq(a, y, rcond=None)
-    return score(a @ w, y)
+    return linear_r2(x, y, pooled=True)
 
 
 def knn_r2(x: np.ndarray, y: np.ndarray, k: int = 5) -> float:
@@ -51,7 +46,7 @@ def knn_r2(x: np.ndarray, y: np.ndarray, k: int = 5) -> float:
     rows of x (n, d) among the first three quarters (Euclidean, in the code's own units)."""
     cut = len(x) * 3 // 4
     _, idx = cKDTree(x[:cut]).query(x[cut:], k)
-    return score(y[:cut][idx.reshape(len(x) - cut, k)].mean(axis=1), y[cut:])
+    return prediction_r2(y[:cut][idx.reshape(len(x) - cut, k)].mean(axis=1), y[cut:], pooled=True)
 
 
 def describe(name: str, codes: np.ndarray, modules: list[np.ndarray], kl: list[float] | None,

@@ -1,9 +1,9 @@
 """The reliability tests beside N busy processes: pass counts at a given machine load.
 
-    python bench/load.py --busy 6                  # six spinning processes beside the tests
-    python bench/load.py --load 8                  # as many as bring the load to about 8
-    python bench/load.py --busy 0 --repeat 3       # the tests alone, three times
-    python bench/load.py --busy 4 -- tests/system/test_signals_bus.py   # other tests
+    python tests/stress/load.py --busy 6                  # six spinning processes beside the tests
+    python tests/stress/load.py --load 8                  # as many as bring the load to about 8
+    python tests/stress/load.py --busy 0 --repeat 3       # the tests alone, three times
+    python tests/stress/load.py --busy 4 -- tests/system/test_signals_bus.py   # other tests
 
 A busy process is one Python loop that never sleeps (one runnable task: +1 to the load
 average). They start before the tests, run at this script's own niceness (run it all under
@@ -34,7 +34,7 @@ import xml.etree.ElementTree as ET
 from collections.abc import Iterator
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 RELIABILITY_TESTS = [
     "tests/system",
     "tests/robot",
@@ -120,7 +120,7 @@ def main() -> int:
     if n < 0:
         ap.error("--busy must be >= 0")
     print(f"load average before: {before:.2f}; {n} busy process(es); niceness {os.nice(0)}")
-    logs = Path(tempfile.mkdtemp(prefix="bench-load-"))
+    logs = Path(tempfile.mkdtemp(prefix="stress-load-"))
     worst = 0
     with busy(n):
         for k in range(args.repeat):

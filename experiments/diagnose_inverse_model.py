@@ -3,7 +3,7 @@ finished runs, engineered (rge-efr, mge-efr) or learned (the VAEs', the spatial 
 what each goal episode's nearest neighbour was and did (explore/report/inverse_model.py says
 what is measured).
 
-    .venv/bin/python bench/diagnose_inverse_model.py RUN [RUN ...] [--vae DIR] [--figure PNG]
+    .venv/bin/python experiments/diagnose_inverse_model.py RUN [RUN ...] [--vae DIR] [--figure PNG]
 
 ``--figure``: per run, the arena distance of pairs of its outcomes against their distance in
 its goal space, and the distribution of the context mismatch over its goal episodes.
