@@ -17,7 +17,6 @@ from collections import deque
 from pathlib import Path
 
 from robot.spec import ERGO_JR_JOINTS
-from sim import RENDER_QUALITIES
 from sim.headless import ensure_fork_safe_software_gl, ensure_headless_gl
 from sim.servo_model import ServoModel, read_model, write_model
 
@@ -31,11 +30,6 @@ MODELS = Path(__file__).parent / "models"
 SCENE = MODELS / "scene.xml"
 SCENE_DISTRACTOR = MODELS / "scene_distractor.xml"  # the same with a second ball (make_scene.py)
 JOINTS = ERGO_JR_JOINTS  # the MJCF's joint and actuator names (sim/models/ergo_jr.xml)
-# MuJoCo's default visual quality (MJCF reference, <visual><quality>): what the scene rendered
-# with before it set its own (sim/models/make_scene.py).
-LEGACY_SHADOW_SIZE = 4096  # px
-LEGACY_OFFSAMPLES = 4
-LEGACY_FLOOR_GRID = 0.01  # m, the floor's render grid before 2026-12-01 (shadows show it)
 
 
 # Renderers a forked child inherited from its parent: their GL contexts belong to the parent's
@@ -54,12 +48,6 @@ class Twin:
     Args:
         scene: MJCF file to load (default: ``sim/models/scene.xml``).
         render_size: (height, width) of overhead renders, pixels.
-        render_quality: ``"chosen"`` (the scene's own render settings: no shadow map, no
-            multisampling; docs/twin.md) or ``"legacy"`` (MuJoCo's defaults, which the twin
-            used before 2026-12-01: a 4096 x 4096 shadow map, 4x multisampling, the top light
-            casting shadows, the floor drawn on a 1 cm grid; about 15x slower a frame on a
-            software renderer, for reproducing figures measured on those images: the same
-            pixels). Physics is the same with either.
         servos: the servos' dynamics (``sim.servo_model.ServoModel``; default: the scene's
             own, ``sim.servo_model.NOMINAL`` for the committed scenes). A model with a
             ``delay_s`` holds each command that long before the actuators see it.
@@ -69,23 +57,12 @@ class Twin:
         self,
         scene: str | Path = SCENE,
         render_size: tuple[int, int] = (240, 240),
-        render_quality: str = "chosen",
         servos: ServoModel | None = None,
     ) -> None:
-        if render_quality not in RENDER_QUALITIES:
-            raise TwinError(
-                f"render quality {render_quality!r}: expected one of {', '.join(RENDER_QUALITIES)}"
-            )
         try:
             self.model = mujoco.MjModel.from_xml_path(str(scene))
         except (ValueError, FileNotFoundError) as exc:
             raise TwinError(f"cannot load twin scene {scene}: {exc}") from exc
-        self.render_quality = render_quality
-        if render_quality == "legacy":
-            quality = self.model.vis.quality
-            quality.shadowsize, quality.offsamples = LEGACY_SHADOW_SIZE, LEGACY_OFFSAMPLES
-            self.model.light_castshadow[:] = 1
-            self.model.geom_size[self.model.geom("floor").id, 2] = LEGACY_FLOOR_GRID
         self.data = mujoco.MjData(self.model)
         self._timestep = float(self.model.opt.timestep)
         self.lock = threading.RLock()

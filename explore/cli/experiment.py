@@ -20,7 +20,6 @@ from explore.campaigns.trial import CampaignError
 from explore.cli import CliError
 from explore.cli.explore import add_rig_arguments, parse_key_values, rig_of
 from explore.learner.presets import PRESETS
-from sim import RENDER_QUALITIES
 
 # Rigs that can render an outcome database (``--rig``): the twin (explore/rigs/sim_dataset.py)
 # and those whose rig module has an ``outcome_dataset`` (explore/rigs/armballs.py).
@@ -104,10 +103,6 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="arm at rest (default: as in an episode's outcome image) or in random poses",
     )  # fmt: skip
     o.add_argument(
-        "--render-quality", choices=RENDER_QUALITIES, default="chosen",
-        help="the twin's render settings (default chosen; legacy: the images before 2026-12-01)",
-    )  # fmt: skip
-    o.add_argument(
         "--distractor", action="store_true",
         help="the scene with the distractor (rig option distractor=walk), placed over the ring",
     )  # fmt: skip
@@ -184,7 +179,6 @@ def run_dataset_outcomes(args: argparse.Namespace) -> int:
         twin_only = [
             flag for flag, given in (
                 ("--arm random", args.arm != "rest"), ("--distractor", args.distractor),
-                ("--render-quality legacy", args.render_quality != "chosen"),
             ) if given
         ]  # fmt: skip
         if twin_only:
@@ -198,7 +192,7 @@ def run_dataset_outcomes(args: argparse.Namespace) -> int:
     else:
         data = make_outcome_dataset(
             args.n, seed=args.seed, progress=not args.no_progress, arm=args.arm,
-            render_quality=args.render_quality, distractor=args.distractor,
+            distractor=args.distractor,
         )  # fmt: skip
     save_dataset(args.out, data)
     what = "ball and distractor" if "distractor" in data else "ball"

@@ -143,9 +143,6 @@ class TwinSensor:
         twin: the ``sim.twin.Twin``.
         camera: its ``sim.camera.SimCamera`` (the overhead view).
         locator: the tracker on the camera's frames, or None: the twin's ground truth.
-        square: with the ground truth, render the observation directly at its own size (no
-            full frame); False: cut it from the full frame (the images of the legacy render
-            mode were made so).
         prepare: the scene's changes before each episode (the ball put back, the
             distractor's walk), or None.
     """
@@ -157,25 +154,23 @@ class TwinSensor:
         twin: Any,
         camera: Any,
         locator: BallLocator | None = None,
-        square: bool = True,
         prepare: Callable[[np.random.Generator], None] | None = None,
     ) -> None:
         self.twin = twin
         self.camera = camera
         self.locator = locator
-        self.square = square and locator is None
         self._prepare = prepare
 
     def locate(self, image_side: int | None = None) -> Observation:
         distractor = self.twin.distractor_position()[:2]
         if self.locator is None and image_side is None:
             return Observation(ball=self._true_ball(), distractor=distractor)
-        if self.square:
+        if self.locator is None:
             # only the observation is used: rendered at its own size, no full frame
             image = self.camera.read_square(image_side).image
             return Observation(ball=self._true_ball(), image=image, distractor=distractor)
-        frame = self.camera.read().image
-        ball = self._true_ball() if self.locator is None else self.locator(frame)
+        frame = self.camera.read().image  # the tracker's view
+        ball = self.locator(frame)
         if image_side is None:
             return Observation(ball=ball, distractor=distractor)
         image = square_observation(frame, image_side)

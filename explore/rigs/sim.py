@@ -15,7 +15,6 @@ from explore.rigs.clock import TwinClock
 from explore.rigs.rig import Rig, RigConfig, RigError
 from explore.rigs.video import VideoOptions
 from robot.watchdog import Watchdog
-from sim import RENDER_QUALITIES
 from sim.arm import SimArm
 from sim.camera import SimCamera
 from sim.models.make_scene import ARENA_RADIUS
@@ -57,9 +56,10 @@ class Options(VideoOptions):
         ball_reset: ``none`` (default: the ball stays where the last episode left it, as on the
             real rig) or ``start`` (put back at its start position before every episode, as in
             the paper's simulated ArmBall, where the context never changes).
-        render_quality: ``chosen`` (default: the scene's own settings, docs/twin.md) or
-            ``legacy`` (MuJoCo's default quality and full frames reduced to the observation,
-            the twin's images before 2026-12-01); ``sim.RENDER_QUALITIES``.
+        render_quality: ``chosen``, the only value (the scene's own settings, docs/twin.md),
+            kept so that run folders that name it still open; ``legacy`` (MuJoCo's default
+            quality, the images before 2026-12-01) was removed: no current result needs it
+            (docs/notebook.md holds the results made with it).
         distractor: ``none`` (default) or ``walk``: a second ball (red) that the arm cannot
             move, taking a random step on the ball's ring before every episode
             (``distractor_walk``).
@@ -92,10 +92,11 @@ class Options(VideoOptions):
             raise BadOption(
                 "distractor_step", f"must be radians in [0, pi], got {self.distractor_step}"
             )
-        if self.render_quality not in RENDER_QUALITIES:
+        if self.render_quality != "chosen":
             raise BadOption(
                 "render_quality",
-                f"must be one of {', '.join(RENDER_QUALITIES)}, got {self.render_quality!r}",
+                f"must be 'chosen', got {self.render_quality!r} (the legacy render mode was "
+                "removed on 2026-12-03: no current result needs it; docs/notebook.md)",
             )
 
 
@@ -104,8 +105,7 @@ def make_rig(config: RigConfig, options: Options) -> Rig:
     walk = options.distractor == "walk"
     scene = SCENE_DISTRACTOR if walk else SCENE
     twin = Twin(
-        scene, render_size=options.render_size, render_quality=options.render_quality,
-        servos=rig_servos(config),
+        scene, render_size=options.render_size, servos=rig_servos(config),
     )  # fmt: skip
     camera = SimCamera(twin)
     locator = tracker_locator(twin_arena_model(camera)) if options.ball == "tracker" else None
@@ -118,13 +118,7 @@ def make_rig(config: RigConfig, options: Options) -> Rig:
             xy = twin.distractor_position()[:2]
             twin.place_distractor(distractor_walk(xy, options.distractor_step, rng))
 
-    sensor = TwinSensor(
-        twin, camera, locator,
-        # with the ground truth, the outcome image is all a frame is for: render it at its
-        # size; legacy: reduced from the full frame, as those images were made
-        square=options.render_quality == "chosen",
-        prepare=prepare if reset or walk else None,
-    )  # fmt: skip
+    sensor = TwinSensor(twin, camera, locator, prepare=prepare if reset or walk else None)
     return Rig(
         arm=SimArm(twin, watchdog=Watchdog(hold_s=options.watchdog_hold_s)), camera=camera,
         clock=TwinClock(twin), config=config, sensor=sensor,

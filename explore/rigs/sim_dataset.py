@@ -20,7 +20,7 @@ import numpy as np
 
 from explore.learner.goal_spaces import R_MAX, R_MIN
 from robot.spec import ergo_jr_spec
-from vision.observation import OBSERVATION_SIZE, square_observation
+from vision.observation import OBSERVATION_SIZE
 
 SETTLE_S = 0.3  # s of physics towards the random pose: a 30-degree step takes ~0.2 s (docs/twin)
 ARM_POSES = ("rest", "random")  # arm at its rest pose (as in an episode's outcome) or random
@@ -39,13 +39,12 @@ def make_outcome_dataset(
     settle_s: float = SETTLE_S,
     progress: bool = True,
     arm: str = "rest",
-    render_quality: str = "chosen",
     distractor: bool = False,
 ) -> dict[str, np.ndarray]:
     """Render ``n`` scenes with the arm at rest (``arm="rest"``) or in random poses (``"random"``),
-    with the twin's ``render_quality`` (``sim.twin.Twin``; "legacy" reduces full frames, as the
-    sim rig does with it). ``distractor``: the scene with the distractor, placed uniformly over
-    the ring too, independently of the ball (as its walk leaves it in the long run).
+    rendered as the sim rig renders its outcome images. ``distractor``: the scene with the
+    distractor, placed uniformly over the ring too, independently of the ball (as its walk
+    leaves it in the long run).
 
     Returns:
         images: (n, 64, 64, 3) BGR uint8; ball: (n, 2) m after the arm moved; placed: (n, 2) m
@@ -58,7 +57,7 @@ def make_outcome_dataset(
     if arm not in ARM_POSES:
         raise ValueError(f"arm={arm!r}: expected one of {', '.join(ARM_POSES)}")
     rng = np.random.default_rng(seed)
-    twin = Twin(SCENE_DISTRACTOR if distractor else SCENE, render_quality=render_quality)
+    twin = Twin(SCENE_DISTRACTOR if distractor else SCENE)
     camera = SimCamera(twin)
     camera.connect()
     lo = np.array([twin.model.joint(j).range[0] for j in JOINTS])
@@ -84,10 +83,7 @@ def make_outcome_dataset(
                 twin.place_distractor(others[i])
             twin.set_targets(targets[i])
             twin.step(settle_s)
-            if render_quality == "legacy":
-                images[i] = square_observation(camera.read().image, size)
-            else:
-                images[i] = camera.read_square(size).image
+            images[i] = camera.read_square(size).image
             ball[i] = twin.ball_position()[:2]
             joints[i] = twin.joint_positions()
             if bar is not None:

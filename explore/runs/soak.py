@@ -59,7 +59,7 @@ def build_rig(bus: str, rate: float, seed: int) -> Rig:
         arm = FaultyArm(SimArm(twin), rate=rate, seed=seed)
     camera = SimCamera(twin)
     return Rig(arm=arm, camera=camera, clock=TwinClock(twin), config=RigConfig(name="sim"),
-               sensor=TwinSensor(twin, camera, square=False))  # fmt: skip
+               sensor=TwinSensor(twin, camera))  # fmt: skip
 
 
 def soak(episodes: int, rate: float, bus: str, seed: int, out: Path) -> dict:

@@ -112,22 +112,25 @@ def test_torque_off_makes_the_arm_limp(twin):
     assert twin.joint_positions()[1] > held + 0.05  # gravity pulls the leaning arm further down
 
 
-def test_the_scene_renders_with_its_chosen_settings_and_legacy_brings_back_mujocos():
+def test_the_scene_renders_with_its_chosen_settings():
     """No shadow map, no multisampling, no shadow-casting light, a coarse floor grid: a model
     edit that brings back MuJoCo's 4096 x 4096 shadow map (15x the cost of a frame on a
-    software renderer) fails here. ``legacy`` restores what the images were made with before."""
-    chosen, legacy = Twin(), Twin(render_quality="legacy")
+    software renderer) fails here."""
+    chosen = Twin()
     floor = chosen.model.geom("floor").id
     q = chosen.model.vis.quality
     assert (q.shadowsize, q.offsamples) == (make_scene.SHADOW_SIZE, make_scene.OFFSCREEN_SAMPLES)
     assert (q.shadowsize, q.offsamples) == (0, 0)
     assert not chosen.model.light_castshadow.any()
     assert chosen.model.geom_size[floor, 2] == make_scene.FLOOR_GRID
-    q = legacy.model.vis.quality
-    assert (q.shadowsize, q.offsamples) == (4096, 4)
-    assert legacy.model.light_castshadow.all() and legacy.model.geom_size[floor, 2] == 0.01
-    with pytest.raises(TwinError, match="render quality 'best'"):
-        Twin(render_quality="best")
+
+
+def test_the_removed_legacy_render_mode_is_refused_in_one_line_naming_it():
+    from explore.rigs.rig import RigConfig, RigError, make_rig
+
+    with pytest.raises(RigError, match=r"render_quality.*legacy render mode was removed"):
+        make_rig(RigConfig(options={"render_quality": "legacy"}))
+    make_rig(RigConfig(options={"render_quality": "chosen"}))  # run folders that name it
 
 
 def test_the_observation_rendered_at_its_own_size_shows_the_ball_where_the_full_frame_does():

@@ -61,7 +61,7 @@ def _rig(twin: Twin, port: str, recovery: RecoveryPolicy | None = None) -> Rig:
     arm = DynamixelArm(port, latency_s=LATENCY_S, recovery=recovery)
     camera = SimCamera(twin)
     return Rig(arm=arm, camera=camera, clock=TwinClock(twin), config=RigConfig(name="sim"),
-               sensor=TwinSensor(twin, camera, square=False))  # fmt: skip
+               sensor=TwinSensor(twin, camera))  # fmt: skip
 
 
 def _history(path: Path) -> list[int]:
