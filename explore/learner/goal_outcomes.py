@@ -47,11 +47,11 @@ def strategy_outcome_of(strategy: Any) -> OutcomeOf | None:
 
 
 def goal_outcome_of(
-    strategy_config: dict[str, Any], load_models: bool = False, scene: Scene | None = None
+    strategy_config: dict[str, Any], scene: Scene, load_models: bool = False
 ) -> OutcomeOf | None:
     """``strategy_outcome_of`` for a run's strategy built from its config (``run.json``'s
     ``config["strategy"]``: name and options) on its rig's ``scene`` (``explore.rigs.rig.
-    rig_scene``; the twin's arena when None), without the running strategy.
+    rig_scene``), without the running strategy.
 
     Engineered goal spaces (rge-efr, mge-efr) are functions of the record: always built (cheap).
     Learned ones (VAE latents) are built only with ``load_models`` (loads the model, and every

@@ -23,7 +23,7 @@ import numpy as np
 
 from explore.learner.dmp import N_PARAMS
 from explore.learner.experience import Experience, Observation
-from explore.learner.scene import TWIN_ARENA, Scene
+from explore.learner.scene import Scene
 from explore.options import OptionsError, parse_options
 from robot.registry import LazyTable
 
@@ -59,7 +59,8 @@ class Strategy(ABC):
 
     Args:
         n_params: motor parameters to propose (the rig's ``motor.n_params``).
-        scene: the rig's scene (``explore.rigs.rig.rig_scene``; default the twin's arena).
+        scene: the rig's scene (``explore.rigs.rig.rig_scene``; required: the learner knows no
+            rig's).
         **options: the strategy's options as given (``self.options``), read into its ``Options``
             dataclass (``self.settings``).
     """
@@ -73,16 +74,14 @@ class Strategy(ABC):
     #: sees none, and ``open_run`` refuses such a run
     needs_ball: bool = False
 
-    def __init__(
-        self, n_params: int = N_PARAMS, scene: Scene | None = None, **options: Any
-    ) -> None:
+    def __init__(self, n_params: int = N_PARAMS, *, scene: Scene, **options: Any) -> None:
         self.options = dict(options)
         try:
             self.settings = parse_options(self.Options, options, f"strategy {self.name!r}")
         except OptionsError as exc:
             raise StrategyError(str(exc)) from None
         self.n_params = int(n_params)
-        self.scene = TWIN_ARENA if scene is None else scene
+        self.scene = scene
 
     @abstractmethod
     def propose(self, context: Observation, rng: np.random.Generator) -> Proposal:
@@ -168,9 +167,7 @@ STRATEGY_SUMMARIES = {
 }
 
 
-def make_strategy(
-    name: str, n_params: int = N_PARAMS, scene: Scene | None = None, **options: Any
-) -> Strategy:
+def make_strategy(name: str, n_params: int = N_PARAMS, *, scene: Scene, **options: Any) -> Strategy:
     """The strategy ``name`` with ``options``, proposing ``n_params`` parameters on a rig with
-    ``scene`` (the twin's arena when None)."""
+    ``scene`` (``explore.rigs.rig.rig_scene``)."""
     return STRATEGIES.load(name)(n_params=n_params, scene=scene, **options)

@@ -161,10 +161,8 @@ class GoalExploration(Strategy):
     modular_default = False
     needs_ball = True
 
-    def __init__(
-        self, n_params: int = N_PARAMS, scene: Scene | None = None, **options: Any
-    ) -> None:
-        super().__init__(n_params, scene, **options)
+    def __init__(self, n_params: int = N_PARAMS, *, scene: Scene, **options: Any) -> None:
+        super().__init__(n_params, scene=scene, **options)
         s = self.settings
         self.bootstrap = s.bootstrap
         self.sigma = s.sigma
@@ -379,7 +377,7 @@ class EngineeredGoalExploration(GoalExploration):
         hand = self.modular if s.hand_module is None else s.hand_module
         distractor = self.scene.distractor if s.distractor is None else s.distractor
         try:
-            space = EngineeredGoalSpace(s.form, hand, distractor, self.scene)
+            space = EngineeredGoalSpace(s.form, hand, distractor, scene=self.scene)
         except ValueError as exc:
             raise StrategyError(f"{self.name}: {exc}") from None
         if s.flat:
