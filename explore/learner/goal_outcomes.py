@@ -59,18 +59,14 @@ def goal_outcome_of(
     its strategy has seen the run, so it gives None, as does RPE or a strategy that cannot be
     built (unknown name, missing model).
     """
-    from explore.learner.strategies import StrategyError, make_strategy
-    from explore.learner.strategies.goal_exploration import (
-        EngineeredGoalExploration,
-        GoalExploration,
-    )
+    from explore.learner.strategies import STRATEGIES, StrategyError, make_strategy
 
     name = str(strategy_config.get("name", ""))
     options = dict(strategy_config.get("options", {}))
-    target = _strategy_class(name)
-    if target is None or not issubclass(target, GoalExploration):
+    entry = STRATEGIES.get(name)
+    if entry is None or not entry.goal_exploration:
         return None
-    if not load_models and not issubclass(target, EngineeredGoalExploration):
+    if not load_models and not entry.engineered:
         return None
     try:
         strategy = make_strategy(name, scene=scene, **options)
@@ -80,13 +76,3 @@ def goal_outcome_of(
     if getattr(strategy, "space", None) is None:
         return None
     return strategy_outcome_of(strategy)
-
-
-def _strategy_class(name: str) -> type | None:
-    """The class registered for a strategy name, without building it (None if unknown)."""
-    from explore.learner.strategies import STRATEGIES, StrategyError
-
-    try:
-        return STRATEGIES.load(name)
-    except StrategyError:
-        return None
