@@ -120,8 +120,8 @@ def plan_trials(
                                         f"rig {held[2]} {held[3]})")  # fmt: skip
                 if final_cells(run_dir)[0] >= episodes:
                     continue  # finished
-            todo.append(Trial(str(run_dir), s, seed, episodes, options[s], rig, cid,
-                              trial_resources(rig)))  # fmt: skip
+            todo.append(Trial.of(str(run_dir), s, seed, episodes, options[s], rig, cid,
+                                 trial_resources(rig)))  # fmt: skip
     return todo
 
 

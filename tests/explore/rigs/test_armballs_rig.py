@@ -56,7 +56,7 @@ def rig(name: str) -> dict:
 
 
 def run(out: Path, strategy: str, opts: dict, rig_name: str, episodes: int, seed: int = 0):
-    run_trial(Trial(str(out), strategy, seed, episodes, opts, rig(rig_name)))
+    run_trial(Trial.of(str(out), strategy, seed, episodes, opts, rig(rig_name)))
     return RunStore.open(out).records
 
 
