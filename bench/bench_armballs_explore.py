@@ -38,7 +38,7 @@ def one_run(out: Path, strategy: str, episodes: int, models: dict[str, str]) -> 
     shutil.rmtree(out, ignore_errors=True)
     rig = {"name": "arm2balls", "rig_id": "twin", "options": {}}
     wall, cpu = time.perf_counter(), time.process_time()
-    run_trial(Trial(str(out), strategy, 0, episodes, opts, rig))
+    run_trial(Trial.of(str(out), strategy, 0, episodes, opts, rig))
     return time.perf_counter() - wall, time.process_time() - cpu
 
 

@@ -52,10 +52,11 @@ def time_online_training() -> float:
     """Seconds rge-online's VAE training takes here (its default schedule, 2000 images)."""
     import numpy as np
 
-    from explore.learner.strategies.online import OnlineLatentGoalExploration
+    from explore.learner.strategies import make_strategy
+    from explore.rigs.arena import TWIN_ARENA
     from vision.vae_train import train_vae
 
-    strategy = OnlineLatentGoalExploration()
+    strategy = make_strategy("rge-online", scene=TWIN_ARENA)
     images = np.random.default_rng(0).integers(0, 256, (ONLINE_BOOTSTRAP, 64, 64, 3), np.uint8)
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()

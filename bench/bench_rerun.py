@@ -37,7 +37,11 @@ def run_once(out: Path, episodes: int, record: bool, stride: int) -> tuple[float
         excluded, the recorder's flush on close included.
     """
     run = open_run(out, RunConfig(seed=0, episodes=episodes), mode="new")
-    recorder = Recorder("save", path=out / "recording.rrd", stride=stride) if record else None
+    recorder = (
+        Recorder("save", path=out / "recording.rrd", stride=stride, scene=run.rig.scene)
+        if record
+        else None
+    )
     explorer = run.explorer(on_record=recorder.on_record if recorder else None)
     t0, c0 = time.perf_counter(), time.process_time()
     explorer.run(episodes)

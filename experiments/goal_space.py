@@ -29,6 +29,7 @@ from scipy.spatial import cKDTree
 
 from explore.learner.goal_spaces import kl_ranked_modules, wrap_safe_features
 from explore.learner.strategies.goal_exploration import NORMAL_CLIP
+from explore.rigs.arena import R_MAX, R_MIN
 
 N_GOALS = 20_000  # goals drawn per space (enough for a stable entropy; guess)
 N_SECTORS = 36  # 10-degree sectors of the ring for the coverage entropy
@@ -72,7 +73,10 @@ def main() -> None:
         images, ball = data["images"], data["ball"]
     seen = np.all(np.isfinite(ball), axis=1)
     images, ball = images[seen], ball[seen]
-    spaces = {"ball (x, y): the bound": ball, "engineered (r, cos, sin)": wrap_safe_features(ball)}
+    spaces = {
+        "ball (x, y): the bound": ball,
+        "engineered (r, cos, sin)": wrap_safe_features(ball, (R_MIN, R_MAX)),
+    }
     if args.vae:
         from vision.vae import load_vae
 

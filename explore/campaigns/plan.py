@@ -29,15 +29,6 @@ from explore.campaigns.trial import (
 from explore.rigs.rig import RigConfig
 from robot.registry import did_you_mean
 
-# strategies that need a representation trained beforehand, and the flag that gives it (the
-# key of ``run_campaign``'s ``models``, of ``MAKE_VAE`` and the ergo experiment flag)
-MODEL_FLAGS = {
-    "rge-vae": "vae", "mge-vae": "vae", "rge-betavae": "betavae", "mge-betavae": "betavae",
-    "rge-sae": "sae", "mge-sae": "sae",
-}  # fmt: skip
-# the strategy option that names the model, per flag
-MODEL_OPTION = {"vae": "vae", "betavae": "vae", "sae": "sae"}
-
 
 def option_target(key: str) -> tuple[str | None, str]:
     """``"NAME:KEY"`` -> (NAME, KEY), an option for that strategy only; ``"KEY"`` -> (None,
@@ -50,14 +41,20 @@ def strategy_options(
     name: str, models: dict[str, Path | None], common: dict[str, Any], preset: str | None = None
 ) -> dict[str, Any]:
     """Options of one strategy in a campaign: the ``preset``'s for it
-    (``explore.learner.presets``), then every plain ``KEY`` of ``common`` (goal-exploration
-    strategies, not rpe), every ``NAME:KEY`` for this strategy (e.g. ``rge-vae:latents``) and
-    its model from ``models`` (flag -> path, ``MODEL_FLAGS``); raises CampaignError naming the
-    command that makes a missing model, or an unknown preset."""
+    (``explore.learner.presets``), then every plain ``KEY`` of ``common`` (to the strategies
+    whose registry entry takes the goal-exploration options: not rpe), every ``NAME:KEY`` for
+    this strategy (e.g. ``rge-vae:latents``) and its model from ``models`` (flag -> path, the
+    entry's ``Model``); raises CampaignError naming the command that makes a missing model, an
+    unknown strategy or preset."""
+    from explore.learner.strategies import STRATEGIES, StrategyError
+
+    try:
+        entry = STRATEGIES.entry(name)
+    except StrategyError as exc:
+        raise CampaignError(str(exc)) from None
     opts: dict[str, Any] = {}
     if preset is not None:
         from explore.learner.presets import preset_options
-        from explore.learner.strategies import StrategyError
 
         try:
             opts.update(preset_options(preset, name))
@@ -65,19 +62,17 @@ def strategy_options(
             raise CampaignError(str(exc)) from None
     for key, value in common.items():
         target, option = option_target(key)
-        if target == name or (target is None and name != "rpe"):
+        if target == name or (target is None and entry.goal_exploration):
             opts[option] = value
-    from explore.learner.strategies import MAKE_VAE
-
-    flag = MODEL_FLAGS.get(name)
-    if flag is not None:
-        path = models.get(flag)
+    model = entry.model
+    if model is not None:
+        path = models.get(model.flag)
         if path is None:
-            raise CampaignError(f"{name} needs --{flag} PATH; make one with: {MAKE_VAE[flag]}")
+            raise CampaignError(f"{name} needs --{model.flag} PATH; make one with: {model.recipe}")
         if not path.exists():
-            raise CampaignError(f"--{flag} {path}: no such file or folder; make one with: "
-                                f"{MAKE_VAE[flag]}")  # fmt: skip
-        opts[MODEL_OPTION[flag]] = str(path.resolve())
+            raise CampaignError(f"--{model.flag} {path}: no such file or folder; make one with: "
+                                f"{model.recipe}")  # fmt: skip
+        opts[model.option] = str(path.resolve())
     return opts
 
 
@@ -125,8 +120,8 @@ def plan_trials(
                                         f"rig {held[2]} {held[3]})")  # fmt: skip
                 if final_cells(run_dir)[0] >= episodes:
                     continue  # finished
-            todo.append(Trial(str(run_dir), s, seed, episodes, options[s], rig, cid,
-                              trial_resources(rig)))  # fmt: skip
+            todo.append(Trial.of(str(run_dir), s, seed, episodes, options[s], rig, cid,
+                                 trial_resources(rig)))  # fmt: skip
     return todo
 
 

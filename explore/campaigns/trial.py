@@ -24,10 +24,14 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from explore.rigs import rig as rigs
 from explore.rigs.rig import RigConfig
+
+# explore.runs.config loads cv2 (vision.observation): imported where a trial is made, as before
+if TYPE_CHECKING:
+    from explore.runs.config import RunConfig
 
 log = logging.getLogger(__name__)
 
@@ -48,29 +52,68 @@ class TrialLockedError(CampaignError):
 
 @dataclass(frozen=True)
 class Trial:
-    """One (strategy, seed) of a campaign: everything a worker needs, JSON-like and picklable.
+    """One (strategy, seed) of a campaign: everything a worker needs, picklable (nothing of it
+    is written to disk: ``campaign.json`` holds the campaign's id only).
 
     Attributes:
         run_dir: absolute path of the run folder; on a cluster it must be on a file system that
             every worker mounts at the same path.
-        strategy: strategy name (explore/strategies).
-        seed: the run's seed.
-        episodes: episodes the run must hold when the trial ends.
-        options: the strategy's options.
-        rig: a ``RigConfig`` as a dict (name, rig_id, options).
+        config: the run's ``RunConfig`` when it is new (rig, strategy and its options, seed,
+            episodes the run must hold when the trial ends); a resumed run keeps its own and
+            takes only the episode count and the rig options (ports change between sessions).
         campaign_id: the id in ``CAMPAIGN/campaign.json``; a worker that reads another id (or
             none) is not looking at the driver's folder. None for a run outside a campaign.
         resources: Ray custom resources the trial needs (``trial_resources(rig)``).
     """
 
     run_dir: str
-    strategy: str
-    seed: int
-    episodes: int
-    options: dict[str, Any] = field(default_factory=dict)
-    rig: dict[str, Any] = field(default_factory=lambda: RigConfig().to_dict())
+    config: RunConfig
     campaign_id: str | None = None
     resources: dict[str, float] = field(default_factory=dict)
+
+    @classmethod
+    def of(
+        cls,
+        run_dir: str,
+        strategy: str,
+        seed: int,
+        episodes: int,
+        options: dict[str, Any] | None = None,
+        rig: dict[str, Any] | None = None,
+        campaign_id: str | None = None,
+        resources: dict[str, float] | None = None,
+    ) -> Trial:
+        """The trial of ``strategy`` with ``options`` and ``seed`` on ``rig`` (a ``RigConfig``
+        as a dict; the default rig when None) until ``episodes``."""
+        from explore.runs.config import RunConfig, StrategyConfig
+
+        r = rig or {}
+        default = RigConfig()
+        rig_config = RigConfig(
+            r.get("name", default.name), r.get("rig_id", default.rig_id), dict(r.get("options", {}))
+        )
+        config = RunConfig(
+            rig=rig_config, strategy=StrategyConfig(strategy, dict(options or {})), seed=seed,
+            episodes=episodes,
+        )  # fmt: skip
+        return cls(str(run_dir), config, campaign_id, dict(resources or {}))
+
+    @property
+    def strategy(self) -> str:
+        return self.config.strategy.name
+
+    @property
+    def seed(self) -> int:
+        return self.config.seed
+
+    @property
+    def episodes(self) -> int:
+        return self.config.episodes
+
+    @property
+    def rig(self) -> dict[str, Any]:
+        """The rig as a dict (name, rig_id, options)."""
+        return self.config.rig.to_dict()
 
     @property
     def label(self) -> str:
@@ -176,18 +219,6 @@ def read_json(path: Path) -> dict[str, Any]:
     return data if isinstance(data, dict) else {}
 
 
-def trial_config(trial: Trial) -> Any:
-    """The ``RunConfig`` of a trial's run when it is new (a resumed run keeps its own)."""
-    from explore.rigs.rig import RigConfig
-    from explore.runs.config import RunConfig, StrategyConfig
-
-    rig = RigConfig(trial.rig["name"], trial.rig["rig_id"], dict(trial.rig.get("options", {})))
-    return RunConfig(
-        rig=rig, strategy=StrategyConfig(trial.strategy, dict(trial.options)), seed=trial.seed,
-        episodes=trial.episodes,
-    )  # fmt: skip
-
-
 def run_trial(trial: Trial, progress: bool = False) -> TrialResult:
     """Run (or resume) one trial until ``trial.episodes``; runs in the worker (a local process
     or a Ray task). Raises ``CampaignError`` (or the rig's and the strategy's errors) with a
@@ -203,8 +234,8 @@ def run_trial(trial: Trial, progress: bool = False) -> TrialResult:
     host, pid = socket.gethostname(), os.getpid()
     try:
         run = open_run(
-            path, trial_config(trial), mode="auto", episodes=trial.episodes,
-            rig_options=trial.rig.get("options", {}),  # ports change between sessions
+            path, trial.config, mode="auto", episodes=trial.episodes,
+            rig_options=trial.config.rig.options,  # ports change between sessions
         )  # fmt: skip
     except RunLockedError as exc:
         raise TrialLockedError(str(exc)) from exc
@@ -254,5 +285,5 @@ def run_one(
 ) -> tuple[str, int, int]:
     """Run (or resume) one (strategy, seed) on the twin in ``run_dir``, outside any campaign;
     returns (strategy, seed, final ball cells)."""
-    r = run_trial(Trial(str(run_dir), strategy, seed, episodes, dict(options)), progress)
+    r = run_trial(Trial.of(str(run_dir), strategy, seed, episodes, options), progress)
     return r.strategy, r.seed, r.cells

@@ -59,10 +59,10 @@ def parse_key_values(items: list[str], flag: str) -> dict[str, Any]:
 
 def strategies_help() -> str:
     """The strategies and what each is, one line each (the epilog of ``ergo explore --help``)."""
-    from explore.learner.strategies import STRATEGIES, STRATEGY_SUMMARIES
+    from explore.learner.strategies import STRATEGIES
 
     width = max(len(name) for name in STRATEGIES)
-    lines = [f"  {name:<{width}}  {STRATEGY_SUMMARIES.get(name, '')}" for name in STRATEGIES]
+    lines = [f"  {name:<{width}}  {entry.summary}" for name, entry in STRATEGIES.items()]
     return "strategies (--strategy NAME):\n" + "\n".join(lines)
 
 

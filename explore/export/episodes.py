@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from explore.learner.strategies import StrategyError, make_strategy
+from explore.rigs.rig import rig_scene
 from explore.runs.config import RunConfig
 from explore.runs.lock import describe_holder, holder_of
 from explore.runs.record import EpisodeRecord
@@ -123,12 +124,13 @@ def _describer(source: RunSource) -> Any:
     """The strategy whose ``describe`` gives the run's episodes in its goal space."""
     s = source.config.strategy
     n_params = len(source.records[0].theta)
+    scene = rig_scene(source.config.rig)
     try:
-        strategy = make_strategy(s.name, n_params=n_params, **s.options)
+        strategy = make_strategy(s.name, n_params=n_params, scene=scene, **s.options)
     except (StrategyError, OSError, ValueError) as exc:
         raise ExportError(f"{source.path}: its goal space cannot be rebuilt: {exc}") from None
     if not hasattr(strategy, "space"):  # no goal space at all (RPE)
-        strategy = make_strategy(DESCRIBING_STRATEGY, n_params=n_params)
+        strategy = make_strategy(DESCRIBING_STRATEGY, n_params=n_params, scene=scene)
     return strategy
 
 

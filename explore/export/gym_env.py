@@ -37,7 +37,7 @@ from gymnasium import spaces
 
 from explore.learner.dmp import N_PARAMS
 from explore.learner.experience import Observation
-from explore.learner.goal_spaces import R_MAX, R_MIN
+from explore.rigs.arena import R_MAX, R_MIN
 from explore.rigs.arm_episodes import EpisodeRunner
 from explore.rigs.episodes import EpisodeConfig
 from explore.rigs.rig import Rig, RigConfig, make_rig

@@ -22,8 +22,6 @@ from typing import Protocol
 
 import numpy as np
 
-from robot.spec import CONTROL_RATE_HZ
-
 N_JOINTS = 6
 N_BASIS = 7
 N_PARAMS = N_JOINTS * (N_BASIS + 1)  # 48
@@ -33,6 +31,10 @@ GOAL_SCALE = 1.0  # original implementation
 ALPHA_Y = 25.0  # original implementation
 BETA_Y = ALPHA_Y / 4.0  # critically damped
 ALPHA_X = 1.0  # canonical system x' = -x (original)
+# The primitive's own time base: 40 points at dt = 1/40 s (original implementation); a rig plays
+# the points at its control rate (``explore.runs.config.EpisodeConfig.rate_hz``, 40 Hz on the
+# Ergo Jr, robot/spec.py).
+RATE_HZ = 40.0
 
 
 def _deg(values: list[float]) -> tuple[float, ...]:
@@ -63,7 +65,7 @@ class DmpConfig:
     """
 
     n_points: int = 40
-    rate_hz: float = CONTROL_RATE_HZ
+    rate_hz: float = RATE_HZ
     substeps: int = 10
     lower: tuple[float, ...] = field(default=TWIN_LOWER)
     upper: tuple[float, ...] = field(default=TWIN_UPPER)

@@ -47,11 +47,11 @@ def strategy_outcome_of(strategy: Any) -> OutcomeOf | None:
 
 
 def goal_outcome_of(
-    strategy_config: dict[str, Any], load_models: bool = False, scene: Scene | None = None
+    strategy_config: dict[str, Any], scene: Scene, load_models: bool = False
 ) -> OutcomeOf | None:
     """``strategy_outcome_of`` for a run's strategy built from its config (``run.json``'s
     ``config["strategy"]``: name and options) on its rig's ``scene`` (``explore.rigs.rig.
-    rig_scene``; the twin's arena when None), without the running strategy.
+    rig_scene``), without the running strategy.
 
     Engineered goal spaces (rge-efr, mge-efr) are functions of the record: always built (cheap).
     Learned ones (VAE latents) are built only with ``load_models`` (loads the model, and every
@@ -59,18 +59,14 @@ def goal_outcome_of(
     its strategy has seen the run, so it gives None, as does RPE or a strategy that cannot be
     built (unknown name, missing model).
     """
-    from explore.learner.strategies import StrategyError, make_strategy
-    from explore.learner.strategies.goal_exploration import (
-        EngineeredGoalExploration,
-        GoalExploration,
-    )
+    from explore.learner.strategies import STRATEGIES, StrategyError, make_strategy
 
     name = str(strategy_config.get("name", ""))
     options = dict(strategy_config.get("options", {}))
-    target = _strategy_class(name)
-    if target is None or not issubclass(target, GoalExploration):
+    entry = STRATEGIES.get(name)
+    if entry is None or not entry.goal_exploration:
         return None
-    if not load_models and not issubclass(target, EngineeredGoalExploration):
+    if not load_models and not entry.engineered:
         return None
     try:
         strategy = make_strategy(name, scene=scene, **options)
@@ -80,13 +76,3 @@ def goal_outcome_of(
     if getattr(strategy, "space", None) is None:
         return None
     return strategy_outcome_of(strategy)
-
-
-def _strategy_class(name: str) -> type | None:
-    """The class registered for a strategy name, without building it (None if unknown)."""
-    from explore.learner.strategies import STRATEGIES, StrategyError
-
-    try:
-        return STRATEGIES.load(name)
-    except StrategyError:
-        return None

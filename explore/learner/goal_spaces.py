@@ -27,23 +27,17 @@ from typing import Any
 
 import numpy as np
 
-from explore.learner.scene import CARTESIAN, FORMS, TWIN_ARENA, Scene
+from explore.learner.scene import CARTESIAN, FORMS, Scene
 from vision.spatial_code import distinct_features
 
-# The twin's ring, where the ball's centre lies, m (explore/learner/scene.py TWIN_ARENA): the
-# polar forms map it onto r_n in [-1, 1]. Kept as names for the twin's own modules.
-R_MIN, R_MAX = TWIN_ARENA.ring  # type: ignore[misc]
-R_MID = (R_MIN + R_MAX) / 2
-R_HALF = (R_MAX - R_MIN) / 2
-# End-effector module of the twin (MGE-EFR): the arm's horizontal reach, m (robot/spec.py).
-REACH = TWIN_ARENA.hand_half_width
 POLAR_FORMS = FORMS  # every engineered form (explore/learner/scene.py)
 Features = Callable[[np.ndarray], np.ndarray]
 
 
-def polar_features(xy: np.ndarray, ring: tuple[float, float] = (R_MIN, R_MAX)) -> np.ndarray:
-    """Ball (x, y), shape (..., 2) -> (r_n, t / pi), shape (..., 2), t = atan2(y, x), r_n the
-    radius mapped from ``ring`` onto [-1, 1] (the twin's ring by default)."""
+def ring_polar_features(xy: np.ndarray, ring: tuple[float, float]) -> np.ndarray:
+    """The ``"polar"`` form: ball (x, y), shape (..., 2) -> (r_n, t / pi), shape (..., 2),
+    t = atan2(y, x), r_n the radius mapped from ``ring`` = (r_min, r_max) onto [-1, 1]
+    (not ``vision.rectify.polar_features``, the tracker's (r, cos t, sin t) in metres)."""
     xy = np.asarray(xy, dtype=float)
     mid, half = (ring[0] + ring[1]) / 2, (ring[1] - ring[0]) / 2
     r = np.hypot(xy[..., 0], xy[..., 1])
@@ -51,8 +45,9 @@ def polar_features(xy: np.ndarray, ring: tuple[float, float] = (R_MIN, R_MAX)) -
     return np.stack([(r - mid) / half, t / np.pi], axis=-1)
 
 
-def wrap_safe_features(xy: np.ndarray, ring: tuple[float, float] = (R_MIN, R_MAX)) -> np.ndarray:
-    """Ball (x, y), shape (..., 2) -> (r_n, cos t, sin t), shape (..., 3)."""
+def wrap_safe_features(xy: np.ndarray, ring: tuple[float, float]) -> np.ndarray:
+    """The ``"wrap-safe"`` form: ball (x, y), shape (..., 2) -> (r_n, cos t, sin t), shape
+    (..., 3), r_n as in ``ring_polar_features``."""
     xy = np.asarray(xy, dtype=float)
     mid, half = (ring[0] + ring[1]) / 2, (ring[1] - ring[0]) / 2
     r = np.hypot(xy[..., 0], xy[..., 1])
@@ -74,7 +69,7 @@ def form_features(form: str, scene: Scene) -> tuple[Features, int]:
     ring = scene.ring
     assert ring is not None
     if form == "polar":
-        return (lambda xy: polar_features(xy, ring)), 2
+        return (lambda xy: ring_polar_features(xy, ring)), 2
     return (lambda xy: wrap_safe_features(xy, ring)), 3
 
 
@@ -117,7 +112,7 @@ class EngineeredGoalSpace(GoalSpace):
         distractor: add the distractor's features (same form) as a module, after the ball's,
             and to the context: the engineered description of a scene with two balls.
             Records without a distractor seen skip that module.
-        scene: the rig's scene (the twin's arena by default).
+        scene: the rig's scene (required: the learner knows no rig's).
 
     Outcome: [ball, distractor (if), hand (if)]; context: [ball, distractor (if)] before the
     move.
@@ -128,7 +123,8 @@ class EngineeredGoalSpace(GoalSpace):
         form: str | None = None,
         hand_module: bool = False,
         distractor: bool = False,
-        scene: Scene = TWIN_ARENA,
+        *,
+        scene: Scene,
     ) -> None:
         form = scene.default_form if form is None else form
         if form not in POLAR_FORMS:

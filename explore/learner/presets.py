@@ -1,8 +1,10 @@
 """Named presets: the learner settings of a published campaign, as strategy options.
 
-A preset gives each strategy the options that reproduce a campaign; options given on the
-command line win over it, and a run stores the options it ran with (``run.json``), so a resumed
-run needs no preset. Our defaults (the twin's) are untouched.
+A preset gives each strategy the options that reproduce a campaign (each strategy's entry in
+``explore.learner.strategies.registry.STRATEGIES`` holds them under the preset's name, composed
+from the settings below); options given on the command line win over it, and a run stores the
+options it ran with (``run.json``), so a resumed run needs no preset. Our defaults (the
+twin's) are untouched.
 
 ``corl2018``: the ArmBalls / Arm-2-Balls campaign of Laversanne-Finot, Péré and Oudeyer (CoRL
 2018), from its dataset's config columns (``docs/armballs_published_config.csv``, extracted from
@@ -41,9 +43,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from explore.learner.strategies.base import STRATEGIES, StrategyError
 from robot.registry import did_you_mean
 
+CORL2018 = "corl2018"
 CORL2018_COMMON: dict[str, Any] = {
     "sigma": 0.05,
     "random_episodes": 0.0,
@@ -66,37 +68,18 @@ CORL2018_ENGINEERED: dict[str, Any] = {
 CORL2018_LEARNED: dict[str, Any] = {"bootstrap": 400, "goals": "normal", "latents": "raw"}
 CORL2018_SPATIAL: dict[str, Any] = {"bootstrap": 400, "goals": "box"}
 
-PRESETS = ("corl2018",)
+PRESETS = (CORL2018,)
 
 
 def preset_options(preset: str, strategy: str) -> dict[str, Any]:
-    """The options ``preset`` gives ``strategy`` (none for RPE). Raises ``StrategyError`` for an
-    unknown preset or strategy (one line)."""
-    from explore.learner.strategies.goal_exploration import (
-        EngineeredGoalExploration,
-        GoalExploration,
-        SpatialGoalExploration,
-    )
-    from explore.learner.strategies.online import OnlineLatentGoalExploration
+    """The options ``preset`` gives ``strategy`` (its registry entry's; none for RPE). Raises
+    ``StrategyError`` for an unknown preset or strategy (one line)."""
+    # imported here: the registry reads this module's settings
+    from explore.learner.strategies import STRATEGIES, StrategyError
 
     if preset not in PRESETS:
         raise StrategyError(
             f"unknown preset {preset!r}{did_you_mean(preset, PRESETS)}; "
             f"choose one of {', '.join(PRESETS)}"
         )
-    cls = STRATEGIES.load(strategy)
-    if not issubclass(cls, GoalExploration):
-        return {}
-    opts = dict(CORL2018_COMMON)
-    if issubclass(cls, EngineeredGoalExploration):
-        opts.update(CORL2018_ENGINEERED)
-        opts["flat"] = not cls.modular_default
-    elif issubclass(cls, SpatialGoalExploration):
-        opts.update(CORL2018_SPATIAL)
-    else:
-        opts.update(CORL2018_LEARNED)
-        if "latents" not in cls.Options.__dataclass_fields__:
-            del opts["latents"]
-    if issubclass(cls, OnlineLatentGoalExploration):
-        del opts["bootstrap"]  # its bootstrap is its VAE's training set (2000 by default)
-    return opts
+    return dict(STRATEGIES.entry(strategy).presets.get(preset, {}))

@@ -3,24 +3,16 @@ are defined in, and whether the scene changes between episodes.
 
 A rig declares its scene (``explore.rigs.rig.rig_scene``, from the rig module's ``scene``);
 strategies, engineered goal spaces and the metric take it, as they take the motor primitive's
-``n_params``, so that a new rig needs no special case in the learner.
-
-Two scenes exist:
-- ``TWIN_ARENA``: the Ergo Jr's round arena (the twin's, and the real rigs' as built,
-  sim/models/make_scene.py), in metres; the ball's centre lies on a ring between the arena's
-  kerb and its wall, and the ball stays where the last episode left it (the context changes);
-- ``ARM_BALLS_SQUARE`` (``ARM_2_BALLS_SQUARE`` with the distractor): the square [-1, 1]^2 of
-  ArmBalls / Arm-2-Balls, in units of the arm's reach (docs/armballs.md); the ball can lie
-  anywhere in the square, and every episode starts from the same scene (the context is
-  constant).
+``n_params``, so that a new rig needs no special case in the learner. The learner defines no
+scene of its own: the rigs' scenes live with their rigs (the Ergo Jr's arena in
+``explore/rigs/arena.py``, in metres, with a ring where the ball's centre lies and a ball that
+stays where the last episode left it; ArmBalls' squares in ``explore/rigs/armballs.py``, in
+units of the arm's reach, reset before every episode).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-
-from robot.spec import ERGO_JR_REACH_M
-from sim.models.make_scene import ARENA_RADIUS, BALL_RADIUS, INNER_RADIUS, OUTER_RADIUS
+from dataclasses import dataclass
 
 # Engineered forms of an object's (x, y): "wrap-safe" (r_n, cos t, sin t) and "polar"
 # (r_n, t / pi) are defined on a ring, "cartesian" (x / h, y / h) on every scene.
@@ -72,27 +64,3 @@ class Scene:
     @property
     def default_form(self) -> str:
         return self.forms[0]
-
-
-#: The Ergo Jr's arena: the ball's centre between the kerb and the wall, less its radius
-#: (0.13-0.17 m), inside the wall's square (+-0.20 m); the arm's horizontal reach.
-TWIN_ARENA = Scene(
-    name="the Ergo Jr arena",
-    unit="m",
-    ball_half_width=ARENA_RADIUS,
-    hand_half_width=ERGO_JR_REACH_M,
-    ring=(INNER_RADIUS + BALL_RADIUS, OUTER_RADIUS - BALL_RADIUS),
-)
-
-#: ArmBalls: the square [-1, 1]^2 in units of the arm's reach (the links sum to 1), reset before
-#: every episode (docs/armballs.md).
-ARM_BALLS_SQUARE = Scene(
-    name="the ArmBalls square",
-    unit="reach",
-    ball_half_width=1.0,
-    hand_half_width=1.0,
-    ring=None,
-    resets=True,
-)
-#: Arm-2-Balls: the same square with the distractor.
-ARM_2_BALLS_SQUARE = replace(ARM_BALLS_SQUARE, name="the Arm-2-Balls square", distractor=True)

@@ -4,21 +4,19 @@ from __future__ import annotations
 
 from typing import Any
 
-from explore.runs.metrics import ARENA_HALF_WIDTH
-
 TIMELINES = ("episode", "time")
 
 
-def default_blueprint(goals: bool = False, half_width: float = ARENA_HALF_WIDTH) -> Any:
+def default_blueprint(half_width: float, goals: bool = False) -> Any:
     """Viewer layout: arena history and camera on the left, this episode's motion and the goal
     space in the middle, cells and joints on the right; the ``time`` timeline selected and
     following the latest data; the blueprint and selection panels collapsed (the views get the
     room; the buttons at the top right open them).
 
     Args:
+        half_width: of the metric's square (the rig's scene's ``ball_half_width``).
         goals: show the goal-space tab first (the strategy sets goals and their outcomes are
             logged) instead of the 3-D tool tip.
-        half_width: of the metric's square (the rig's scene's; the twin's arena by default).
     """
     import rerun.blueprint as rrb
 

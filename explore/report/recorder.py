@@ -54,7 +54,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from explore.learner.goal_outcomes import goal_outcome_of, strategy_outcome_of
-from explore.learner.scene import TWIN_ARENA, Scene
+from explore.learner.scene import Scene
 from explore.report.blueprint import default_blueprint
 from explore.rigs.episodes import EpisodeConfig
 from explore.runs.config import RunConfig
@@ -188,8 +188,8 @@ class Recorder:
         outcome_of: maps a record to its outcome in the coordinates of its goal (the module
             it was sampled in), shape like ``record.goal``, or None (``strategy_outcome_of``,
             ``goal_outcome_of``); without it, a record's ``outcome`` attribute if it has one.
-        blueprint: send the default layout (``default_blueprint()``).
-        scene: the rig's scene (the metric's squares; the twin's arena by default).
+        blueprint: send the default layout (``default_blueprint``).
+        scene: the rig's scene (the metric's squares; ``explore.rigs.rig.rig_scene``).
     """
 
     def __init__(
@@ -203,7 +203,8 @@ class Recorder:
         recording_id: str | None = None,
         outcome_of: Callable[[EpisodeRecord], np.ndarray | None] | None = None,
         blueprint: bool = True,
-        scene: Scene = TWIN_ARENA,
+        *,
+        scene: Scene,
     ) -> None:
         os.environ.setdefault("RUST_LOG", QUIET_FILE_SINK)
         import rerun as rr
@@ -230,7 +231,7 @@ class Recorder:
         batcher = rr.ChunkBatcherConfig(flush_tick=BATCH_FLUSH_S)
         self.rec = rr.RecordingStream(APP_ID, recording_id=recording_id, batcher_config=batcher)
         bp = (
-            default_blueprint(goals=outcome_of is not None, half_width=scene.ball_half_width)
+            default_blueprint(scene.ball_half_width, goals=outcome_of is not None)
             if blueprint
             else None
         )

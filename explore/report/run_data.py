@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from explore.learner.goal_outcomes import goal_outcome_of
-from explore.learner.scene import TWIN_ARENA, Scene
+from explore.learner.scene import Scene
 from explore.report.recorder import recording_paths
 from explore.runs.config import RunConfig
 from explore.runs.metrics import METRICS_FILE, MetricsLog, read_metrics
@@ -99,14 +99,17 @@ class RunData:
 
 
 def run_scene(config: dict[str, Any]) -> Scene:
-    """The scene of the rig a run's config (``run.json``'s ``config``) names; the twin's arena
-    for a config without a rig."""
+    """The scene of the rig a run's config (``run.json``'s ``config``) names; the default
+    rig's (``RigConfig()``, a run's default) for a config without a rig."""
     from explore.rigs.rig import RigConfig, rig_scene
 
     rig = config.get("rig")
     if not isinstance(rig, dict) or "name" not in rig:
-        return TWIN_ARENA
-    return rig_scene(RigConfig(rig["name"], rig.get("rig_id", "twin"), rig.get("options", {})))
+        return rig_scene(RigConfig())
+    default = RigConfig()
+    return rig_scene(
+        RigConfig(rig["name"], rig.get("rig_id", default.rig_id), rig.get("options", {}))
+    )
 
 
 def load_run(path: Path, goal_outcomes: bool = True, records: bool = True) -> RunData:

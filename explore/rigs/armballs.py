@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from explore.learner.experience import Observation
-from explore.learner.scene import ARM_2_BALLS_SQUARE, ARM_BALLS_SQUARE, Scene
+from explore.learner.scene import Scene
 from explore.options import BadOption
 from explore.rigs.episodes import EpisodeResult
 from explore.rigs.rig import Rig, RigConfig
@@ -50,6 +50,21 @@ ENVIRONMENTS = {"armballs": ARM_BALLS, "arm2balls": ARM_2_BALLS}
 # (``history.synced``, explore/runs/store.py) and redoes in about a second. The interval: a guess.
 SYNC_INTERVAL_S = 1.0
 NO_POSITION = np.full(2, np.nan)
+
+#: ArmBalls: the square [-1, 1]^2 in units of the arm's reach (the links sum to 1), reset before
+#: every episode (docs/armballs.md).
+ARM_BALLS_SQUARE = Scene(
+    name="the ArmBalls square",
+    unit="reach",
+    ball_half_width=1.0,
+    hand_half_width=1.0,
+    ring=None,
+    resets=True,
+)
+#: Arm-2-Balls: the same square with the distractor.
+ARM_2_BALLS_SQUARE = dataclasses.replace(
+    ARM_BALLS_SQUARE, name="the Arm-2-Balls square", distractor=True
+)
 
 
 @dataclass(frozen=True)

@@ -27,8 +27,9 @@ from typing import Any
 
 import numpy as np
 
-from explore.learner.scene import TWIN_ARENA, Scene
+from explore.learner.scene import Scene
 from explore.options import BadOption
+from explore.rigs.arena import TWIN_ARENA
 from explore.rigs.rig import RigConfig, RigError
 from explore.rigs.video import VideoOptions
 from robot.spec import ArmSpec, ergo_jr_spec

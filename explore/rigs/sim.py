@@ -8,8 +8,9 @@ from typing import Any, Literal
 
 import numpy as np
 
-from explore.learner.scene import TWIN_ARENA, Scene
+from explore.learner.scene import Scene
 from explore.options import BadOption
+from explore.rigs.arena import R_MAX, R_MIN, TWIN_ARENA
 from explore.rigs.ball import TwinSensor, tracker_locator
 from explore.rigs.clock import TwinClock
 from explore.rigs.rig import Rig, RigConfig, RigError
@@ -25,7 +26,7 @@ from sim.twin import SCENE, SCENE_DISTRACTOR, Twin
 RENDER_SIDE = (16, 2048)
 RENDER_SIZE = f"[height, width], integers in [{RENDER_SIDE[0]}, {RENDER_SIDE[1]}]"
 # The distractor's walk before each episode, on the ring where the ball's centre lies
-# (explore/learner/goal_spaces.py R_MIN..R_MAX): its angle takes a N(0, step) step, 0.5 rad by
+# (explore/rigs/arena.py R_MIN..R_MAX): its angle takes a N(0, step) step, 0.5 rad by
 # default (75 mm at the ring's middle, about 6 of the metric's cells), its radius a N(0, 1 cm)
 # step reflected into the ring. Guesses: it wanders all round within some 100 episodes, and one
 # episode's move is a fraction of the ring, as ArmBalls' distractor moves a fraction of its
@@ -169,8 +170,6 @@ def scene(config: RigConfig, options: Options) -> Scene:
 
 def distractor_walk(xy: np.ndarray, step: float, rng: np.random.Generator) -> np.ndarray:
     """One step of the distractor's random walk from ``xy`` (2,) m: the new (x, y), m."""
-    from explore.learner.goal_spaces import R_MAX, R_MIN
-
     r = float(np.hypot(*xy)) + rng.normal(0.0, DISTRACTOR_RADIUS_STEP)
     span = R_MAX - R_MIN
     r = R_MIN + span - abs(span - abs(r - R_MIN) % (2 * span))  # reflected into the ring

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from explore.learner.goal_spaces import R_MAX, R_MIN
+from explore.rigs.arena import R_MAX, R_MIN
 from robot.spec import ergo_jr_spec
 from vision.observation import OBSERVATION_SIZE
 

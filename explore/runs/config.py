@@ -132,7 +132,7 @@ class RunConfig:
 
         strategy = _obj(where, config, "strategy", "config.strategy")
         name = _name(where, strategy, "config.strategy", STRATEGIES)
-        s_opts = _options(where, strategy, "config.strategy", STRATEGIES.load(name).Options)
+        s_opts = _options(where, strategy, "config.strategy", STRATEGIES.options_class(name))
 
         seed = config.get("seed")
         if not _is_int(seed) or not 0 <= seed <= MAX_SEED:

@@ -3,9 +3,9 @@
 The paper's measure (docs/facts.md): ball positions binned into 30 x 30 cells over the
 arena's square, performance = number of non-empty cells. End-effector positions are counted
 the same way over the arm's reach, for the paper's scatter plots. The square and the reach are
-the rig's scene's (``explore.learner.scene.Scene``: the twin's arena, +-0.2 m and the Ergo
-Jr's reach; ArmBalls' square [-1, 1]^2, where this count over 900 is the CoRL 2018
-campaign's exploration ratio, docs/armballs.md).
+the run's rig's scene's (``explore.learner.scene.Scene``, given: the twin's arena, +-0.2 m and
+the Ergo Jr's reach, explore/rigs/arena.py; ArmBalls' square [-1, 1]^2, where this count over
+900 is the CoRL 2018 campaign's exploration ratio, docs/armballs.md).
 
 ``exploration_ratio`` and ``checkpoints`` give that campaign's curves: the fraction of the
 cells holding the final ball position of at least one of the first n episodes (bootstrap
@@ -19,21 +19,17 @@ from pathlib import Path
 
 import numpy as np
 
-from explore.learner.scene import TWIN_ARENA, Scene
+from explore.learner.scene import Scene
 
 N_BINS = 30  # paper
-# Bounding square of the twin's arena: the outer wall's inner radius (the twin's, and the rig's
-# as built: sim/models/make_scene.py), m; a run's own is its rig's scene's.
-ARENA_HALF_WIDTH = TWIN_ARENA.ball_half_width
-# End-effector grid of the twin: the arm's horizontal reach (robot/spec.py), m.
-REACH_HALF_WIDTH = TWIN_ARENA.hand_half_width
 # The published curves' checkpoints: int(i * 10000 / 30), i = 0..29 (results/
 # Experiment_Visualization.ipynb of the CoRL 2018 campaign; docs/armballs.md)
 CHECKPOINT_SPAN, CHECKPOINT_COUNT = 10000, 30
 
 
 class CellCounter:
-    """Counts distinct cells of an ``n_bins`` x ``n_bins`` grid over [-h, h]^2 (metres).
+    """Counts distinct cells of an ``n_bins`` x ``n_bins`` grid over [-h, h]^2 (the scene's
+    unit: metres on the Ergo Jr rigs).
 
     Points outside the square or NaN (not seen) are ignored.
     """
@@ -69,9 +65,10 @@ METRIC_COLUMNS = ("episode", "ball_cells", "ee_cells", "ball_moved", "kind", "se
 
 
 class MetricsLog:
-    """Cells reached after every episode, kept in memory and appended to ``metrics.csv``."""
+    """Cells reached after every episode, kept in memory and appended to ``metrics.csv``; the
+    grids are over the run's rig's ``scene`` (its ball and hand half widths)."""
 
-    def __init__(self, path: Path, scene: Scene = TWIN_ARENA) -> None:
+    def __init__(self, path: Path, scene: Scene) -> None:
         self.path = path
         self.ball = CellCounter(scene.ball_half_width)
         self.ee = CellCounter(scene.hand_half_width)

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from explore.cli import main, version
-from explore.learner.strategies import STRATEGIES, STRATEGY_SUMMARIES
+from explore.learner.strategies import STRATEGIES
 from explore.rigs.rig import RigConfig, RigError
 from explore.runs.config import RunConfig, StrategyConfig
 from explore.runs.lock import LOCK_FILE
@@ -42,7 +42,7 @@ def test_explore_help_lists_every_strategy_with_what_it_is(capsys):
     assert code == 0
     listed = out[out.index("strategies (--strategy NAME):") :]
     for name in STRATEGIES:
-        summary = STRATEGY_SUMMARIES[name]
+        summary = STRATEGIES[name].summary
         assert summary and f"{name}" in listed and summary in " ".join(listed.split()), name
 
 

@@ -66,9 +66,10 @@ def test_the_wings_of_explore_import_downwards_only():
 
 # The episode's seam (explore/rigs: the Rig, the episode player, the ball sensors) and the
 # exploration loop (explore/runs) know no simulator: a twin is one rig among others, behind its
-# BallSensor. Only the rigs that are simulators build one; the fault soak (explore/runs/soak.py)
+# BallSensor. Only the rigs that are simulators build one (and arena.py, the twin arena's Scene,
+# reads the twin's dimensions); the fault soak (explore/runs/soak.py)
 # builds twin rigs with faulty buses on purpose.
-SIMULATED_RIGS = ("sim.py", "sim_dataset.py", "armballs.py")
+SIMULATED_RIGS = ("sim.py", "sim_dataset.py", "armballs.py", "arena.py")
 SOAK = "soak.py"
 
 
@@ -87,3 +88,41 @@ def test_the_shared_modules_of_explore_import_no_wing():
     for path in (ROOT / "explore" / "options.py", ROOT / "explore" / "__init__.py"):
         wings = {n for n in _imports(path) if n.split(".")[:2][-1] in WINGS}
         assert wings == set(), path
+
+
+# What the learner may import of the project besides itself: ``explore.options`` (shared) and
+# ``vision`` (representations: the VAE, the spatial code); of ``robot`` only its generic name
+# tables (``robot.registry``: ``LazyTable``, ``did_you_mean``, which import nothing of the
+# project, checked below). No rig: neither ``sim`` nor the rest of ``robot`` (joint specs, the
+# arm's reach), nor ``calibration``; a rig's facts reach the learner through its ``Scene`` and
+# its motor primitive, as arguments.
+LEARNER_MAY_IMPORT = ("explore.learner", "explore.options", "vision", "robot.registry")
+
+
+def _within(name: str, prefixes: tuple[str, ...]) -> bool:
+    return any(name == p or name.startswith(p + ".") for p in prefixes)
+
+
+def test_the_learner_knows_no_rig():
+    bad = []
+    for path in _modules("explore/learner"):
+        for name in _imports(path):
+            if name.split(".")[0] in PACKAGES and not _within(name, LEARNER_MAY_IMPORT):
+                bad.append(f"{path.relative_to(ROOT)} imports {name}")
+    assert bad == []
+
+
+def test_the_registry_the_learner_may_import_imports_nothing_of_the_project():
+    names = _imports(ROOT / "robot" / "registry.py")
+    assert {n for n in names if n.split(".")[0] in PACKAGES} == set()
+
+
+def test_the_learner_check_sees_a_rig_import(tmp_path):
+    """The check above fails on what it must refuse (the learner's imports before it held)."""
+    bad = tmp_path / "bad.py"
+    bad.write_text(
+        "from robot.spec import ERGO_JR_REACH_M\nimport sim.models.make_scene\n"
+        "from explore.rigs.arena import TWIN_ARENA\nfrom robot.registry import LazyTable\n"
+    )
+    refused = {n for n in _imports(bad) if not _within(n, LEARNER_MAY_IMPORT)}
+    assert refused == {"robot.spec", "sim.models.make_scene", "explore.rigs.arena"}

@@ -16,6 +16,7 @@ import torch
 
 from explore.cli import main
 from explore.learner.strategies import StrategyError, make_strategy
+from explore.rigs.arena import TWIN_ARENA
 from vision.sae_train import train_sae
 from vision.spatial_ae import SaeConfig
 from vision.vae import VaeConfig
@@ -50,7 +51,7 @@ def _damage(path: Path, how: str) -> None:
 
 def _strategy(kind: str, folder: Path) -> None:
     name, option = ("rge-vae", "vae") if kind == "vae" else ("rge-sae", "sae")
-    make_strategy(name, n_params=48, **{option: str(folder)})
+    make_strategy(name, n_params=48, scene=TWIN_ARENA, **{option: str(folder)})
 
 
 def _one_line(exc: BaseException) -> str:

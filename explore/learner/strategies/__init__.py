@@ -1,23 +1,26 @@
-"""Exploration strategies behind one interface (``base.Strategy``), built by name."""
+"""Exploration strategies behind one interface (``base.Strategy``), built by name from their
+registry (``registry.STRATEGIES``)."""
 
 from explore.learner.strategies.base import (
-    MAKE_VAE,
-    STRATEGIES,
-    STRATEGY_SUMMARIES,
     Description,
     Proposal,
     Strategy,
     StrategyError,
+)
+from explore.learner.strategies.registry import (
+    STRATEGIES,
+    Model,
+    StrategyEntry,
     make_strategy,
 )
 
 __all__ = [
-    "MAKE_VAE",
     "STRATEGIES",
-    "STRATEGY_SUMMARIES",
     "Description",
+    "Model",
     "Proposal",
     "Strategy",
+    "StrategyEntry",
     "StrategyError",
     "make_strategy",
 ]

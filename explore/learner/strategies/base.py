@@ -5,12 +5,12 @@ rest pose, then learns from the stored record of that episode. Its state must be
 deterministic function of the records it was updated with, so that a resumed run rebuilds it
 by replaying the history.
 
-Strategies are built by name from ``STRATEGIES`` (imported lazily). Each declares its options
-as a dataclass ``Options`` (``explore.options``): unknown keys and wrong types are refused in
-one line with the known options listed. It proposes ``n_params`` motor parameters, the count of
-the rig's motor primitive (48 for the Ergo Jr's DMPs, 49 for ArmBalls' RBFs), and knows the
-rig's ``scene`` (``explore.learner.scene``: the frame of engineered features, whether the scene
-resets between episodes), both given by the rig, never assumed.
+Strategies are built by name from ``registry.STRATEGIES`` (imported lazily). Each declares its
+options as a dataclass ``Options`` (``explore.options``): unknown keys and wrong types are
+refused in one line with the known options listed. It proposes ``n_params`` motor parameters,
+the count of the rig's motor primitive (48 for the Ergo Jr's DMPs, 49 for ArmBalls' RBFs), and
+knows the rig's ``scene`` (``explore.learner.scene``: the frame of engineered features, whether
+the scene resets between episodes), both given by the rig, never assumed.
 """
 
 from __future__ import annotations
@@ -23,9 +23,8 @@ import numpy as np
 
 from explore.learner.dmp import N_PARAMS
 from explore.learner.experience import Experience, Observation
-from explore.learner.scene import TWIN_ARENA, Scene
+from explore.learner.scene import Scene
 from explore.options import OptionsError, parse_options
-from robot.registry import LazyTable
 
 
 @dataclass
@@ -59,7 +58,9 @@ class Strategy(ABC):
 
     Args:
         n_params: motor parameters to propose (the rig's ``motor.n_params``).
-        scene: the rig's scene (``explore.rigs.rig.rig_scene``; default the twin's arena).
+        scene: the rig's scene (``explore.rigs.rig.rig_scene``; required: the learner knows no
+            rig's).
+        name: its name in ``registry.STRATEGIES`` (default: the class's ``name``).
         **options: the strategy's options as given (``self.options``), read into its ``Options``
             dataclass (``self.settings``).
     """
@@ -74,15 +75,23 @@ class Strategy(ABC):
     needs_ball: bool = False
 
     def __init__(
-        self, n_params: int = N_PARAMS, scene: Scene | None = None, **options: Any
+        self, n_params: int = N_PARAMS, *, scene: Scene, name: str | None = None, **options: Any
     ) -> None:
+        if name is not None:
+            self.name = name
         self.options = dict(options)
         try:
             self.settings = parse_options(self.Options, options, f"strategy {self.name!r}")
         except OptionsError as exc:
             raise StrategyError(str(exc)) from None
         self.n_params = int(n_params)
-        self.scene = TWIN_ARENA if scene is None else scene
+        self.scene = scene
+
+    @classmethod
+    def options_for(cls, **params: Any) -> type:
+        """The ``Options`` dataclass of this class built with ``params`` (a registry entry's:
+        ``registry.StrategyEntry.params``)."""
+        return cls.Options
 
     @abstractmethod
     def propose(self, context: Observation, rng: np.random.Generator) -> Proposal:
@@ -116,61 +125,3 @@ class Description:
     context: np.ndarray
     outcome: np.ndarray
     goal: np.ndarray
-
-
-# How to make the model a latent strategy needs (option ``vae``; the campaign's ``--vae`` or
-# ``--betavae``). "vae" is the recipe of docs/results.md: a plain VAE (beta 1) collapses at
-# CPU-sized schedules.
-MAKE_VAE = {
-    "vae": "ergo dataset outcomes --n 3000 --out data/outcomes.npz && "
-    "ergo vae train --data data/outcomes.npz --out models/vae --beta 10 --capacity 10 "
-    "--capacity-iterations 500 --iterations 700",
-    "betavae": "ergo dataset outcomes --n 10000 --out data/outcomes.npz && "
-    "ergo vae train --data data/outcomes.npz --out models/betavae --beta 4 --capacity 10",
-    "sae": "ergo dataset outcomes --n 3000 --out data/outcomes.npz && "
-    "ergo sae train --data data/outcomes.npz --out models/sae",
-}
-
-# name -> "module:Class"
-STRATEGIES = LazyTable(
-    "strategy",
-    {
-        "rpe": "explore.learner.strategies.rpe:RandomParameterExploration",
-        "rge-efr": "explore.learner.strategies.goal_exploration:EngineeredGoalExploration",
-        "mge-efr": "explore.learner.strategies.goal_exploration:ModularEngineeredGoalExploration",
-        "rge-vae": "explore.learner.strategies.goal_exploration:LatentGoalExploration",
-        "rge-betavae": "explore.learner.strategies.goal_exploration:BetaLatentGoalExploration",
-        "mge-vae": "explore.learner.strategies.goal_exploration:ModularLatentGoalExploration",
-        "mge-betavae": (
-            "explore.learner.strategies.goal_exploration:ModularBetaLatentGoalExploration"
-        ),
-        "rge-online": "explore.learner.strategies.online:OnlineLatentGoalExploration",
-        "rge-sae": "explore.learner.strategies.goal_exploration:SpatialGoalExploration",
-        "mge-sae": "explore.learner.strategies.goal_exploration:ModularSpatialGoalExploration",
-    },
-    error=StrategyError,
-)
-
-
-# name -> what it is, in one line (``ergo explore --help``); a test checks that every strategy
-# of STRATEGIES has one.
-STRATEGY_SUMMARIES = {
-    "rpe": "random motor parameters every episode (motor babbling): the baseline",
-    "rge-efr": "random goals in the engineered goal space: the ball's polar coordinates",
-    "mge-efr": "modular goals by learning progress: ball, and the tool tip as a module",
-    "rge-vae": "random goals in a VAE's latent space (strategy option vae=MODEL)",
-    "rge-betavae": "rge-vae with a beta-VAE (vae=MODEL)",
-    "mge-vae": "modular goals over pairs of a VAE's latents, by learning progress (vae=MODEL)",
-    "mge-betavae": "mge-vae with a beta-VAE (vae=MODEL)",
-    "rge-online": "2000 random episodes, then random goals in a VAE trained on their images",
-    "rge-sae": "random goals in a spatial autoencoder's feature positions (sae=MODEL)",
-    "mge-sae": "modular goals, one module per spatial-autoencoder feature (sae=MODEL)",
-}
-
-
-def make_strategy(
-    name: str, n_params: int = N_PARAMS, scene: Scene | None = None, **options: Any
-) -> Strategy:
-    """The strategy ``name`` with ``options``, proposing ``n_params`` parameters on a rig with
-    ``scene`` (the twin's arena when None)."""
-    return STRATEGIES.load(name)(n_params=n_params, scene=scene, **options)

@@ -25,6 +25,7 @@ function of the records given to ``update`` (a resumed run replays them).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -42,7 +43,6 @@ from explore.learner.interest import RANDOM_CHOICE, WINDOW, ModuleInterest
 from explore.learner.meta_policy import MetaPolicy
 from explore.learner.scene import Scene
 from explore.learner.strategies.base import (
-    MAKE_VAE,
     Description,
     Proposal,
     Strategy,
@@ -153,18 +153,35 @@ class LatentOptions(GoalExplorationOptions):
 
 
 class GoalExploration(Strategy):
-    """Goal exploration in a goal space built by ``make_space`` (options:
-    ``GoalExplorationOptions``)."""
+    """Goal exploration in the goal space of a representation (RGE, or MGE by default with
+    ``modular_default``); every {rge, mge} x {efr, vae, betavae, sae} strategy is this class
+    with its registry entry's (``modular_default``, ``representation``).
+
+    Args:
+        modular_default: MGE unless the option ``modular`` says otherwise.
+        representation: a key of ``REPRESENTATIONS`` (its options and its goal space), or
+            None for a subclass with its own ``Options`` and ``make_space`` (rge-online).
+        n_params, scene, name, options: as ``Strategy``'s.
+    """
 
     name = "goal-exploration"
     Options: type = GoalExplorationOptions
-    modular_default = False
     needs_ball = True
 
     def __init__(
-        self, n_params: int = N_PARAMS, scene: Scene | None = None, **options: Any
+        self,
+        n_params: int = N_PARAMS,
+        *,
+        scene: Scene,
+        modular_default: bool = False,
+        representation: str | None = None,
+        **options: Any,
     ) -> None:
-        super().__init__(n_params, scene, **options)
+        self.modular_default = modular_default
+        self.representation = None if representation is None else representation_of(representation)
+        if self.representation is not None:
+            self.Options = self.representation.Options
+        super().__init__(n_params, scene=scene, **options)
         s = self.settings
         self.bootstrap = s.bootstrap
         self.sigma = s.sigma
@@ -185,10 +202,17 @@ class GoalExploration(Strategy):
         self._pending: list[Experience] = []  # records seen before the space exists
         self._init_space(self.make_space())
 
+    @classmethod
+    def options_for(cls, representation: str | None = None, **params: Any) -> type:
+        return cls.Options if representation is None else representation_of(representation).Options
+
     # ---- hooks for subclasses ----------------------------------------------------------------
     def make_space(self) -> GoalSpace | None:
-        """The goal space, or None while it does not exist yet (online representations)."""
-        raise NotImplementedError
+        """The goal space (the representation's), or None while it does not exist yet (online
+        representations)."""
+        if self.representation is None:
+            raise NotImplementedError(f"{type(self).__name__} has no representation")
+        return self.representation.make_space(self)
 
     # ---- state -------------------------------------------------------------------------------
     def _init_space(self, space: GoalSpace | None) -> None:
@@ -367,51 +391,48 @@ class GoalExploration(Strategy):
         )
 
 
-class EngineeredGoalExploration(GoalExploration):
-    """Goal exploration on the ball's engineered polar features (EFR; options:
-    ``EngineeredOptions``)."""
-
-    name = "rge-efr"
-    Options = EngineeredOptions
-
-    def make_space(self) -> GoalSpace:
-        s = self.settings
-        hand = self.modular if s.hand_module is None else s.hand_module
-        distractor = self.scene.distractor if s.distractor is None else s.distractor
-        try:
-            space = EngineeredGoalSpace(s.form, hand, distractor, self.scene)
-        except ValueError as exc:
-            raise StrategyError(f"{self.name}: {exc}") from None
-        if s.flat:
-            space.modules = [np.arange(space.dim)]
-        return space
+def engineered_space(strategy: GoalExploration) -> GoalSpace:
+    """EFR: the ball's engineered features on the rig's scene (options: ``EngineeredOptions``);
+    the tool tip as a module by default when modular."""
+    s = strategy.settings
+    hand = strategy.modular if s.hand_module is None else s.hand_module
+    distractor = strategy.scene.distractor if s.distractor is None else s.distractor
+    try:
+        space = EngineeredGoalSpace(s.form, hand, distractor, scene=strategy.scene)
+    except ValueError as exc:
+        raise StrategyError(f"{strategy.name}: {exc}") from None
+    if s.flat:
+        space.modules = [np.arange(space.dim)]
+    return space
 
 
-class ModularEngineeredGoalExploration(EngineeredGoalExploration):
-    name = "mge-efr"
-    modular_default = True
+def _load_model(strategy: GoalExploration, option: str, load: Callable[[str], Any]) -> Any:
+    """The model the strategy's ``option`` names, loaded by ``load``; a StrategyError (one
+    line) when the option is missing (naming how to make one: the registry entry's
+    ``Model.recipe``) or the model cannot be read."""
+    path = getattr(strategy.settings, option)
+    if not path:
+        from explore.learner.strategies.registry import STRATEGIES
+
+        entry = STRATEGIES.get(strategy.name)
+        model = entry.model if entry is not None else None
+        how = f" (make one with: {model.recipe})" if model is not None else ""
+        raise StrategyError(f"{strategy.name} needs option {option}=PATH{how}")
+    from vision.vae import VaeError
+
+    try:
+        return load(path)
+    except (VaeError, FileNotFoundError) as exc:
+        raise StrategyError(f"{strategy.name}: {exc}") from exc
 
 
-class LatentGoalExploration(GoalExploration):
-    """Goal exploration in the latent space of a VAE trained beforehand (options:
-    ``LatentOptions``)."""
+def vae_space(strategy: GoalExploration) -> GoalSpace:
+    """The latent space of a VAE trained beforehand (options: ``LatentOptions``)."""
+    from vision.vae import load_vae
 
-    name = "rge-vae"
-    Options = LatentOptions
-
-    def make_space(self) -> GoalSpace | None:
-        path = self.settings.vae
-        if not path:
-            raise StrategyError(
-                f"{self.name} needs option vae=PATH (make one with: {MAKE_VAE['vae']})"
-            )
-        from vision.vae import VaeError, load_vae
-
-        try:
-            vae = load_vae(path)
-        except (VaeError, FileNotFoundError) as exc:
-            raise StrategyError(f"{self.name}: {exc}") from exc
-        return latent_space(vae, self.modular, self.settings.latents, path)
+    vae = _load_model(strategy, "vae", load_vae)
+    path = strategy.settings.vae
+    return latent_space(vae, strategy.modular, strategy.settings.latents, path)
 
 
 def check_latents(latents: str, where: str) -> str:
@@ -447,20 +468,6 @@ def latent_space(
         raise StrategyError(f"{where}: {exc}") from exc
 
 
-class BetaLatentGoalExploration(LatentGoalExploration):
-    name = "rge-betavae"
-
-
-class ModularLatentGoalExploration(LatentGoalExploration):
-    name = "mge-vae"
-    modular_default = True
-
-
-class ModularBetaLatentGoalExploration(LatentGoalExploration):
-    name = "mge-betavae"
-    modular_default = True
-
-
 @dataclass(frozen=True)
 class SpatialOptions(GoalExplorationOptions):
     """Goal-exploration options, and ``sae``: the model folder from ``ergo sae train``
@@ -469,37 +476,54 @@ class SpatialOptions(GoalExplorationOptions):
     sae: str | None = None
 
 
-class SpatialGoalExploration(GoalExploration):
-    """Goal exploration in the image positions of a spatial autoencoder's features (options:
-    ``SpatialOptions``): its live features' (x, y), the whole code for RGE, one module per
-    feature for MGE. Goals are uniform in the bounds reached (the code has no prior to sample
-    from); the context is the previous outcome's code."""
+def spatial_space(strategy: GoalExploration) -> GoalSpace:
+    """The image positions of a spatial autoencoder's features (options: ``SpatialOptions``):
+    its live features' (x, y), the whole code for RGE, one module per feature for MGE. Goals
+    are uniform in the bounds reached (the code has no prior to sample from); the context is
+    the previous outcome's code."""
+    from vision.spatial_ae import load_sae
 
-    name = "rge-sae"
-    Options = SpatialOptions
+    sae = _load_model(strategy, "sae", load_sae)
+    path = strategy.settings.sae
+    if sae.config.code_std is None:
+        raise StrategyError(f"{path} has no code statistics: train it with `ergo sae train`")
+    if strategy.goal_sampling == "normal":
+        raise StrategyError(f"{strategy.name}: goals must be uniform (the code has no prior)")
+    return spatial_goal_space(
+        sae.encode_bgr, sae.config.code_std, strategy.modular, sae.config.code_corr
+    )
 
-    def make_space(self) -> GoalSpace:
-        path = self.settings.sae
-        if not path:
-            raise StrategyError(
-                f"{self.name} needs option sae=PATH (make one with: {MAKE_VAE['sae']})"
-            )
-        from vision.spatial_ae import load_sae
-        from vision.vae import VaeError
 
-        try:
-            sae = load_sae(path)
-        except (VaeError, FileNotFoundError) as exc:
-            raise StrategyError(f"{self.name}: {exc}") from exc
-        if sae.config.code_std is None:
-            raise StrategyError(f"{path} has no code statistics: train it with `ergo sae train`")
-        if self.goal_sampling == "normal":
-            raise StrategyError(f"{self.name}: goals must be uniform (the code has no prior)")
-        return spatial_goal_space(
-            sae.encode_bgr, sae.config.code_std, self.modular, sae.config.code_corr
+@dataclass(frozen=True)
+class Representation:
+    """What a goal-exploration strategy explores in.
+
+    Attributes:
+        Options: the strategy's options dataclass with it.
+        make_space: the strategy -> its goal space (a ``StrategyError`` for a bad option or a
+            missing model).
+    """
+
+    Options: type
+    make_space: Callable[[GoalExploration], GoalSpace | None]
+
+
+LATENT = Representation(LatentOptions, vae_space)
+#: representation key (a strategy name's suffix, ``registry.STRATEGIES``) -> Representation;
+#: a VAE and a beta-VAE differ only in the model trained beforehand (the registry's ``Model``).
+REPRESENTATIONS: dict[str, Representation] = {
+    "efr": Representation(EngineeredOptions, engineered_space),
+    "vae": LATENT,
+    "betavae": LATENT,
+    "sae": Representation(SpatialOptions, spatial_space),
+}
+
+
+def representation_of(key: str) -> Representation:
+    """``REPRESENTATIONS[key]``; a ``StrategyError`` (one line) for an unknown key."""
+    found = REPRESENTATIONS.get(key)
+    if found is None:
+        raise StrategyError(
+            f"unknown representation {key!r}; choose one of {', '.join(REPRESENTATIONS)}"
         )
-
-
-class ModularSpatialGoalExploration(SpatialGoalExploration):
-    name = "mge-sae"
-    modular_default = True
+    return found

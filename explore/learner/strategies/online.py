@@ -60,10 +60,8 @@ class OnlineLatentGoalExploration(GoalExploration):
     name = "rge-online"
     Options = OnlineOptions
 
-    def __init__(
-        self, n_params: int = N_PARAMS, scene: Scene | None = None, **options: Any
-    ) -> None:
-        super().__init__(n_params, scene, **options)
+    def __init__(self, n_params: int = N_PARAMS, *, scene: Scene, **options: Any) -> None:
+        super().__init__(n_params, scene=scene, **options)
         if self.bootstrap < 1:
             raise StrategyError(f"{self.name}: bootstrap must be at least 1 (the VAE's data)")
         self._configs = self._vae_configs()  # bad options fail now, not after the bootstrap

@@ -120,7 +120,7 @@ def _kill_trial_worker(run_dir: Path, after_rows: int) -> None:
 def test_a_worker_killed_mid_trial_leaves_a_run_that_resumes(cluster, local_reference, tmp_path):
     out = tmp_path / "c"
     long = 3 * EPISODES  # long enough to be killed before it ends
-    trial = Trial(str(out / "rpe" / "seed-0"), "rpe", 0, long, campaign_id=campaign_id(out))
+    trial = Trial.of(str(out / "rpe" / "seed-0"), "rpe", 0, long, campaign_id=campaign_id(out))
     run_dir = Path(trial.run_dir)
     with ThreadPoolExecutor(1) as pool:
         # no retry: the campaign fails in one line and leaves the run for a rerun
@@ -146,7 +146,7 @@ def test_trials_on_one_rig_run_there_one_at_a_time(cluster, tmp_path):
     # the twin standing in for rig ergo1: two trials that both need it, 2 CPUs free
     cid = campaign_id(tmp_path)
     trials = [
-        Trial(str(tmp_path / "rpe" / f"seed-{s}"), "rpe", s, 8, campaign_id=cid,
+        Trial.of(str(tmp_path / "rpe" / f"seed-{s}"), "rpe", s, 8, campaign_id=cid,
               resources={"rig:ergo1": 1.0})
         for s in (0, 1)
     ]  # fmt: skip
@@ -187,7 +187,7 @@ def test_rig_resources_of_a_trial_and_the_cluster_checks():
     assert trial_resources({"name": "dynamixel", "rig_id": "ergo1", "options": {}}) == {
         "rig:ergo1": 1.0
     }
-    t = Trial("/x/rpe/seed-0", "rpe", 0, 5, resources={"rig:ergo1": 1.0})
+    t = Trial.of("/x/rpe/seed-0", "rpe", 0, 5, resources={"rig:ergo1": 1.0})
     check_rig_resources([t], {"CPU": 2.0, "rig:ergo1": 1.0})
     with pytest.raises(CampaignError, match="no Ray node has rig 'ergo1'"):
         check_rig_resources([t], {"CPU": 2.0})
@@ -205,7 +205,7 @@ def test_the_local_backend_runs_one_arm_one_trial_at_a_time(tmp_path, capsys):
 
 def test_a_worker_that_sees_another_campaign_folder_refuses(tmp_path):
     campaign_id(tmp_path)
-    trial = Trial(str(tmp_path / "rpe" / "seed-0"), "rpe", 0, 5, campaign_id="not-this-one")
+    trial = Trial.of(str(tmp_path / "rpe" / "seed-0"), "rpe", 0, 5, campaign_id="not-this-one")
     with pytest.raises(CampaignError, match="same path"):
         run_trial(trial)
     assert not Path(trial.run_dir).exists()

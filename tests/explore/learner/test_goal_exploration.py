@@ -10,6 +10,7 @@ import pytest
 from explore.campaigns.trial import run_one
 from explore.learner.experience import Observation
 from explore.learner.strategies import StrategyError, make_strategy
+from explore.rigs.arena import TWIN_ARENA
 from explore.runs.store import RunStore
 
 N, BOOT = 150, 50
@@ -52,8 +53,8 @@ def test_resumed_goal_exploration_replays_to_the_same_history(reference, tmp_pat
 
 def test_strategy_state_is_rebuilt_by_update(reference):
     recs = RunStore.open(reference).records
-    s1 = make_strategy("mge-efr", bootstrap=BOOT)
-    s2 = make_strategy("mge-efr", bootstrap=BOOT)
+    s1 = make_strategy("mge-efr", scene=TWIN_ARENA, bootstrap=BOOT)
+    s2 = make_strategy("mge-efr", scene=TWIN_ARENA, bootstrap=BOOT)
     for r in recs:
         s1.update(r)
     for r in recs:
@@ -73,16 +74,18 @@ def test_bad_options_are_one_line_errors():
         StrategyError,
         match=r"option bootstap is unknown \(did you mean 'bootstrap'\?\); known: bootstrap, ",
     ):
-        make_strategy("rge-efr", bootstap=3)
+        make_strategy("rge-efr", scene=TWIN_ARENA, bootstap=3)
     with pytest.raises(StrategyError, match="option goals must be one of 'uniform', 'normal'"):
-        make_strategy("rge-efr", goals="gaussian")
+        make_strategy("rge-efr", scene=TWIN_ARENA, goals="gaussian")
     with pytest.raises(StrategyError, match="option sigma must be >= 0"):
-        make_strategy("rge-efr", sigma=-0.1)
+        make_strategy("rge-efr", scene=TWIN_ARENA, sigma=-0.1)
     with pytest.raises(StrategyError, match="option exploit must be a probability"):
-        make_strategy("mge-efr", exploit=2)
+        make_strategy("mge-efr", scene=TWIN_ARENA, exploit=2)
     with pytest.raises(StrategyError, match="option bootstrap must be an integer"):
-        make_strategy("rge-efr", bootstrap="many")
+        make_strategy("rge-efr", scene=TWIN_ARENA, bootstrap="many")
     with pytest.raises(StrategyError, match="strategy 'rpe': option sigma is unknown"):
-        make_strategy("rpe", sigma=0.1)  # rpe has no options: none is stored silently
+        make_strategy(
+            "rpe", scene=TWIN_ARENA, sigma=0.1
+        )  # rpe has no options: none is stored silently
     with pytest.raises(StrategyError, match="needs option vae"):
-        make_strategy("rge-vae")
+        make_strategy("rge-vae", scene=TWIN_ARENA)

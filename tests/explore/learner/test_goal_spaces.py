@@ -6,19 +6,21 @@ import numpy as np
 import pytest
 
 from explore.learner.goal_spaces import (
-    R_MAX,
-    R_MIN,
     EngineeredGoalSpace,
     kl_ranked_modules,
-    polar_features,
+    ring_polar_features,
     wrap_safe_features,
 )
 from explore.learner.interest import ModuleInterest
+from explore.rigs.arena import R_MAX, R_MIN, TWIN_ARENA
+from explore.rigs.armballs import ARM_2_BALLS_SQUARE
+
+RING = (R_MIN, R_MAX)  # the twin's ring, m
 
 
-def test_polar_features_normalise_the_ring_to_minus_one_one():
+def test_ring_polar_features_normalise_the_ring_to_minus_one_one():
     xy = np.array([[R_MIN, 0.0], [0.0, R_MAX], [-(R_MIN + R_MAX) / 2, 1e-12], [0.0, -R_MIN]])
-    f = polar_features(xy)
+    f = ring_polar_features(xy, RING)
     np.testing.assert_allclose(f[:, 0], [-1, 1, 0, -1], atol=1e-9)
     np.testing.assert_allclose(f[:, 1], [0, 0.5, 1, -0.5], atol=1e-9)
     assert np.all(np.abs(f) <= 1 + 1e-9)
@@ -30,11 +32,11 @@ def test_wrap_safe_features_are_continuous_across_plus_minus_pi():
     above = np.array([r * np.cos(np.pi - eps), r * np.sin(np.pi - eps)])
     below = np.array([r * np.cos(-np.pi + eps), r * np.sin(-np.pi + eps)])
     # the paper's polar angle jumps by ~2 across the negative x axis; the wrap-safe form does not
-    assert abs(polar_features(above)[1] - polar_features(below)[1]) > 1.9
-    assert np.linalg.norm(wrap_safe_features(above) - wrap_safe_features(below)) < 1e-5
+    assert abs(ring_polar_features(above, RING)[1] - ring_polar_features(below, RING)[1]) > 1.9
+    assert np.linalg.norm(wrap_safe_features(above, RING) - wrap_safe_features(below, RING)) < 1e-5
     # and it is continuous all around: small steps in angle give small steps in features
     t = np.linspace(-np.pi, np.pi, 721)
-    f = wrap_safe_features(np.stack([r * np.cos(t), r * np.sin(t)], axis=1))
+    f = wrap_safe_features(np.stack([r * np.cos(t), r * np.sin(t)], axis=1), RING)
     assert np.max(np.linalg.norm(np.diff(f, axis=0), axis=1)) < 0.01
 
 
@@ -46,7 +48,7 @@ class _Rec:
 
 
 def test_engineered_space_outcomes_contexts_and_modules():
-    space = EngineeredGoalSpace("wrap-safe", hand_module=True)
+    space = EngineeredGoalSpace("wrap-safe", hand_module=True, scene=TWIN_ARENA)
     rec = _Rec([0.15, 0.0], [0.0, 0.15], tip=(0.15, -0.3))
     o = space.outcome(rec)
     np.testing.assert_allclose(o, [0, 1, 0, 0.5, -1], atol=1e-12)
@@ -57,12 +59,10 @@ def test_engineered_space_outcomes_contexts_and_modules():
     rec_no_tip = _Rec([0.15, 0.0], [0.15, 0.0], tip=(np.nan, np.nan))
     assert space.module_outcomes(space.outcome(rec_no_tip))[1] is None
     with pytest.raises(ValueError, match="unknown polar form"):
-        EngineeredGoalSpace("spherical")
+        EngineeredGoalSpace("spherical", scene=TWIN_ARENA)
 
 
 def test_engineered_forms_follow_the_rig_s_scene():
-    from explore.learner.scene import ARM_2_BALLS_SQUARE, TWIN_ARENA
-
     # ArmBalls: the balls' positions themselves, (x, y) in its square [-1, 1]^2
     space = EngineeredGoalSpace(None, distractor=True, scene=ARM_2_BALLS_SQUARE)
     assert space.form == "cartesian" and space.dim == 4
@@ -135,7 +135,6 @@ def test_the_original_interest_is_an_exponential_average_of_distance_progress():
 
 
 def test_goal_sampling_in_the_fixed_box_and_the_latent_prior():
-    from explore.learner.scene import ARM_2_BALLS_SQUARE
     from explore.learner.strategies import make_strategy
 
     rng = np.random.default_rng(0)
@@ -144,6 +143,6 @@ def test_goal_sampling_in_the_fixed_box_and_the_latent_prior():
     assert [len(m) for m in s.space.modules] == [2, 2]  # the scene's distractor joins
     goals = np.array([s.sample_goal(0, rng) for _ in range(2000)])
     assert goals.min() >= -1 and goals.max() <= 1 and goals.min() < -0.99 and goals.max() > 0.99
-    s = make_strategy("rge-efr", goals="normal")
+    s = make_strategy("rge-efr", scene=TWIN_ARENA, goals="normal")
     goals = np.array([s.sample_goal(0, rng) for _ in range(20000)])
     assert np.abs(goals).max() == pytest.approx(2.5)  # clipped N(0, 1)

@@ -7,6 +7,7 @@ import pytest
 import torch
 
 from explore.campaigns.trial import run_one
+from explore.rigs.arena import TWIN_ARENA
 from explore.runs.store import RunStore
 from vision.vae import Vae, VaeConfig
 
@@ -49,15 +50,15 @@ def test_zscored_latents_use_the_statistics_saved_with_the_vae(vae_dir, tmp_path
     from vision.vae import load_vae
 
     with pytest.raises(StrategyError, match="no latent statistics"):
-        make_strategy("rge-vae", vae=str(vae_dir), latents="zscore")
+        make_strategy("rge-vae", scene=TWIN_ARENA, vae=str(vae_dir), latents="zscore")
     with pytest.raises(StrategyError, match="latents must be one of"):
-        make_strategy("rge-vae", vae=str(vae_dir), latents="whitened")
+        make_strategy("rge-vae", scene=TWIN_ARENA, vae=str(vae_dir), latents="whitened")
     vae = load_vae(vae_dir)
     images = np.random.default_rng(0).integers(0, 256, (6, 64, 64, 3), dtype=np.uint8)
     vae.config.latent_mean, vae.config.latent_std = vae.latent_stats(images)
     folder = vae.save(tmp_path / "with-stats")
-    raw = make_strategy("rge-vae", vae=str(folder)).space
-    z = make_strategy("rge-vae", vae=str(folder), latents="zscore").space
+    raw = make_strategy("rge-vae", scene=TWIN_ARENA, vae=str(folder)).space
+    z = make_strategy("rge-vae", scene=TWIN_ARENA, vae=str(folder), latents="zscore").space
 
     class Rec:
         image = images[2]
@@ -75,11 +76,13 @@ def test_online_vae_options_are_checked_before_the_bootstrap():
 
     for bad in ({"vae_beta": -1}, {"vae_iterations": 0}):
         with pytest.raises(StrategyError, match="rge-online: bad VAE option"):
-            make_strategy("rge-online", **bad)
+            make_strategy("rge-online", scene=TWIN_ARENA, **bad)
     with pytest.raises(StrategyError, match="option vae_capacity must be a number or null"):
-        make_strategy("rge-online", vae_capacity="lots")
-    plain, _ = make_strategy("rge-online", vae_capacity=None, vae_beta=1)._configs
+        make_strategy("rge-online", scene=TWIN_ARENA, vae_capacity="lots")
+    plain, _ = make_strategy("rge-online", scene=TWIN_ARENA, vae_capacity=None, vae_beta=1)._configs
     assert plain.capacity is None and plain.beta == 1.0
-    default, train = make_strategy("rge-online")._configs  # the pre-trained VAE's schedule
+    default, train = make_strategy(
+        "rge-online", scene=TWIN_ARENA
+    )._configs  # the pre-trained VAE's schedule
     assert (default.beta, default.capacity, default.capacity_iterations) == (10.0, 10.0, 500)
     assert train.iterations == 700

@@ -26,6 +26,7 @@ from explore.report.recorder import (
     recording_paths,
     run_recording_id,
 )
+from explore.rigs.arena import TWIN_ARENA
 from explore.runs.config import RunConfig, StrategyConfig
 from explore.runs.open_run import open_run
 from explore.runs.store import iter_history
@@ -73,6 +74,7 @@ def explore_with_recorder(
             stride=STRIDE,
             recording_id=run_recording_id(out),
             outcome_of=strategy_outcome_of(run.strategy) if live_outcomes else None,
+            scene=TWIN_ARENA,
         )
         try:
             run.explore(on_record=recorder.on_record, on_episode=recorder.on_progress)
@@ -117,7 +119,7 @@ def test_cells_logged_match_the_run_metrics(recorded_run):
     from explore.runs.metrics import read_metrics
 
     m = read_metrics(recorded_run / "metrics.csv")
-    rec = Recorder("save", path=recorded_run / "check.rrd")
+    rec = Recorder("save", path=recorded_run / "check.rrd", scene=TWIN_ARENA)
     rec.prime(iter_history(recorded_run))
     rec.close()
     assert rec.ball_cells.count == int(m["ball_cells"][-1])
@@ -128,7 +130,7 @@ def test_cells_logged_match_the_run_metrics(recorded_run):
 def test_goals_and_hooks(recorded_run, tmp_path):
     base = next(iter(iter_history(recorded_run)))
     path = tmp_path / "g.rrd"
-    with Recorder("save", path=path, outcome_of=lambda r: r.goal + 0.1) as rec:
+    with Recorder("save", path=path, outcome_of=lambda r: r.goal + 0.1, scene=TWIN_ARENA) as rec:
         for k in range(3):
             rec.on_record(dataclasses.replace(base, episode=k, goal=np.full(10, 0.5 * k)))
             rec.log_frame("vae/reconstruction", np.random.default_rng(k).random((64, 64, 3)))
@@ -170,21 +172,21 @@ def test_goal_exploration_logs_goal_and_reached_in_goal_space(goal_run):
     # the reached outcome is the record's ball in the goal's coordinates (wrap-safe polar)
     from explore.learner.goal_spaces import wrap_safe_features
 
-    outcome_of = goal_outcome_of(GOAL_RUN)  # from the config alone: the same map
+    outcome_of = goal_outcome_of(GOAL_RUN, TWIN_ARENA)  # from the config alone: the same map
     assert outcome_of is not None
     for r in seen:
         reached = outcome_of(r)
         assert reached is not None and reached.shape == r.goal.shape
-        np.testing.assert_allclose(reached, wrap_safe_features(r.ball[:2]))
+        np.testing.assert_allclose(reached, wrap_safe_features(r.ball[:2], TWIN_ARENA.ring))
     assert outcome_of(records[0]) is None  # a random episode has no module
 
 
 def test_goal_outcome_of_needs_a_goal_space():
-    assert goal_outcome_of({"name": "rpe", "options": {}}) is None
-    assert goal_outcome_of({"name": "no-such-strategy"}) is None
+    assert goal_outcome_of({"name": "rpe", "options": {}}, TWIN_ARENA) is None
+    assert goal_outcome_of({"name": "no-such-strategy"}, TWIN_ARENA) is None
     # a learned space is not loaded unless asked (and rge-vae without a model cannot be built)
-    assert goal_outcome_of({"name": "rge-vae", "options": {}}) is None
-    assert goal_outcome_of({"name": "rge-vae", "options": {}}, load_models=True) is None
+    assert goal_outcome_of({"name": "rge-vae", "options": {}}, TWIN_ARENA) is None
+    assert goal_outcome_of({"name": "rge-vae", "options": {}}, TWIN_ARENA, load_models=True) is None
 
 
 def test_make_recorder_derives_goal_outcomes_from_the_run_config(goal_run, tmp_path):

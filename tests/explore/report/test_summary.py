@@ -122,13 +122,16 @@ def goal_run(tmp_path_factory) -> Path:
 
 def test_report_of_a_goal_run_has_the_reached_outcomes(goal_run, tmp_path):
     from explore.learner.goal_spaces import wrap_safe_features
+    from explore.rigs.arena import TWIN_ARENA
 
     run = load_run(goal_run)
     assert run.goals.shape == (7, 3) and run.reached is not None
     with_goal = np.all(np.isfinite(run.goals), axis=1)
     assert with_goal.sum() == 4 and not np.isfinite(run.reached[~with_goal]).any()
     seen = with_goal & np.all(np.isfinite(run.ball), axis=1)
-    np.testing.assert_allclose(run.reached[seen], wrap_safe_features(run.ball[seen]))
+    np.testing.assert_allclose(
+        run.reached[seen], wrap_safe_features(run.ball[seen], TWIN_ARENA.ring)
+    )
     out = tmp_path / "report"
     assert main(["report", str(goal_run), "--out", str(out)]) == 0
     assert png_size(out / "goals.png") == FIG_PX

@@ -56,7 +56,7 @@ def rig(name: str) -> dict:
 
 
 def run(out: Path, strategy: str, opts: dict, rig_name: str, episodes: int, seed: int = 0):
-    run_trial(Trial(str(out), strategy, seed, episodes, opts, rig(rig_name)))
+    run_trial(Trial.of(str(out), strategy, seed, episodes, opts, rig(rig_name)))
     return RunStore.open(out).records
 
 
@@ -119,9 +119,9 @@ def _published_config() -> dict[str, dict[str, str]]:
      ("mge-vae", "MGE-VAE"), ("rge-betavae", "RGE-betaVAE"), ("mge-betavae", "MGE-betaVAE")],
 )  # fmt: skip
 def test_the_preset_s_settings_are_what_the_published_config_says(strategy, algorithm, models):
-    from explore.learner.scene import ARM_2_BALLS_SQUARE
     from explore.learner.strategies import make_strategy
     from explore.learner.strategies.goal_exploration import NORMAL_CLIP
+    from explore.rigs.armballs import ARM_2_BALLS_SQUARE
 
     published = _published_config()[algorithm]
     opts = preset_options("corl2018", strategy)

@@ -11,7 +11,8 @@ import cv2
 import numpy as np
 import pytest
 
-from explore.learner.goal_spaces import R_MAX, R_MIN, EngineeredGoalSpace, wrap_safe_features
+from explore.learner.goal_spaces import EngineeredGoalSpace, wrap_safe_features
+from explore.rigs.arena import R_MAX, R_MIN, TWIN_ARENA
 from explore.rigs.rig import RigConfig, RigError, make_rig
 from explore.runs.config import RunConfig, StrategyConfig
 from explore.runs.open_run import open_run
@@ -59,7 +60,7 @@ def test_the_camera_sees_it_where_the_state_says(tmp_path):
 
 
 def test_the_engineered_features_report_both_balls_as_modules():
-    space = EngineeredGoalSpace(distractor=True, hand_module=True)
+    space = EngineeredGoalSpace(distractor=True, hand_module=True, scene=TWIN_ARENA)
     assert [len(m) for m in space.modules] == [3, 3, 2] and space.context_dim == 6
 
     class Rec:
@@ -67,19 +68,23 @@ def test_the_engineered_features_report_both_balls_as_modules():
         context_ball, context_distractor = np.array([0.14, 0.02]), np.array([0.01, -0.15])
         end_effector = np.array([[0.1, 0.1, 0.05]])
 
+    ring = (R_MIN, R_MAX)
     o = space.outcome(Rec)
-    np.testing.assert_allclose(o[:3], wrap_safe_features(Rec.ball))
-    np.testing.assert_allclose(o[3:6], wrap_safe_features(Rec.distractor))
+    np.testing.assert_allclose(o[:3], wrap_safe_features(Rec.ball, ring))
+    np.testing.assert_allclose(o[3:6], wrap_safe_features(Rec.distractor, ring))
     np.testing.assert_allclose(
         space.context(Rec),
         np.concatenate(
-            [wrap_safe_features(Rec.context_ball), wrap_safe_features(Rec.context_distractor)]
+            [
+                wrap_safe_features(Rec.context_ball, ring),
+                wrap_safe_features(Rec.context_distractor, ring),
+            ]
         ),
     )
     Rec.distractor = np.full(2, np.nan)  # not seen: its module skips the record
     assert space.module_outcomes(space.outcome(Rec))[1] is None
     # without a distractor the space is the ball's alone, as before
-    assert [len(m) for m in EngineeredGoalSpace().modules] == [3]
+    assert [len(m) for m in EngineeredGoalSpace(scene=TWIN_ARENA).modules] == [3]
 
 
 def test_a_resumed_run_walks_it_exactly_as_the_uninterrupted_run(tmp_path):

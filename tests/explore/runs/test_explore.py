@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from explore.cli import main
+from explore.rigs.arena import TWIN_ARENA
 from explore.runs.metrics import CellCounter, read_metrics
 from explore.runs.store import RunStore
 
@@ -225,7 +226,7 @@ def test_fault_counters_are_summed_per_session_and_never_mask_the_runs_error(tmp
     assert (tmp_path / "faults.json.bad").read_text() == "{not json"
 
     rig = make_rig(RigConfig())
-    strategy = make_strategy("rpe")
+    strategy = make_strategy("rpe", scene=TWIN_ARENA)
 
     def broken_counts() -> dict[str, float]:
         raise RuntimeError("counters unreadable")

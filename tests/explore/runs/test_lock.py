@@ -79,7 +79,7 @@ def test_every_writer_holds_the_lock_campaign_trials_and_open_run(tmp_path):
         with pytest.raises(RunLockedError, match="being written by another process"):
             open_run(run, mode="resume")
         with pytest.raises(CampaignError, match=f"pid {os.getpid()}"):
-            run_trial(Trial(str(run), "rpe", 0, 1))
+            run_trial(Trial.of(str(run), "rpe", 0, 1))
     assert holder_of(run) is None
     with open_run(run, mode="resume") as again:  # released on close
         assert not again.created and again.lock.took_over is None

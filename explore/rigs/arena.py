@@ -1,0 +1,27 @@
+"""The Ergo Jr's round arena as the learner and the metric see it (an
+``explore.learner.scene.Scene``): the twin's, and the physical rigs' as built. The twin's facts
+live with the twin: the arena's dimensions are ``sim/models/make_scene.py``'s, the arm's reach
+``robot/spec.py``'s; the learner receives them only through the rig's ``scene``.
+
+In metres; the ball's centre lies on a ring between the arena's kerb and its wall, and the ball
+stays where the last episode left it (the context changes between episodes).
+"""
+
+from __future__ import annotations
+
+from explore.learner.scene import Scene
+from robot.spec import ERGO_JR_REACH_M
+from sim.models.make_scene import ARENA_RADIUS, BALL_RADIUS, INNER_RADIUS, OUTER_RADIUS
+
+#: The Ergo Jr's arena: the ball's centre between the kerb and the wall, less its radius
+#: (0.13-0.17 m), inside the wall's square (+-0.20 m); the arm's horizontal reach.
+TWIN_ARENA = Scene(
+    name="the Ergo Jr arena",
+    unit="m",
+    ball_half_width=ARENA_RADIUS,
+    hand_half_width=ERGO_JR_REACH_M,
+    ring=(INNER_RADIUS + BALL_RADIUS, OUTER_RADIUS - BALL_RADIUS),
+)
+#: The ring where the ball's centre lies, (r_min, r_max) m: where the twin places balls (its
+#: outcome dataset, the distractor's walk, the Gymnasium environment's resets).
+R_MIN, R_MAX = TWIN_ARENA.ring  # type: ignore[misc]
