@@ -32,6 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
+from robot.cli_errors import error
+
 ROOT = Path(__file__).resolve().parents[1]
 PUBLISHED_RUNS = ROOT / "docs" / "armballs_published_runs.csv"
 PUBLISHED = ROOT / "docs" / "armballs_published.csv"
@@ -245,9 +247,9 @@ def main(argv: list[str] | None = None) -> int:
     named = {}
     for c in args.campaigns:
         if not (c / args.strategy).is_dir():
-            print(f"ergo: error: {c} has no {args.strategy}/ folder: give a campaign folder of "
-                  f"`ergo experiment`", file=sys.stderr)  # fmt: skip
-            return 2
+            return error(
+                f"{c} has no {args.strategy}/ folder: give a campaign folder of `ergo experiment`"
+            )
         runs = campaign_figures(c, args.strategy, args.interest)
         named[c.name] = runs
         print(f"## {c}\n\n{runs_table(runs, floor)}\n")

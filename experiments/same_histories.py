@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from robot.cli_errors import error
+
 
 def same_run(a: Path, b: Path) -> tuple[bool, str]:
     """(equal, what was compared or where they part) for two run folders."""
@@ -46,9 +48,10 @@ def main(argv: list[str] | None = None) -> int:
     runs = sorted(p.relative_to(args.a) for p in args.a.glob("*/seed-*") if p.is_dir())
     common = [r for r in runs if (args.b / r).is_dir()]
     if not common:
-        print(f"ergo: error: {args.a} and {args.b} share no STRATEGY/seed-N run folder: give two "
-              "campaign folders of `ergo experiment`", file=sys.stderr)  # fmt: skip
-        return 2
+        return error(
+            f"{args.a} and {args.b} share no STRATEGY/seed-N run folder: give two "
+            "campaign folders of `ergo experiment`"
+        )
     all_equal = True
     for r in common:
         equal, what = same_run(args.a / r, args.b / r)

@@ -9,10 +9,10 @@ import time
 from pathlib import Path
 from typing import Any
 
-from explore.cli import CliError
 from explore.cli.rerun_flags import add_rerun_arguments, check_viewer
 from explore.rigs.rig import RIGS
 from robot.bus_flags import add_bus_arguments, bus_flags
+from robot.cli_errors import CliError
 
 
 def add_rig_arguments(p: argparse.ArgumentParser) -> None:

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import rerun.chunk as rrc
 
-from explore.cli import CliError, main
+from explore.cli import main
 from explore.cli.rerun_flags import add_rerun_arguments, make_recorder
 from explore.learner.goal_outcomes import goal_outcome_of, strategy_outcome_of
 from explore.report.recorder import (
@@ -29,6 +29,7 @@ from explore.report.recorder import (
 from explore.runs.config import RunConfig, StrategyConfig
 from explore.runs.open_run import open_run
 from explore.runs.store import iter_history
+from robot.cli_errors import CliError
 
 N = 8
 # one line of ChunkStore.summary(): "{entity}  rows={n}  static={bool}  timelines=[...]  cols=[...]"
