@@ -249,7 +249,7 @@ def _camera_impl(args: argparse.Namespace) -> int:
 def _live_views(args: argparse.Namespace, spec) -> tuple[list, tuple[int, int]]:
     import numpy as np
 
-    from vision.camera import CameraError, make_camera
+    from vision.camera import EndOfStream, make_camera
 
     views: list = []
     size = (0, 0)
@@ -261,10 +261,8 @@ def _live_views(args: argparse.Namespace, spec) -> tuple[list, tuple[int, int]]:
                 break
             try:
                 image = cam.read().image
-            except CameraError as exc:
-                if "end of replay" in str(exc):  # a recorded video: use what it had
-                    break
-                raise
+            except EndOfStream:  # a recorded video: use what it had
+                break
             size = (image.shape[1], image.shape[0])
             view = spec.detect(image, f"frame{n}")
             if view is None:
@@ -562,7 +560,7 @@ def _show_impl(args: argparse.Namespace) -> int:
 def _track(args: argparse.Namespace) -> int:
     import dataclasses
 
-    from vision.camera import CameraError, make_camera
+    from vision.camera import CameraError, EndOfStream, make_camera
     from vision.rectify import ArenaModel
     from vision.tracker import BallTracker, HSVRange, TrackerConfig, tracker_config_from_arena
 
@@ -595,8 +593,8 @@ def _track(args: argparse.Namespace) -> int:
             while args.frames is None or n < args.frames:
                 try:
                     frame = camera.read()
-                except CameraError as exc:
-                    if n and "end of replay" in str(exc):
+                except EndOfStream:
+                    if n:  # a recording played to its end (none at all: an error)
                         break
                     raise
                 obs = tracker.track(frame.image)
