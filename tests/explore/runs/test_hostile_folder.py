@@ -54,6 +54,17 @@ def _one_line(capsys) -> str:
     return lines[0]
 
 
+def _resume_through_link(run: Path, target: Path, victim: Path, link: str, capsys) -> str:
+    """Make ``target`` (a file of ``run``) a ``link`` ("symbolic" or "hard") to ``victim``,
+    resume the run (refused: exit code 2) and return its one error line."""
+    if link == "symbolic":
+        target.symlink_to(victim)
+    else:
+        os.link(victim, target)
+    assert ergo("explore", "--resume", str(run), "--episodes", "5") == 2
+    return _one_line(capsys)
+
+
 @pytest.mark.parametrize("link", ["symbolic", "hard"])
 @pytest.mark.parametrize(
     "name", ["writer.lock", "history.bin", "metrics.csv", "faults.json", "run.json.tmp"]
@@ -64,12 +75,7 @@ def test_a_linked_file_in_a_received_run_is_refused_and_left_alone(run, victim, 
         victim.write_bytes(target.read_bytes())
     before = victim.read_bytes()
     target.unlink(missing_ok=True)
-    if link == "symbolic":
-        target.symlink_to(victim)
-    else:
-        os.link(victim, target)
-    assert ergo("explore", "--resume", str(run), "--episodes", "5") == 2
-    line = _one_line(capsys)
+    line = _resume_through_link(run, target, victim, link, capsys)
     assert name in line and ("symbolic link" in line or "hard link" in line), line
     assert victim.read_bytes() == before
     if name in ("writer.lock", "history.bin"):
@@ -83,12 +89,7 @@ def test_a_linked_frames_file_is_refused_and_left_alone(run, victim, capsys, lin
     a file elsewhere."""
     target = run / "frames" / "episode-000003.npz"
     target.parent.mkdir()
-    if link == "symbolic":
-        target.symlink_to(victim)
-    else:
-        os.link(victim, target)
-    assert ergo("explore", "--resume", str(run), "--episodes", "5") == 2
-    line = _one_line(capsys)
+    line = _resume_through_link(run, target, victim, link, capsys)
     assert "episode-000003.npz" in line and f"{link} link" in line, line
     assert victim.read_bytes() == VICTIM
 
