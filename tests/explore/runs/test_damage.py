@@ -14,8 +14,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from explore.cli import main
+from explore.runs.layout import HEADER
 from explore.runs.repair import iter_records, salvage, survey
-from explore.runs.store import HEADER, RunStore, RunStoreError, read_history
+from explore.runs.store import RunStore, RunStoreError, read_history
 
 N = 10
 

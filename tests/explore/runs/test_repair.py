@@ -13,9 +13,10 @@ from pathlib import Path
 import pytest
 
 from explore.cli import main
+from explore.runs.layout import HEADER
 from explore.runs.lock import run_lock
 from explore.runs.repair import iter_records, survey
-from explore.runs.store import HEADER, RunStore
+from explore.runs.store import RunStore
 
 N = 10
 
