@@ -8,8 +8,8 @@ Layout: ``<root>/<rig_id>/<kind>.json`` where ``root`` is, in order of precedenc
 Each file is ``{"schema": "ergo-explore/calibration", "kind": ..., "version": N, "rig_id": ...,
 "created": ISO-8601 UTC, "data": {...}}``. Payloads are validated before they are written (a bad
 one never replaces a good file) and after they are read; a validation error is one line that
-names the file and the bad field. Writes are atomic: a temporary file in the same folder, fsync,
-then ``os.replace``.
+names the file and the bad field. Writes are atomic (``robot.files.atomic_write``: a temporary
+file in the same folder, fsync, then ``os.replace``).
 """
 
 from __future__ import annotations
@@ -19,11 +19,12 @@ import json
 import math
 import os
 import re
-import tempfile
 from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
+
+from robot.files import atomic_write
 
 SCHEMA = "ergo-explore/calibration"
 ENV_DIR = "ERGO_CALIBRATION_DIR"
@@ -294,17 +295,7 @@ def save(kind: str, rig_id: str, data: dict[str, Any], directory: str | Path | N
     }
     text = json.dumps(doc, indent=2, allow_nan=False) + "\n"
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{kind}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    return atomic_write(path, text)
 
 
 # The arena file keeps a copy of the intrinsics it was fitted with (its homography is only

@@ -29,6 +29,7 @@ import numpy as np
 from explore.learner.scene import Scene
 from explore.report.run_data import RunData
 from explore.runs.metrics import N_BINS, read_metrics
+from robot.files import atomic_write
 
 FIG_PX = (960, 640)  # width, height of every figure, pixels
 DPI = 100
@@ -285,13 +286,8 @@ def coverage_curve(run: Path, out: Path | None = None) -> Path:
     ax.grid(alpha=0.3)
     ax.legend()
     fig.tight_layout()
-    tmp = out.with_name(out.name + ".tmp.png")
-    try:
-        fig.savefig(tmp)
-        tmp.replace(out)  # a full disk leaves the previous figure, not half a new one
-    except OSError:
-        tmp.unlink(missing_ok=True)
-        raise
+    try:  # a full disk leaves the previous figure, not half a new one
+        atomic_write(out, fig.savefig)
     finally:
         plt.close(fig)
     return out
