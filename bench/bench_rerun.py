@@ -25,6 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from explore.report.recorder import Recorder
 from explore.runs.config import RunConfig
+from explore.runs.layout import RECORDING_FILE
 from explore.runs.open_run import open_run
 
 
@@ -37,7 +38,7 @@ def run_once(out: Path, episodes: int, record: bool, stride: int) -> tuple[float
         excluded, the recorder's flush on close included.
     """
     run = open_run(out, RunConfig(seed=0, episodes=episodes), mode="new")
-    recorder = Recorder("save", path=out / "recording.rrd", stride=stride) if record else None
+    recorder = Recorder("save", path=out / RECORDING_FILE, stride=stride) if record else None
     explorer = run.explorer(on_record=recorder.on_record if recorder else None)
     t0, c0 = time.perf_counter(), time.process_time()
     explorer.run(episodes)

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from explore.runs.layout import METRICS_FILE
 from vision.representation_quality import heldout_split
 
 # model folder -> (dataset, kind)
@@ -40,7 +41,7 @@ def linear_r2(code: np.ndarray, target: np.ndarray, train: np.ndarray, test: np.
 
 
 def final_cells(run: Path) -> int | None:
-    metrics = run / "metrics.csv"
+    metrics = run / METRICS_FILE
     if not metrics.exists():
         return None
     with open(metrics) as f:

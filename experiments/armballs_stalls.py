@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from explore.runs.layout import METRICS_FILE, RUN_FILE
 from robot.cli_errors import error
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -87,7 +88,7 @@ def run_figures(run: Path) -> RunFigures:
     from explore.runs.metrics import checkpoints, exploration_ratio, read_metrics
     from explore.runs.store import iter_history
 
-    cells = read_metrics(run / "metrics.csv")["ball_cells"]
+    cells = read_metrics(run / METRICS_FILE)["ball_cells"]
     curve = exploration_ratio(cells, checkpoints())
     ratios = exploration_ratio(cells, np.array(AT))
     episode, module, moved, random = [], [], [], []
@@ -128,7 +129,7 @@ def ball_lead_early(run: Path) -> float:
     from explore.runs.store import RunStore
 
     store = RunStore.read(run)  # a reader: cuts nothing
-    strategy = strategy_for(RunConfig.from_dict(store.config, run / "run.json"))
+    strategy = strategy_for(RunConfig.from_dict(store.config, run / RUN_FILE))
     lead = []
     try:
         for rec in store:
@@ -145,9 +146,9 @@ def ball_lead_early(run: Path) -> float:
 
 def campaign_figures(campaign: Path, strategy: str, interest: bool = False) -> list[RunFigures]:
     runs = sorted((campaign / strategy).glob("seed-*"), key=lambda p: int(p.name.split("-")[1]))
-    out = [run_figures(r) for r in runs if (r / "metrics.csv").exists()]
+    out = [run_figures(r) for r in runs if (r / METRICS_FILE).exists()]
     if interest:
-        for fig, run in zip(out, [r for r in runs if (r / "metrics.csv").exists()], strict=True):
+        for fig, run in zip(out, [r for r in runs if (r / METRICS_FILE).exists()], strict=True):
             fig.ball_lead_early = ball_lead_early(run)
     return out
 

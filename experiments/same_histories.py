@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from explore.runs.layout import METRICS_FILE
 from robot.cli_errors import error
 
 
@@ -33,7 +34,7 @@ def same_run(a: Path, b: Path) -> tuple[bool, str]:
     n = len(records_a)
     if n != len(records_b):
         return False, f"{n} against {len(records_b)} records"
-    ca, cb = (read_metrics(p / "metrics.csv")["ball_cells"] for p in (a, b))
+    ca, cb = (read_metrics(p / METRICS_FILE)["ball_cells"] for p in (a, b))
     ra, rb = (exploration_ratio(c, checkpoints()) for c in (ca, cb))
     if not np.array_equal(ra, rb, equal_nan=True):
         return False, "exploration ratios differ"

@@ -11,6 +11,7 @@ from typing import Any
 
 from explore.cli.rerun_flags import add_rerun_arguments, check_viewer
 from explore.rigs.rig import RIGS
+from explore.runs.layout import METRICS_FILE
 from robot.bus_flags import add_bus_arguments, bus_flags
 from robot.cli_errors import CliError
 
@@ -283,7 +284,7 @@ def _coverage_curve(run: Path, episodes: int) -> list[str]:
     """Draw ``RUN/coverage.png`` when the run has episodes; returns what failed, in words."""
     from explore.report.figures import coverage_curve
 
-    if not episodes or not (run / "metrics.csv").exists():
+    if not episodes or not (run / METRICS_FILE).exists():
         return []
     try:
         coverage_curve(run)

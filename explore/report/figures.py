@@ -28,6 +28,7 @@ import numpy as np
 
 from explore.learner.scene import Scene
 from explore.report.run_data import RunData
+from explore.runs.layout import COVERAGE_FILE, METRICS_FILE
 from explore.runs.metrics import N_BINS, read_metrics
 from robot.files import atomic_write
 
@@ -275,8 +276,8 @@ def campaign_scatter_figure(groups: dict[str, list[RunData]], out: Path) -> Path
 
 def coverage_curve(run: Path, out: Path | None = None) -> Path:
     """Plot ball and end-effector cells reached against episodes; returns the PNG path."""
-    m = read_metrics(run / "metrics.csv")
-    out = out or run / "coverage.png"
+    m = read_metrics(run / METRICS_FILE)
+    out = out or run / COVERAGE_FILE
     fig, ax = plt.subplots(figsize=(6.4, 4.0), dpi=100)
     ax.plot(m["episode"], m["ball_cells"], label="ball cells")
     ax.plot(m["episode"], m["ee_cells"], label="end-effector cells", alpha=0.7)
