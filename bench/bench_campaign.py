@@ -26,6 +26,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from explore.runs.layout import TRIAL_FILE
+
 STRATEGIES = ("rpe", "rge-efr", "rge-vae")
 PAPER_SEEDS, PAPER_EPISODES, PAPER_WORKERS = 8, 5000, 2
 # the paper's five strategies, each timed as the reference strategy whose loop it runs
@@ -71,7 +73,7 @@ def trial_costs(out: Path, strategies: list[str]) -> dict[str, float]:
     for s in strategies:
         per = []
         for run in sorted((out / s).glob("seed-*")):
-            t = json.loads((run / "trial.json").read_text())
+            t = json.loads((run / TRIAL_FILE).read_text())
             per.append((t["finished"] - t["started"]) / (t["episodes"] - t["resumed_from"]))
         costs[s] = sum(per) / len(per)
     return costs

@@ -37,6 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from explore.campaigns.plan import run_campaign
 from explore.campaigns.ray_backend import LOCAL_OBJECT_STORE_BYTES, import_ray
 from explore.campaigns.trial import TRIAL_FILE
+from explore.runs.layout import METRICS_FILE
 
 
 def trial_walls(out: Path, strategies: list[str], seeds: list[int]) -> list[float]:
@@ -64,8 +65,8 @@ def code_digest() -> str:
 def same_runs(a: Path, b: Path, strategies: list[str], seeds: list[int]) -> bool:
     """Whether every run's metrics.csv is the same in both campaigns."""
     return all(
-        (a / s / f"seed-{seed}" / "metrics.csv").read_bytes()
-        == (b / s / f"seed-{seed}" / "metrics.csv").read_bytes()
+        (a / s / f"seed-{seed}" / METRICS_FILE).read_bytes()
+        == (b / s / f"seed-{seed}" / METRICS_FILE).read_bytes()
         for s in strategies
         for seed in seeds
     )

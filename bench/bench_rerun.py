@@ -25,6 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from explore.report.recorder import Recorder
 from explore.runs.config import RunConfig
+from explore.runs.layout import RECORDING_FILE
 from explore.runs.open_run import open_run
 
 
@@ -38,7 +39,7 @@ def run_once(out: Path, episodes: int, record: bool, stride: int) -> tuple[float
     """
     run = open_run(out, RunConfig(seed=0, episodes=episodes), mode="new")
     recorder = (
-        Recorder("save", path=out / "recording.rrd", stride=stride, scene=run.rig.scene)
+        Recorder("save", path=out / RECORDING_FILE, stride=stride, scene=run.rig.scene)
         if record
         else None
     )

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from robot.bus_flags import add_bus_arguments, bus_from_args, make_arm
+from robot.cli_errors import error
 from sim.models.make_scene import BALL_RADIUS
 
 DEFAULT_VIEWS = 15  # views to collect from a live camera (OpenCV's tutorial: 10-15, docs/facts.md)
@@ -158,11 +159,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     track.set_defaults(func=_track)
 
 
-def _error(message: str) -> int:
-    print(f"ergo: error: {message}", file=sys.stderr)
-    return 2
-
-
 def _pair(text: str, what: str) -> tuple[float, float]:
     from calibration.store import CalibrationError
 
@@ -178,14 +174,14 @@ def _run(func, args: argparse.Namespace) -> int:
     from vision.camera import CameraError
 
     if args.rig_type is not None:
-        return _error(
+        return error(
             f"--rig {args.rig_type}: ergo calibrate takes the rig id as --rig-id ID "
             "(--rig is the rig type of ergo explore)"
         )
     try:
         return int(func(args) or 0)
     except (CalibrationError, CameraError) as exc:
-        return _error(str(exc))
+        return error(exc)
 
 
 # ---- camera ------------------------------------------------------------------------------
@@ -253,7 +249,7 @@ def _camera_impl(args: argparse.Namespace) -> int:
 def _live_views(args: argparse.Namespace, spec) -> tuple[list, tuple[int, int]]:
     import numpy as np
 
-    from vision.camera import CameraError, make_camera
+    from vision.camera import EndOfStream, make_camera
 
     views: list = []
     size = (0, 0)
@@ -265,10 +261,8 @@ def _live_views(args: argparse.Namespace, spec) -> tuple[list, tuple[int, int]]:
                 break
             try:
                 image = cam.read().image
-            except CameraError as exc:
-                if "end of replay" in str(exc):  # a recorded video: use what it had
-                    break
-                raise
+            except EndOfStream:  # a recorded video: use what it had
+                break
             size = (image.shape[1], image.shape[0])
             view = spec.detect(image, f"frame{n}")
             if view is None:
@@ -466,7 +460,7 @@ def _joints_impl(args: argparse.Namespace) -> int:
             )
     except EOFError:
         print()
-        return _error(
+        return error(
             f"stdin closed {at[0]}: the calibration needs a person pressing Enter; nothing "
             f"saved ({kept})"
         )
@@ -566,7 +560,7 @@ def _show_impl(args: argparse.Namespace) -> int:
 def _track(args: argparse.Namespace) -> int:
     import dataclasses
 
-    from vision.camera import CameraError, make_camera
+    from vision.camera import CameraError, EndOfStream, make_camera
     from vision.rectify import ArenaModel
     from vision.tracker import BallTracker, HSVRange, TrackerConfig, tracker_config_from_arena
 
@@ -577,20 +571,20 @@ def _track(args: argparse.Namespace) -> int:
         try:  # validated (version, finite numbers) and checked against camera.json beside it
             data = store.load_arena_file(args.arena)
         except store.CalibrationError as exc:
-            return _error(str(exc))
+            return error(exc)
         arena = ArenaModel.from_dict(data)
         config = tracker_config_from_arena(data)
     if args.hsv:
         try:
             ranges = tuple(HSVRange.parse(h) for h in args.hsv)
         except ValueError as exc:
-            return _error(f"--hsv: {exc}")
+            return error(f"--hsv: {exc}")
         config = dataclasses.replace(config, ranges=ranges)
     tracker = BallTracker(config, arena)
     try:
         camera = make_camera(args.camera, args.width, args.height, args.fps, args.fourcc)
     except CameraError as exc:
-        return _error(str(exc))
+        return error(exc)
     n = 0
     try:
         with camera:
@@ -599,15 +593,15 @@ def _track(args: argparse.Namespace) -> int:
             while args.frames is None or n < args.frames:
                 try:
                     frame = camera.read()
-                except CameraError as exc:
-                    if n and "end of replay" in str(exc):
+                except EndOfStream:
+                    if n:  # a recording played to its end (none at all: an error)
                         break
                     raise
                 obs = tracker.track(frame.image)
                 print(f"frame {n} t={frame.timestamp:.3f}s: {obs.describe()}", flush=True)
                 n += 1
     except CameraError as exc:
-        return _error(str(exc))
+        return error(exc)
     except KeyboardInterrupt:
         pass
     return 0

@@ -8,22 +8,23 @@ Layout: ``<root>/<rig_id>/<kind>.json`` where ``root`` is, in order of precedenc
 Each file is ``{"schema": "ergo-explore/calibration", "kind": ..., "version": N, "rig_id": ...,
 "created": ISO-8601 UTC, "data": {...}}``. Payloads are validated before they are written (a bad
 one never replaces a good file) and after they are read; a validation error is one line that
-names the file and the bad field. Writes are atomic: a temporary file in the same folder, fsync,
-then ``os.replace``.
+names the file and the bad field. Writes are atomic (``robot.files.atomic_write``: a temporary
+file in the same folder, fsync, then ``os.replace``).
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import math
 import os
 import re
-import tempfile
 from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
+
+from robot.fields import Fields, is_matrix
+from robot.files import atomic_write
 
 SCHEMA = "ergo-explore/calibration"
 ENV_DIR = "ERGO_CALIBRATION_DIR"
@@ -69,65 +70,12 @@ def calibration_path(kind: str, rig_id: str, directory: str | Path | None = None
 
 
 # ---- validation --------------------------------------------------------------------------
-class _Checker:
-    """Field checks that raise one-line ``CalibrationError``s naming the field."""
-
-    def __init__(self, where: str, data: Any) -> None:
-        self.where = where
-        if not isinstance(data, dict):
-            self.fail("data", f"must be an object, got {type(data).__name__}")
-        self.data = data
-
-    def fail(self, name: str, why: str) -> None:
-        raise CalibrationError(f"{self.where}: field '{name}' {why}")
-
-    def get(self, name: str, optional: bool = False) -> Any:
-        if name not in self.data:
-            if optional:
-                return None
-            self.fail(name, "is missing")
-        return self.data[name]
-
-    def number(self, name: str, lo: float = -math.inf, hi: float = math.inf, **kw) -> Any:
-        v = self.get(name, **kw)
-        if v is None and kw.get("optional"):
-            return None
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-            self.fail(name, f"must be a finite number, got {v!r}")
-        if not lo <= v <= hi:
-            self.fail(name, f"must be in [{lo:g}, {hi:g}], got {v!r}")
-        return v
-
-    def matrix(self, name: str, shape: tuple[int, ...], optional: bool = False) -> Any:
-        v = self.get(name, optional=optional)
-        if v is None and optional:
-            return None
-        if not _is_matrix(v, shape):
-            dims = "x".join("N" if s < 0 else str(s) for s in shape)
-            self.fail(name, f"must be a {dims} array of finite numbers")
-        return v
-
-    def string(self, name: str, optional: bool = False) -> Any:
-        v = self.get(name, optional=optional)
-        if v is None and optional:
-            return None
-        if not isinstance(v, str) or not v:
-            self.fail(name, f"must be a non-empty string, got {v!r}")
-        return v
+def _checker(where: str, data: Any) -> Fields:
+    """The fields of a calibration file's object, failing as one-line ``CalibrationError``s."""
+    return Fields(where, data, CalibrationError, name="data")
 
 
-def _is_matrix(v: Any, shape: tuple[int, ...]) -> bool:
-    """Whether ``v`` is nested lists of finite numbers of this shape (-1: any length >= 1)."""
-    if not shape:
-        return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
-    if not isinstance(v, list) or not v:
-        return False
-    if shape[0] >= 0 and len(v) != shape[0]:
-        return False
-    return all(_is_matrix(x, shape[1:]) for x in v)
-
-
-def _validate_camera(c: _Checker) -> None:
+def _validate_camera(c: Fields) -> None:
     c.matrix("camera_matrix", (3, 3))
     k = c.data["camera_matrix"]
     if not (k[0][0] > 0 and k[1][1] > 0 and k[2] == [0, 0, 1]):
@@ -142,7 +90,7 @@ def _validate_camera(c: _Checker) -> None:
     c.number("n_views", 1, 10_000)
     sd = c.get("std_px", optional=True)
     if sd is not None and not (
-        isinstance(sd, dict) and all(_is_matrix(v, ()) and v >= 0 for v in sd.values())
+        isinstance(sd, dict) and all(is_matrix(v, ()) and v >= 0 for v in sd.values())
     ):
         c.fail("std_px", "must map fx, fy, cx, cy to finite standard deviations >= 0, px")
     c.number("held_out_rms_px", 0.0, 1e4, optional=True)
@@ -159,7 +107,7 @@ ARENA_DISTORTION_MAX_ABS = 1e3
 ARENA_FOCAL_MAX_PX = 1e6
 
 
-def _check_arena_numbers(c: _Checker) -> None:
+def _check_arena_numbers(c: Fields) -> None:
     """What finite is not enough for: a homography that is singular or out of all scale, a
     distortion or focal length no lens has (1e300 passed the finite checks and broke every
     pixel mapped through it)."""
@@ -183,7 +131,7 @@ def _check_arena_numbers(c: _Checker) -> None:
         c.fail("camera_matrix", f"focal lengths must be in (0, {ARENA_FOCAL_MAX_PX:g}] px")
 
 
-def _validate_arena(c: _Checker) -> None:
+def _validate_arena(c: Fields) -> None:
     _validate_camera_like(c)
     c.matrix("homography", (3, 3))
     _check_arena_numbers(c)
@@ -197,7 +145,7 @@ def _validate_arena(c: _Checker) -> None:
         if not isinstance(ranges, list) or not ranges:
             c.fail("ball_hsv_ranges", "must be a non-empty list of [lower, upper] HSV triples")
         for i, r in enumerate(ranges):
-            if not _is_matrix(r, (2, 3)):
+            if not is_matrix(r, (2, 3)):
                 c.fail(f"ball_hsv_ranges[{i}]", "must be [[h, s, v], [h, s, v]]")
             lo, hi = r
             if not (0 <= lo[0] <= hi[0] <= 179 and all(0 <= lo[j] <= hi[j] <= 255 for j in (1, 2))):
@@ -206,13 +154,13 @@ def _validate_arena(c: _Checker) -> None:
     c.number("residual_max_mm", 0.0, 1e4, optional=True)
 
 
-def _validate_camera_like(c: _Checker) -> None:
+def _validate_camera_like(c: Fields) -> None:
     c.matrix("camera_matrix", (3, 3))
     c.matrix("dist_coeffs", (-1,))
     c.matrix("image_size", (2,))
 
 
-def _validate_joints(c: _Checker) -> None:
+def _validate_joints(c: Fields) -> None:
     names = c.get("names")
     if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
         c.fail("names", "must be a non-empty list of joint names")
@@ -229,7 +177,7 @@ def _validate_joints(c: _Checker) -> None:
             c.fail("lower", f"of joint {name} must be below its upper limit")
 
 
-def _validate_dynamics(c: _Checker) -> None:
+def _validate_dynamics(c: Fields) -> None:
     from sim.servo_model import ServoModel, ServoModelError
 
     try:
@@ -241,12 +189,12 @@ def _validate_dynamics(c: _Checker) -> None:
         c.fail("recording", "must name the recording fitted (path, sha256)")
     rms = c.get("held_out_rms_rad")
     if not isinstance(rms, dict) or not all(
-        _is_matrix(rms.get(k), ()) for k in ("nominal", "fitted")
+        is_matrix(rms.get(k), ()) for k in ("nominal", "fitted")
     ):
         c.fail("held_out_rms_rad", "must hold the held-out RMS errors nominal and fitted, rad")
 
 
-VALIDATORS: dict[str, Callable[[_Checker], None]] = {
+VALIDATORS: dict[str, Callable[[Fields], None]] = {
     "camera": _validate_camera,
     "arena": _validate_arena,
     "joints": _validate_joints,
@@ -258,7 +206,7 @@ def validate(kind: str, data: Any, where: str | None = None) -> dict[str, Any]:
     """Check a payload of the given kind; returns it or raises a one-line ``CalibrationError``."""
     if kind not in VALIDATORS:
         raise CalibrationError(f"unknown calibration kind {kind!r}; known: {', '.join(KINDS)}")
-    checker = _Checker(where or f"{kind} calibration", data)
+    checker = _checker(where or f"{kind} calibration", data)
     VALIDATORS[kind](checker)
     return data
 
@@ -294,17 +242,7 @@ def save(kind: str, rig_id: str, data: dict[str, Any], directory: str | Path | N
     }
     text = json.dumps(doc, indent=2, allow_nan=False) + "\n"
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{kind}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    return atomic_write(path, text)
 
 
 # The arena file keeps a copy of the intrinsics it was fitted with (its homography is only
@@ -415,7 +353,7 @@ def load_document(path: str | Path, kind: str | None = None) -> dict[str, Any]:
             f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})"
         ) from None
     where = str(path)
-    top = _Checker(where, doc)
+    top = _checker(where, doc)
     if top.get("schema") != SCHEMA:
         top.fail("schema", f"must be {SCHEMA!r}, got {doc.get('schema')!r}")
     file_kind = top.string("kind")

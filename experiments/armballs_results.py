@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 from script_helpers import save_figure  # experiments/script_helpers.py, beside this script
 
+from explore.runs.layout import METRICS_FILE
 from explore.runs.metrics import checkpoints, exploration_ratio, read_metrics
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -48,8 +49,8 @@ def campaign_ratios(campaign: Path) -> dict[str, np.ndarray]:
     for folder in sorted(p for p in campaign.iterdir() if p.is_dir()):
         rows = []
         for run in sorted(folder.glob("seed-*"), key=lambda p: int(p.name.split("-")[1])):
-            if (run / "metrics.csv").exists():
-                cells = read_metrics(run / "metrics.csv")["ball_cells"]
+            if (run / METRICS_FILE).exists():
+                cells = read_metrics(run / METRICS_FILE)["ball_cells"]
                 rows.append(exploration_ratio(cells, checkpoints()))
         if rows:
             out[folder.name] = np.array(rows)
@@ -243,7 +244,7 @@ def scatter_figure(campaign: Path, out: Path, seed: int | None = None) -> Path:
         recs = list(iter_history(campaign / name / f"seed-{seed}"))
         ball = np.array([r.ball for r in recs])
         caught = np.array([r.ball_moved for r in recs])
-        cells = read_metrics(campaign / name / f"seed-{seed}" / "metrics.csv")["ball_cells"][-1]
+        cells = read_metrics(campaign / name / f"seed-{seed}" / METRICS_FILE)["ball_cells"][-1]
         ax.scatter(ball[caught, 0], ball[caught, 1], s=1.5, alpha=0.4)
         ax.set_title(f"{name}: {cells / 900:.2f}, caught {int(caught.sum())}", fontsize=9)
         ax.set_xlim(-1, 1)

@@ -33,6 +33,9 @@ from pathlib import Path
 import numpy as np
 from script_helpers import save_figure  # experiments/script_helpers.py, beside this script
 
+from explore.runs.layout import METRICS_FILE, RUN_FILE
+from robot.cli_errors import error
+
 ROOT = Path(__file__).resolve().parents[1]
 PUBLISHED_RUNS = ROOT / "docs" / "armballs_published_runs.csv"
 PUBLISHED = ROOT / "docs" / "armballs_published.csv"
@@ -86,7 +89,7 @@ def run_figures(run: Path) -> RunFigures:
     from explore.runs.metrics import checkpoints, exploration_ratio, read_metrics
     from explore.runs.store import iter_history
 
-    cells = read_metrics(run / "metrics.csv")["ball_cells"]
+    cells = read_metrics(run / METRICS_FILE)["ball_cells"]
     curve = exploration_ratio(cells, checkpoints())
     ratios = exploration_ratio(cells, np.array(AT))
     episode, module, moved, random = [], [], [], []
@@ -127,7 +130,7 @@ def ball_lead_early(run: Path) -> float:
     from explore.runs.store import RunStore
 
     store = RunStore.read(run)  # a reader: cuts nothing
-    strategy = strategy_for(RunConfig.from_dict(store.config, run / "run.json"))
+    strategy = strategy_for(RunConfig.from_dict(store.config, run / RUN_FILE))
     lead = []
     try:
         for rec in store:
@@ -144,9 +147,9 @@ def ball_lead_early(run: Path) -> float:
 
 def campaign_figures(campaign: Path, strategy: str, interest: bool = False) -> list[RunFigures]:
     runs = sorted((campaign / strategy).glob("seed-*"), key=lambda p: int(p.name.split("-")[1]))
-    out = [run_figures(r) for r in runs if (r / "metrics.csv").exists()]
+    out = [run_figures(r) for r in runs if (r / METRICS_FILE).exists()]
     if interest:
-        for fig, run in zip(out, [r for r in runs if (r / "metrics.csv").exists()], strict=True):
+        for fig, run in zip(out, [r for r in runs if (r / METRICS_FILE).exists()], strict=True):
             fig.ball_lead_early = ball_lead_early(run)
     return out
 
@@ -245,9 +248,9 @@ def main(argv: list[str] | None = None) -> int:
     named = {}
     for c in args.campaigns:
         if not (c / args.strategy).is_dir():
-            print(f"ergo: error: {c} has no {args.strategy}/ folder: give a campaign folder of "
-                  f"`ergo experiment`", file=sys.stderr)  # fmt: skip
-            return 2
+            return error(
+                f"{c} has no {args.strategy}/ folder: give a campaign folder of `ergo experiment`"
+            )
         runs = campaign_figures(c, args.strategy, args.interest)
         named[c.name] = runs
         print(f"## {c}\n\n{runs_table(runs, floor)}\n")

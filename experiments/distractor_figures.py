@@ -25,6 +25,7 @@ from script_helpers import (
 
 from explore.learner.goal_spaces import EngineeredGoalSpace
 from explore.runs.config import RunConfig
+from explore.runs.layout import RUN_FILE
 from explore.runs.open_run import strategy_for
 from explore.runs.store import RunStore
 
@@ -32,7 +33,7 @@ from explore.runs.store import RunStore
 def interests_over_time(run: Path) -> tuple[np.ndarray, list[str]]:
     """(interest after each episode (n, modules), module names) of an MGE run."""
     store = RunStore.read(run)  # a reader: cuts nothing
-    strategy = strategy_for(RunConfig.from_dict(store.config, run / "run.json"))
+    strategy = strategy_for(RunConfig.from_dict(store.config, run / RUN_FILE))
     rows = []
     for rec in store:
         strategy.update(rec)

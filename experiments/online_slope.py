@@ -20,12 +20,14 @@ import numpy as np
 from scipy import stats
 from script_helpers import save_figure  # experiments/script_helpers.py, beside this script
 
+from explore.runs.layout import METRICS_FILE
+
 
 def cells_per_run(strategy_dir: Path) -> dict[str, list[int]]:
     """seed folder name -> ball cells after each episode (``metrics.csv``), in episode order."""
     out = {}
     for run in sorted(strategy_dir.glob("seed-*")):
-        with (run / "metrics.csv").open() as f:
+        with (run / METRICS_FILE).open() as f:
             out[run.name] = [int(row["ball_cells"]) for row in csv.DictReader(f)]
     return out
 

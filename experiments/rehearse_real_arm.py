@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from explore.runs.metrics import METRICS_FILE
+from explore.runs.layout import METRICS_FILE
 from explore.runs.store import read_history
 from sim.standin.owner import Owner, ServedRig, read_saved
 from sim.standin.truth import arena_error_mm, camera_errors, joint_errors, read_hidden

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 from script_helpers import linear_r2  # experiments/script_helpers.py, beside this script
 
+from explore.runs.layout import METRICS_FILE
 from vision.representation_quality import heldout_split
 
 # model folder -> (dataset, kind)
@@ -38,7 +39,7 @@ def held_out_r2(code: np.ndarray, target: np.ndarray, train: np.ndarray, test: n
 
 
 def final_cells(run: Path) -> int | None:
-    metrics = run / "metrics.csv"
+    metrics = run / METRICS_FILE
     if not metrics.exists():
         return None
     with open(metrics) as f:

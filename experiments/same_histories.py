@@ -18,6 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
+from explore.runs.layout import METRICS_FILE
+from robot.cli_errors import error
+
 
 def same_run(a: Path, b: Path) -> tuple[bool, str]:
     """(equal, what was compared or where they part) for two run folders."""
@@ -31,7 +34,7 @@ def same_run(a: Path, b: Path) -> tuple[bool, str]:
     n = len(records_a)
     if n != len(records_b):
         return False, f"{n} against {len(records_b)} records"
-    ca, cb = (read_metrics(p / "metrics.csv")["ball_cells"] for p in (a, b))
+    ca, cb = (read_metrics(p / METRICS_FILE)["ball_cells"] for p in (a, b))
     ra, rb = (exploration_ratio(c, checkpoints()) for c in (ca, cb))
     if not np.array_equal(ra, rb, equal_nan=True):
         return False, "exploration ratios differ"
@@ -46,9 +49,10 @@ def main(argv: list[str] | None = None) -> int:
     runs = sorted(p.relative_to(args.a) for p in args.a.glob("*/seed-*") if p.is_dir())
     common = [r for r in runs if (args.b / r).is_dir()]
     if not common:
-        print(f"ergo: error: {args.a} and {args.b} share no STRATEGY/seed-N run folder: give two "
-              "campaign folders of `ergo experiment`", file=sys.stderr)  # fmt: skip
-        return 2
+        return error(
+            f"{args.a} and {args.b} share no STRATEGY/seed-N run folder: give two "
+            "campaign folders of `ergo experiment`"
+        )
     all_equal = True
     for r in common:
         equal, what = same_run(args.a / r, args.b / r)

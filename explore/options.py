@@ -3,23 +3,24 @@ into a frozen dataclass, with one-line errors naming the option and what was exp
 
 Each rig and each strategy declares its options as a dataclass (field types and defaults);
 ``parse_options(Options, given, where)`` refuses unknown keys with the list of known ones and
-values of the wrong type. The field types understood are ``bool``, ``int``, ``float``, ``str``,
-``Literal[...]``, ``tuple[T, ...]`` and ``tuple[T, T]`` of those, and unions of them with
-``None`` (a JSON list becomes a tuple). A field's ``metadata={"expected": "..."}`` words what a
-value must be when the type alone says too little. Range checks belong to the dataclass's
-``__post_init__``, which raises ``BadOption(key, reason)``. Only the keys given are checked:
-the dict keeps the options as given (``run.json`` stores them so), the dataclass holds them
-with the defaults.
+values of the wrong type (by the predicates of ``robot.fields``, which also checks
+``run.json``'s config and the calibration files). The field types understood are ``bool``,
+``int``, ``float``, ``str``, ``Literal[...]``, ``tuple[T, ...]`` and ``tuple[T, T]`` of those,
+and unions of them with ``None`` (a JSON list becomes a tuple). A field's
+``metadata={"expected": "..."}`` words what a value must be when the type alone says too
+little. Range checks belong to the dataclass's ``__post_init__``, which raises
+``BadOption(key, reason)``. Only the keys given are checked: the dict keeps the options as
+given (``run.json`` stores them so), the dataclass holds them with the defaults.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
 import types
 import typing
 from typing import Any, Literal, TypeVar, Union, get_args, get_origin
 
+from robot.fields import is_int, is_number
 from robot.registry import did_you_mean
 
 T = TypeVar("T")
@@ -121,11 +122,9 @@ def _convert(kind: Any, value: Any) -> tuple[bool, Any]:
     if kind is bool:
         return isinstance(value, bool), value
     if kind is int:
-        return isinstance(value, int) and not isinstance(value, bool), value
+        return is_int(value), value
     if kind is float:
-        if not isinstance(value, int | float) or isinstance(value, bool):
-            return False, None
-        return math.isfinite(value), float(value)
+        return (True, float(value)) if is_number(value) else (False, None)
     if kind is str:
         return isinstance(value, str) and value != "", value
     raise TypeError(f"options of type {kind!r} are not supported")

@@ -127,10 +127,6 @@ class Twin:
             self.data.qvel[self._ball_qvel : self._ball_qvel + 6] = 0.0
             mujoco.mj_forward(self.model, self.data)
 
-    @property
-    def has_distractor(self) -> bool:
-        return self._distractor is not None
-
     def distractor_position(self) -> np.ndarray:
         """Distractor centre, shape (3,), m; NaN when the scene has none."""
         if self._distractor is None:

@@ -24,6 +24,7 @@ if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY"):
 import pytest
 from hypothesis import HealthCheck, settings
 
+from explore.runs.layout import HISTORY_FILE
 from sim.twin import Twin
 
 # 20,000 examples per property by default (a choice: a few minutes on one core).
@@ -62,7 +63,7 @@ def explore_killed_at() -> Callable[..., None]:
     def kill(args: list[str], run: Path, size: int) -> None:
         cmd = [sys.executable, "-m", "explore.cli", "explore", *args, "--out", str(run)]
         proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        hist, deadline = run / "history.bin", time.monotonic() + 120
+        hist, deadline = run / HISTORY_FILE, time.monotonic() + 120
         while time.monotonic() < deadline and (not hist.exists() or hist.stat().st_size < size):
             time.sleep(0.005)
         os.kill(proc.pid, signal.SIGKILL)

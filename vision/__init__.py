@@ -10,7 +10,7 @@ import os
 # (before any of its modules imports torch); a user's own setting wins.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from vision.camera import Camera, CameraError, Frame
+from vision.camera import Camera, CameraError, EndOfStream, Frame
 from vision.file_camera import FileCamera
 from vision.opencv_camera import OpenCVCamera
 from vision.rectify import ArenaModel, pixels_to_arena, polar_features
@@ -22,6 +22,7 @@ __all__ = [
     "BallTracker",
     "Camera",
     "CameraError",
+    "EndOfStream",
     "FileCamera",
     "Frame",
     "HSVRange",

@@ -13,6 +13,11 @@ class CameraError(RuntimeError):
     """A camera could not be opened or stopped delivering frames."""
 
 
+class EndOfStream(CameraError):
+    """A recorded source (a video file, a folder of images) has no frame left: the end of a
+    replay, not a failure; a command that reads a recording to its end stops there."""
+
+
 @dataclass
 class Frame:
     """One camera image.

@@ -8,9 +8,10 @@ Imports nothing heavy at module level: OpenCV and torch are imported inside the 
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 from typing import Any
+
+from robot.cli_errors import error
 
 MAX_INDEX = 10  # device indices probed by default (/dev/video0..9): a convention
 
@@ -107,11 +108,6 @@ def _seeds_of(args: argparse.Namespace) -> list[int]:
     return parse_seeds(args.seeds) if args.seeds is not None else [args.seed]
 
 
-def _error(message: str) -> int:
-    print(f"ergo: error: {message}", file=sys.stderr)
-    return 2
-
-
 def _find_cameras(args: argparse.Namespace) -> int:
     import cv2
 
@@ -166,7 +162,7 @@ def _vae_train(args: argparse.Namespace) -> int:
 
         vae = train_and_select(args.out, seeds, train_one)
     except (VaeError, ValueError) as exc:
-        return _error(str(exc))
+        return error(exc)
     kl = ", ".join(f"{v:.2f}" for v in vae.config.kl_per_latent or [])
     print(f"{args.out}: VAE saved (trained on {resolve_device(args.device)}); "
           f"KL per latent (nats): {kl}; "
@@ -207,7 +203,7 @@ def _sae_train(args: argparse.Namespace) -> int:
 
         sae = train_and_select(args.out, seeds, train_one)
     except (VaeError, ValueError) as exc:
-        return _error(str(exc))
+        return error(exc)
     kept = distinct_features(sae.config.code_std, sae.config.code_corr)
     n = sae.config.features
     features = (

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vision.camera import Camera, CameraError, Frame
+from vision.camera import Camera, CameraError, EndOfStream, Frame
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
 DEFAULT_FPS = 30.0  # frames/s for image folders (and videos that report none): a convention
@@ -94,7 +94,7 @@ class FileCamera(Camera):
         if self._files:
             if self._index >= len(self._files):
                 if not self.loop:
-                    raise CameraError(f"end of replay: {len(self._files)} frames of {self.path}")
+                    raise EndOfStream(f"end of replay: {len(self._files)} frames of {self.path}")
                 self._index = 0
             f = self._files[self._index]
             image = cv2.imread(str(f), cv2.IMREAD_COLOR)
@@ -107,5 +107,5 @@ class FileCamera(Camera):
             self._index = 0
             ok, image = self._cap.read()
         if not ok or image is None:
-            raise CameraError(f"end of replay: {self._index} frames of {self.path}")
+            raise EndOfStream(f"end of replay: {self._index} frames of {self.path}")
         return image

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vision.camera import Camera, CameraError, Frame
+from vision.camera import Camera, CameraError, EndOfStream, Frame
 
 
 @contextmanager
@@ -141,6 +141,7 @@ class OpenCVCamera(Camera):
         self._returned_seq = 0
         self._last_new_frame_t = 0.0
         self._error: str | None = None
+        self._ended = False  # the error is a video file's end (EndOfStream)
 
     def __repr__(self) -> str:
         return f"OpenCVCamera({self.source!r})"
@@ -245,6 +246,7 @@ class OpenCVCamera(Camera):
         self._cap = cap
         self._stop.clear()
         self._error = None
+        self._ended = False
         now = time.monotonic()
         with self._cond:
             self._latest = Frame(first, now)
@@ -310,6 +312,7 @@ class OpenCVCamera(Camera):
                 continue
             with self._cond:
                 self._error = reason
+                self._ended = self._is_file and failures >= 2
                 self._cond.notify_all()
             return
 
@@ -320,7 +323,7 @@ class OpenCVCamera(Camera):
         with self._cond:
             while self._seq <= self._returned_seq:
                 if self._error is not None:
-                    raise CameraError(self._error)
+                    raise (EndOfStream if self._ended else CameraError)(self._error)
                 remaining = deadline - time.monotonic()
                 if remaining <= 0:
                     age = time.monotonic() - self._last_new_frame_t

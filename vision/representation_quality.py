@@ -13,12 +13,13 @@ only, never at the true ball position: a campaign can choose its model by it.
 from __future__ import annotations
 
 import json
-import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from robot.files import atomic_write
 
 HELDOUT = 0.1  # share of a dataset kept out of training to score the model (guess)
 SELECTION_FILE = "selection.json"
@@ -71,9 +72,7 @@ def train_and_select(out: Path, seeds: list[int], train_one: Callable[[int, Path
     best = max(seeds, key=lambda s: (scores[s], -s))
     models[best].save(out)
     record = {"criterion": "heldout_explained_variance", "scores": scores, "chosen": best}
-    tmp = out / (SELECTION_FILE + ".tmp")
-    tmp.write_text(json.dumps(record, indent=1))
-    os.replace(tmp, out / SELECTION_FILE)
+    atomic_write(out / SELECTION_FILE, json.dumps(record, indent=1))
     for s in seeds:
         print(f"seed {s}: held-out explained pixel variance {scores[s]:.3f}"
               f"{'  <- chosen' if s == best else ''}")  # fmt: skip

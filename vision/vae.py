@@ -31,6 +31,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
+from robot.files import atomic_write
 from vision.observation import OBSERVATION_SIZE
 
 IMAGE_SIZE = OBSERVATION_SIZE  # 64, the paper (vision/observation.py)
@@ -75,31 +76,19 @@ def save_state(obj: Any, path: Path) -> None:
     """``torch.save`` to ``path`` through a temporary file and a rename: a failure (a full
     disk: torch reports it as a ``RuntimeError``) leaves ``path`` as it was and no temporary
     file, and is a one-line ``VaeError``."""
-    tmp = path.with_name(path.name + ".tmp")
     try:
-        torch.save(obj, tmp)
-        tmp.replace(path)
+        atomic_write(path, lambda tmp: torch.save(obj, tmp))
     except (RuntimeError, OSError) as exc:
-        tmp.unlink(missing_ok=True)
         detail = " ".join(str(exc).split())[:200]
         with contextlib.suppress(OSError):  # torch's writer does not give the errno: look
             if shutil.disk_usage(path.parent).free < (1 << 20):
                 detail = f"No space left on device: {detail}"
         raise VaeError(f"cannot write {path} ({detail})") from exc
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 def write_text_atomically(path: Path, text: str) -> None:
     """``path.write_text`` through a temporary file and a rename (no half file on failure)."""
-    tmp = path.with_name(path.name + ".tmp")
-    try:
-        tmp.write_text(text)
-        tmp.replace(path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    atomic_write(path, text)
 
 
 def check_statistics(values: Any, length: int, name: str, where: Path) -> None:

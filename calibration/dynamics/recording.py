@@ -20,9 +20,8 @@ Times are seconds from the first command, on the arm's clock (the twin's simulat
 
 from __future__ import annotations
 
+import io
 import json
-import os
-import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -35,6 +34,7 @@ from calibration.dynamics.excitation import Segment
 from calibration.store import CalibrationError
 from robot.arm import Arm
 from robot.errors import RobotError
+from robot.files import atomic_write
 from robot.spec import CONTROL_RATE_HZ
 
 FORMAT = "ergo-explore/dynamics-recording"
@@ -75,30 +75,24 @@ class Recording:
         return self.load[self.measured_segment == self.segment_names.index(name)]
 
     def save(self, path: str | Path) -> Path:
-        """Write the ``.npz`` atomically (a temporary file beside it, then a rename)."""
+        """Write the ``.npz`` atomically (``robot.files.atomic_write``)."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".npz", dir=path.parent)
-        os.close(fd)
-        try:
-            np.savez_compressed(
-                tmp,
-                joint_names=np.array(self.joint_names),
-                segment_names=np.array(self.segment_names),
-                command_t=self.command_t,
-                command=self.command,
-                command_segment=self.command_segment,
-                measured_t=self.measured_t,
-                measured=self.measured,
-                load=self.load,
-                measured_segment=self.measured_segment,
-                meta=np.array(json.dumps(self.meta)),
-            )
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
-        return path
+        buf = io.BytesIO()
+        np.savez_compressed(
+            buf,
+            joint_names=np.array(self.joint_names),
+            segment_names=np.array(self.segment_names),
+            command_t=self.command_t,
+            command=self.command,
+            command_segment=self.command_segment,
+            measured_t=self.measured_t,
+            measured=self.measured,
+            load=self.load,
+            measured_segment=self.measured_segment,
+            meta=np.array(json.dumps(self.meta)),
+        )
+        return atomic_write(path, buf.getvalue())
 
     @classmethod
     def load_file(cls, path: str | Path) -> Recording:

@@ -7,12 +7,14 @@ import csv
 from pathlib import Path
 from typing import Any
 
+from explore.runs.layout import METRICS_FILE
+
 
 def final_cells(run_dir: Path) -> tuple[int, int]:
     """(episodes, final ball cells) of a run from its metrics.csv; (0, 0) when absent."""
     from explore.runs.metrics import read_metrics
 
-    path = run_dir / "metrics.csv"
+    path = run_dir / METRICS_FILE
     if not path.exists():
         return 0, 0
     m = read_metrics(path)

@@ -20,7 +20,6 @@ import json
 import logging
 import os
 import socket
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -225,6 +224,7 @@ def run_trial(trial: Trial, progress: bool = False) -> TrialResult:
     one-line message."""
     from explore.runs.lock import RunLockedError
     from explore.runs.open_run import open_run
+    from explore.runs.progress import ProgressBar
     from explore.runs.store import RunStoreError, atomic_write_text
 
     _check_campaign(trial)
@@ -246,7 +246,8 @@ def run_trial(trial: Trial, progress: bool = False) -> TrialResult:
             log.warning("%s", note)
         info = {"host": host, "pid": pid, "started": started, "resumed_from": run.resumed_from}
         atomic_write_text(path / TRIAL_FILE, json.dumps(info))
-        bar = _Bar(trial, run.resumed_from) if progress else None
+        label = f"{trial.strategy} s{trial.seed}"
+        bar = ProgressBar(trial.episodes, run.resumed_from, label, 2.0, False) if progress else None
         try:
             explorer = run.explore(on_episode=bar.update if bar else None)
         finally:
@@ -260,24 +261,6 @@ def run_trial(trial: Trial, progress: bool = False) -> TrialResult:
         )  # fmt: skip
         atomic_write_text(path / TRIAL_FILE, json.dumps(dataclasses.asdict(result)))
         return result
-
-
-class _Bar:
-    """tqdm bar of one trial, fed with the explorer's ``Progress``."""
-
-    def __init__(self, trial: Trial, initial: int) -> None:
-        from tqdm import tqdm
-
-        self.bar = tqdm(total=trial.episodes, initial=initial, unit="ep", mininterval=2.0,
-                        desc=f"{trial.strategy} s{trial.seed}", file=sys.stderr)  # fmt: skip
-
-    def update(self, p: Any) -> None:
-        self.bar.n = p.episode
-        self.bar.set_postfix(cells=p.ball_cells, phase=p.phase, refresh=False)
-        self.bar.update(0)
-
-    def close(self) -> None:
-        self.bar.close()
 
 
 def run_one(

@@ -9,6 +9,7 @@ import logging
 import sys
 from typing import Any
 
+from robot.cli_errors import CliError, error
 from robot.registry import LazyTable, RegistryError, did_you_mean
 
 # Each package's ``register(subparsers) -> None``, in the order of ``ergo --help``. Each module
@@ -27,10 +28,6 @@ COMMAND_MODULES = LazyTable(
         "export": "explore.cli.export:register",
     },
 )
-
-
-class CliError(Exception):
-    """A user error: printed as one line ``ergo: error: ...`` with exit code 2."""
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -114,13 +111,11 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except _user_errors() as exc:
-        print(f"ergo: error: {exc}", file=sys.stderr)
-        return 2
+        return error(exc)
     except OSError as exc:
         if exc.errno not in FILE_SYSTEM_ERRNOS:
             raise
-        print(f"ergo: error: {describe_os_error(exc)}", file=sys.stderr)
-        return 2
+        return error(describe_os_error(exc))
     except KeyboardInterrupt:
         print("ergo: interrupted", file=sys.stderr)
         return 130

@@ -9,10 +9,11 @@ import time
 from pathlib import Path
 from typing import Any
 
-from explore.cli import CliError
 from explore.cli.rerun_flags import add_rerun_arguments, check_viewer
 from explore.rigs.rig import RIGS
+from explore.runs.layout import METRICS_FILE
 from robot.bus_flags import add_bus_arguments, bus_flags
+from robot.cli_errors import CliError
 
 
 def add_rig_arguments(p: argparse.ArgumentParser) -> None:
@@ -283,7 +284,7 @@ def _coverage_curve(run: Path, episodes: int) -> list[str]:
     """Draw ``RUN/coverage.png`` when the run has episodes; returns what failed, in words."""
     from explore.report.figures import coverage_curve
 
-    if not episodes or not (run / "metrics.csv").exists():
+    if not episodes or not (run / METRICS_FILE).exists():
         return []
     try:
         coverage_curve(run)
@@ -292,25 +293,7 @@ def _coverage_curve(run: Path, episodes: int) -> list[str]:
     return []
 
 
-class _Bar:
-    """tqdm bar fed with ``Progress`` objects."""
+def _progress_bar(total: int, initial: int, disabled: bool) -> Any:
+    from explore.runs.progress import ProgressBar
 
-    def __init__(self, total: int, initial: int) -> None:
-        from tqdm import tqdm
-
-        self.bar = tqdm(total=total, initial=initial, unit="ep", mininterval=1.0, file=sys.stderr)
-
-    def update(self, p: Any) -> None:
-        self.bar.n = p.episode
-        self.bar.set_postfix(
-            cells=p.ball_cells, ee=p.ee_cells, phase=p.phase, eps=f"{p.episodes_per_s:.1f}",
-            refresh=False,
-        )  # fmt: skip
-        self.bar.update(0)
-
-    def close(self) -> None:
-        self.bar.close()
-
-
-def _progress_bar(total: int, initial: int, disabled: bool) -> _Bar | None:
-    return None if disabled else _Bar(total, initial)
+    return None if disabled else ProgressBar(total, initial)

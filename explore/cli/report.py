@@ -10,7 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from explore.cli import CliError
+from robot.cli_errors import CliError
 
 
 def register(sub: argparse._SubParsersAction) -> None:

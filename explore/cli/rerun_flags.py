@@ -8,7 +8,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from explore.cli import CliError
+from robot.cli_errors import CliError
 
 RERUN_MODES = ("save", "spawn", "off")
 

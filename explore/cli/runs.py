@@ -8,7 +8,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from explore.cli import CliError
+from robot.cli_errors import CliError
 
 
 def register(sub: argparse._SubParsersAction) -> None:

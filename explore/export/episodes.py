@@ -29,9 +29,10 @@ import numpy as np
 from explore.learner.strategies import StrategyError, make_strategy
 from explore.rigs.rig import rig_scene
 from explore.runs.config import RunConfig
+from explore.runs.layout import RUN_FILE, frames_path
 from explore.runs.lock import describe_holder, holder_of
 from explore.runs.record import EpisodeRecord
-from explore.runs.store import RunStoreError, frames_path, read_frames, read_history
+from explore.runs.store import RunStoreError, read_frames, read_history
 from robot.spec import ergo_jr_spec
 
 # The goal space a run without one (RPE) is described in: rge-efr's, default options.
@@ -112,7 +113,7 @@ def open_source(path: str | Path) -> RunSource:
         )
     try:
         history = read_history(path)
-        config = RunConfig.from_dict(history.meta["config"], where=path / "run.json")
+        config = RunConfig.from_dict(history.meta["config"], where=path / RUN_FILE)
     except RunStoreError as exc:
         raise ExportError(str(exc) if str(path) in str(exc) else f"{path}: {exc}") from None
     if not history.records:

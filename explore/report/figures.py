@@ -28,7 +28,9 @@ import numpy as np
 
 from explore.learner.scene import Scene
 from explore.report.run_data import RunData
+from explore.runs.layout import COVERAGE_FILE, METRICS_FILE
 from explore.runs.metrics import N_BINS, read_metrics
+from robot.files import atomic_write
 
 FIG_PX = (960, 640)  # width, height of every figure, pixels
 DPI = 100
@@ -274,8 +276,8 @@ def campaign_scatter_figure(groups: dict[str, list[RunData]], out: Path) -> Path
 
 def coverage_curve(run: Path, out: Path | None = None) -> Path:
     """Plot ball and end-effector cells reached against episodes; returns the PNG path."""
-    m = read_metrics(run / "metrics.csv")
-    out = out or run / "coverage.png"
+    m = read_metrics(run / METRICS_FILE)
+    out = out or run / COVERAGE_FILE
     fig, ax = plt.subplots(figsize=(6.4, 4.0), dpi=100)
     ax.plot(m["episode"], m["ball_cells"], label="ball cells")
     ax.plot(m["episode"], m["ee_cells"], label="end-effector cells", alpha=0.7)
@@ -285,13 +287,8 @@ def coverage_curve(run: Path, out: Path | None = None) -> Path:
     ax.grid(alpha=0.3)
     ax.legend()
     fig.tight_layout()
-    tmp = out.with_name(out.name + ".tmp.png")
-    try:
-        fig.savefig(tmp)
-        tmp.replace(out)  # a full disk leaves the previous figure, not half a new one
-    except OSError:
-        tmp.unlink(missing_ok=True)
-        raise
+    try:  # a full disk leaves the previous figure, not half a new one
+        atomic_write(out, fig.savefig)
     finally:
         plt.close(fig)
     return out

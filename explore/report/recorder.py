@@ -58,6 +58,7 @@ from explore.learner.scene import Scene
 from explore.report.blueprint import default_blueprint
 from explore.rigs.episodes import EpisodeConfig
 from explore.runs.config import RunConfig
+from explore.runs.layout import RECORDING_FILE, RECORDING_NAME, RUN_FILE
 from explore.runs.metrics import CellCounter
 from robot.spec import ERGO_JR_JOINTS
 
@@ -74,7 +75,6 @@ QUIET_FILE_SINK = (
     "warn,re_log_encoding::rrd::file_sink=off,re_log_encoding::rrd::encoder=off,"
     "re_sdk::recording_stream=off"
 )
-RECORDING_NAME = "recording"  # RUN/recording.rrd, then RUN/recording-2.rrd, ... on resumes
 JOINT_NAMES = ERGO_JR_JOINTS
 BATCH_FLUSH_S = 1.0  # latency of a live viewer, s
 # How long closing waits for a viewer (spawned or connected) to take the last data, s (a guess:
@@ -136,7 +136,7 @@ def next_recording_path(run: Path) -> Path:
     """Where a new recording of ``run`` goes: never overwrites an earlier one."""
     existing = recording_paths(run)
     if not existing:
-        return Path(run) / f"{RECORDING_NAME}.rrd"
+        return Path(run) / RECORDING_FILE
     last = existing[-1].stem.rpartition("-")[2]
     n = int(last) if last.isdigit() else 1
     return Path(run) / f"{RECORDING_NAME}-{n + 1}.rrd"
@@ -146,7 +146,7 @@ def run_recording_id(run: Path) -> str:
     """A recording id that is the same for every session of one run, so that the viewer merges
     a run's recording files (a resumed run's new file continues the first one)."""
     created = ""
-    meta = Path(run) / "run.json"
+    meta = Path(run) / RUN_FILE
     if meta.is_file():
         import json
 
@@ -458,7 +458,7 @@ def open_recorder(
     if config is None:
         from explore.runs.store import RunStore
 
-        config = RunConfig.from_dict(RunStore.read_meta(run_path)["config"], run_path / "run.json")
+        config = RunConfig.from_dict(RunStore.read_meta(run_path)["config"], run_path / RUN_FILE)
     from explore.rigs.rig import rig_scene
 
     scene = rig_scene(config.rig)

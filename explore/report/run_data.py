@@ -21,7 +21,8 @@ from explore.learner.goal_outcomes import goal_outcome_of
 from explore.learner.scene import Scene
 from explore.report.recorder import recording_paths
 from explore.runs.config import RunConfig
-from explore.runs.metrics import METRICS_FILE, MetricsLog, read_metrics
+from explore.runs.layout import METRICS_FILE, RUN_FILE
+from explore.runs.metrics import MetricsLog, read_metrics
 from explore.runs.store import RunStore, iter_history
 
 log = logging.getLogger(__name__)
@@ -123,13 +124,13 @@ def load_run(path: Path, goal_outcomes: bool = True, records: bool = True) -> Ru
     """
     path = Path(path)
     meta = RunStore.read_meta(path)
-    RunConfig.from_dict(meta["config"], where=path / "run.json")  # one line naming a bad field
+    RunConfig.from_dict(meta["config"], where=path / RUN_FILE)  # one line naming a bad field
     if not records:
         derived = _from_metrics(path, meta)
         if derived is not None:
             return derived
     scene = run_scene(meta["config"])
-    metrics = MetricsLog(path / "metrics.csv", scene)  # never written here
+    metrics = MetricsLog(path / METRICS_FILE, scene)  # never written here
     cols: dict[str, list[Any]] = {k: [] for k in ("ball", "context_ball", "ee_final", "goals")}
     module, reached = [], []
     outcome_of = (

@@ -41,11 +41,12 @@ from explore.report.figures import (
     scatter_figure,
 )
 from explore.report.run_data import RunData, find_campaign_runs, load_run
+from explore.runs.layout import COVERAGE_FILE
 from explore.runs.store import RunStore
 
 INCOMPLETE = "REPORT_INCOMPLETE"  # in an output folder whose report stopped being moved in
 # every file a report may write: those this report did not write are stale, removed
-REPORT_FILES = ("coverage.png", "scatter.png", "goals.png", "campaign_coverage.png",
+REPORT_FILES = (COVERAGE_FILE, "scatter.png", "goals.png", "campaign_coverage.png",
                 "campaign_scatter.png", "summary.md", "summary.html")  # fmt: skip
 
 
@@ -274,7 +275,7 @@ def report_run(run_path: Path, out_dir: Path | None = None) -> list[Path]:
     out_dir = Path(out_dir) if out_dir is not None else run.path / "report"
     with _staged(out_dir) as (tmp, written):
         figures = [
-            coverage_figure(run, tmp / "coverage.png"),
+            coverage_figure(run, tmp / COVERAGE_FILE),
             scatter_figure(run, tmp / "scatter.png"),
         ]
         goals = goals_figure(run, tmp / "goals.png")

@@ -22,7 +22,7 @@ from typing import Any
 from explore.rigs.episodes import EpisodeConfig
 from explore.rigs.rig import RIGS, RigConfig
 from explore.runs.store import RunStoreError
-from robot.registry import did_you_mean
+from robot.fields import Fields, is_int
 
 # Seeds feed numpy.random.default_rng([seed, episode]): non-negative integers only.
 MAX_SEED = 2**63 - 1
@@ -115,34 +115,28 @@ class RunConfig:
         Raises:
             RunConfigError: naming the first bad field, in one line.
         """
-        where = str(where)
-        if not isinstance(config, dict):
-            _fail(where, "config", f"must be an object, got {type(config).__name__}")
-        unknown = sorted(set(config) - set(TOP_LEVEL))
-        if unknown:
-            _fail(where, f"config.{unknown[0]}", f"is unknown; known: {', '.join(TOP_LEVEL)}")
-        rig = _obj(where, config, "rig", "config.rig")
-        rig_name = _name(where, rig, "config.rig", RIGS)
-        rig_id = rig.get("rig_id", RigConfig.rig_id)
+        top = Fields(str(where), config, RunConfigError, "config")
+        top.only(TOP_LEVEL)
+        rig = top.sub("rig")
+        rig_name = rig.one_of("name", RIGS)
+        rig_id = rig.data.get("rig_id", RigConfig.rig_id)
         if not isinstance(rig_id, str) or not rig_id:
-            _fail(where, "config.rig.rig_id", f"must be a non-empty string, got {rig_id!r}")
-        rig_opts = _options(where, rig, "config.rig", RIGS.load(rig_name).Options)
+            rig.fail("rig_id", f"must be a non-empty string, got {rig_id!r}")
+        rig_opts = _options(rig, RIGS.load(rig_name).Options)
 
         from explore.learner.strategies import STRATEGIES
 
-        strategy = _obj(where, config, "strategy", "config.strategy")
-        name = _name(where, strategy, "config.strategy", STRATEGIES)
-        s_opts = _options(where, strategy, "config.strategy", STRATEGIES.options_class(name))
+        strategy = top.sub("strategy")
+        name = strategy.one_of("name", STRATEGIES)
+        s_opts = _options(strategy, STRATEGIES.options_class(name))
 
-        seed = config.get("seed")
-        if not _is_int(seed) or not 0 <= seed <= MAX_SEED:
-            _fail(where, "config.seed", f"must be an integer in [0, 2**63-1], got {seed!r}")
-        episodes = config.get("episodes")
-        if not _is_int(episodes) or episodes < 1:
-            _fail(where, "config.episodes", f"must be an integer >= 1, got {episodes!r}")
-        episode = EpisodeConfig()
-        if "episode" in config:
-            episode = _episode(where, _obj(where, config, "episode", "config.episode"))
+        seed = top.data.get("seed")
+        if not is_int(seed) or not 0 <= seed <= MAX_SEED:
+            top.fail("seed", f"must be an integer in [0, 2**63-1], got {seed!r}")
+        episodes = top.data.get("episodes")
+        if not is_int(episodes) or episodes < 1:
+            top.fail("episodes", f"must be an integer >= 1, got {episodes!r}")
+        episode = _episode(top.sub("episode")) if "episode" in config else EpisodeConfig()
         return cls(
             rig=RigConfig(rig_name, rig_id, rig_opts),
             strategy=StrategyConfig(name, s_opts),
@@ -152,62 +146,27 @@ class RunConfig:
         )
 
 
-def _fail(where: str, path: str, why: str) -> None:
-    raise RunConfigError(f"{where}: field '{path}' {why}")
-
-
-def _is_int(v: Any) -> bool:
-    return isinstance(v, int) and not isinstance(v, bool)
-
-
-def _is_number(v: Any) -> bool:
-    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
-
-
-def _obj(where: str, parent: dict[str, Any], key: str, path: str) -> dict[str, Any]:
-    if key not in parent:
-        _fail(where, path, "is missing")
-    v = parent[key]
-    if not isinstance(v, dict):
-        _fail(where, path, f"must be an object, got {type(v).__name__} {v!r}")
-    return v
-
-
-def _name(where: str, parent: dict[str, Any], path: str, table: Any) -> str:
-    v = parent.get("name")
-    if not isinstance(v, str) or v not in table:
-        _fail(
-            where,
-            f"{path}.name",
-            f"must be one of {', '.join(sorted(table))}, got {v!r}{did_you_mean(v, table)}",
-        )
-    return v
-
-
-def _options(where: str, parent: dict[str, Any], path: str, options_class: type) -> dict:
-    """``parent["options"]`` (default {}), checked against ``options_class``; returned as given."""
+def _options(parent: Fields, options_class: type) -> dict:
+    """``parent``'s ``options`` (default {}), checked against ``options_class``; returned as
+    given."""
     from explore.options import OptionsError, parse_options
 
-    opts = parent.get("options", {})
+    opts = parent.data.get("options", {})
     if not isinstance(opts, dict):
-        _fail(where, f"{path}.options", f"must be an object, got {type(opts).__name__}")
+        parent.fail("options", f"must be an object, got {type(opts).__name__}")
     try:
-        parse_options(options_class, opts, path)
+        parse_options(options_class, opts, parent.path)
     except OptionsError as exc:
-        _fail(where, f"{path}.options.{exc.key}" if exc.key else f"{path}.options", exc.reason)
+        parent.fail(f"options.{exc.key}" if exc.key else "options", exc.reason)
     return dict(opts)
 
 
-def _episode(where: str, ep: dict[str, Any]) -> EpisodeConfig:
-    known = [f.name for f in dataclasses.fields(EpisodeConfig)]
-    for key, value in ep.items():
-        path = f"config.episode.{key}"
-        if key not in known:
-            _fail(where, path, f"is unknown; known: {', '.join(sorted(known))}")
+def _episode(ep: Fields) -> EpisodeConfig:
+    ep.only(sorted(f.name for f in dataclasses.fields(EpisodeConfig)))
+    for key in ep.data:
         lo, hi = EPISODE_BOUNDS.get(key, (-math.inf, math.inf))
         if key == "obs_size":
-            if not _is_int(value) or not lo <= value <= hi:
-                _fail(where, path, f"must be an integer in [{lo:g}, {hi:g}], got {value!r}")
-        elif not _is_number(value) or not lo <= value <= hi:
-            _fail(where, path, f"must be a number in [{lo:g}, {hi:g}], got {value!r}")
-    return EpisodeConfig(**ep)
+            ep.integer(key, lo, hi)
+        else:
+            ep.number(key, lo, hi)
+    return EpisodeConfig(**ep.data)

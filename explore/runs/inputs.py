@@ -23,9 +23,10 @@ from pathlib import Path
 from typing import Any
 
 from explore.runs.config import RunConfig
-from explore.runs.store import RunStore, RunStoreError, atomic_write_text
+from explore.runs.layout import INPUTS_KEY, RUN_FILE
+from explore.runs.store import RunStore, RunStoreError
+from robot.files import atomic_write
 
-INPUTS = "inputs"  # run.json's key of the record
 BEFORE = "inputs_before"  # run.json's key of the records replaced by an allowed change
 ALLOW_FLAG = "--allow-changed-inputs"  # ergo explore's override
 
@@ -94,7 +95,7 @@ def describe_changes(before: list[dict[str, str]], now: list[dict[str, str]]) ->
 def record_inputs(store: RunStore, config: RunConfig) -> None:
     """Write the inputs ``config`` reads now into the run's ``run.json`` (a new run, or a run
     recorded before the record existed)."""
-    _write(store, {**store.meta, INPUTS: current_inputs(config)})
+    _write(store, {**store.meta, INPUTS_KEY: current_inputs(config)})
 
 
 def check_inputs(store: RunStore, config: RunConfig, allow_changed: bool = False) -> str | None:
@@ -108,9 +109,9 @@ def check_inputs(store: RunStore, config: RunConfig, allow_changed: bool = False
         InputsChanged: they differ and ``allow_changed`` is False (nothing is written).
     """
     now = current_inputs(config)
-    recorded = store.meta.get(INPUTS)
+    recorded = store.meta.get(INPUTS_KEY)
     if not isinstance(recorded, list):
-        _write(store, {**store.meta, INPUTS: now})
+        _write(store, {**store.meta, INPUTS_KEY: now})
         return (
             f"{store.path}: run.json had no record of its input files (an older run): "
             f"recorded the {len(now)} it uses now"
@@ -126,12 +127,12 @@ def check_inputs(store: RunStore, config: RunConfig, allow_changed: bool = False
             f"ergo explore --resume {store.path} {ALLOW_FLAG}"
         )
     history = list(store.meta.get(BEFORE) or [])
-    history.append({"until_episode": len(store), INPUTS: recorded})
-    _write(store, {**store.meta, INPUTS: now, BEFORE: history})
+    history.append({"until_episode": len(store), INPUTS_KEY: recorded})
+    _write(store, {**store.meta, INPUTS_KEY: now, BEFORE: history})
     return f"{store.path}: resumed with changed input files ({what}); run.json keeps the old record"
 
 
 def _write(store: RunStore, meta: dict[str, Any]) -> None:
     """Replace ``run.json`` atomically (as ``RunStore.create`` writes it) and the store's copy."""
-    atomic_write_text(store.path / "run.json", json.dumps(meta, indent=2, sort_keys=True))
+    atomic_write(store.path / RUN_FILE, json.dumps(meta, indent=2, sort_keys=True))
     store.meta = meta

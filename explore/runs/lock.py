@@ -36,7 +36,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from explore.runs.store import WRITER_LOCK_FILE, RunStoreError
+from explore.runs.layout import WRITER_LOCK_FILE
+from explore.runs.store import RunStoreError
 
 LOCK_FILE = WRITER_LOCK_FILE
 # How long a writer that finds the lock taken, by nobody alive the file names, tries again

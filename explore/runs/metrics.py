@@ -15,11 +15,14 @@ included), at n = int(i x 10000 / 30).
 from __future__ import annotations
 
 import csv
+import io
 from pathlib import Path
 
 import numpy as np
 
 from explore.learner.scene import Scene
+from explore.runs.layout import METRICS_FILE
+from robot.files import atomic_write
 
 N_BINS = 30  # paper
 # The published curves' checkpoints: int(i * 10000 / 30), i = 0..29 (results/
@@ -60,7 +63,6 @@ class CellCounter:
         return int(self.grid.sum())
 
 
-METRICS_FILE = "metrics.csv"  # in the run folder
 METRIC_COLUMNS = ("episode", "ball_cells", "ee_cells", "ball_moved", "kind", "settle_s")
 
 
@@ -89,12 +91,11 @@ class MetricsLog:
 
     def rewrite(self) -> None:
         """Write every row so far (used after a resume rebuilt them from the history)."""
-        tmp = self.path.with_name(self.path.name + ".tmp")
-        with open(tmp, "w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=METRIC_COLUMNS)
-            w.writeheader()
-            w.writerows(self.rows)
-        tmp.replace(self.path)
+        buf = io.StringIO(newline="")
+        w = csv.DictWriter(buf, fieldnames=METRIC_COLUMNS)
+        w.writeheader()
+        w.writerows(self.rows)
+        atomic_write(self.path, buf.getvalue())
 
     def append_last(self) -> None:
         new = not self.path.exists()

@@ -29,6 +29,7 @@ from explore.rigs.rig import Rig, RigError, is_physical, make_rig
 from explore.runs.config import RunConfig
 from explore.runs.explorer import Explorer, Progress
 from explore.runs.inputs import check_inputs, record_inputs
+from explore.runs.layout import HISTORY_FILE, NEW_RUN_FILES, RUN_FILE
 from explore.runs.lock import LOCK_FILE, RunLock, remove_lock_if_free, run_lock
 from explore.runs.metrics import recorded_episodes
 from explore.runs.record import EpisodeRecord
@@ -200,7 +201,7 @@ def open_run(
             check_own_files(path)  # a received folder cannot make us write outside it
             store = RunStore.open(path)  # under the lock: no other writer is appending
             held.callback(store.close)  # unwinds first: the history closes before the lock
-            run_config = RunConfig.from_dict(store.config, where=path / "run.json")
+            run_config = RunConfig.from_dict(store.config, where=path / RUN_FILE)
             if check_resumed is not None:
                 check_resumed(run_config)
             if episodes is not None or rig_options:
@@ -251,25 +252,17 @@ def open_run(
         raise
 
 
-# What a new run writes before its first episode is stored (``discard_empty_run`` removes
-# only these, and only from a run that holds no episode).
-_NEW_RUN_FILES = (
-    "history.bin", "metrics.csv", "faults.json", "trial.json", "recording.rrd", "run.json",
-    "run.json.tmp",
-)  # fmt: skip
-
-
 def discard_empty_run(run: Path) -> None:
     """Remove a run that holds no episode (a new run whose rig failed to connect), so that the
     command that made it can run again: its own files only, then the folder if nothing else
     is left (the lock file aside). Refuses (``RunStoreError``) a run with episodes."""
     run = Path(run)
-    history = run / "history.bin"
+    history = run / HISTORY_FILE
     if history.exists() and history.stat().st_size:
         raise RunStoreError(f"{run} holds episodes: not removed")
-    for name in _NEW_RUN_FILES:
+    for name in NEW_RUN_FILES:
         (run / name).unlink(missing_ok=True)
-    for tmp in run.glob("run.json.tmp*"):  # a create's own temporary file
+    for tmp in run.glob(f"{RUN_FILE}.tmp*"):  # a create's own temporary file
         tmp.unlink(missing_ok=True)
     left = [p.name for p in run.iterdir()]
     if left == [LOCK_FILE] and remove_lock_if_free(run):

@@ -32,26 +32,32 @@ import json
 import os
 import shutil
 import time
-import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
+from explore.runs.layout import (
+    DAMAGED_FILE,
+    FRAMES_DIR,
+    HEADER,
+    HISTORY_FILE,
+    KEPT_FILE,
+    RUN_FILE,
+    SALVAGE_REPORT,
+    frame_at,
+    next_frame,
+)
 from explore.runs.lock import run_lock
 from explore.runs.metrics import recorded_episodes
 from explore.runs.record import EpisodeRecord, RecordError
 from explore.runs.store import (
-    FRAMES_DIR,
-    HEADER,
-    MAGIC,
     RunStore,
     RunStoreError,
     check_own_files,
     fsync_dir,
     fsync_write,
     new_salvage_folder,
-    next_frame,
     read_frames,
 )
 
@@ -140,17 +146,11 @@ class Survey:
 def _record_at(data: bytes, pos: int) -> tuple[int, int | None, str]:
     """(end, episode, why) of the record at ``pos``: episode None and ``why`` when it is not
     a good record; end is then where its header says it ends (may be past the data)."""
-    n = len(data)
-    if n - pos < HEADER.size:
-        return n, None, "torn header"
-    magic, length, crc = HEADER.unpack_from(data, pos)
-    if magic != MAGIC:
-        return pos + 1, None, "bad record marker"
-    start, end = pos + HEADER.size, pos + HEADER.size + length
-    if end > n:
-        return end, None, "record runs past the end of the file"
-    if zlib.crc32(data[start:end]) != crc:
-        return end, None, "checksum mismatch"
+    start, end, why = frame_at(data, pos)
+    if why == "bad record marker":
+        return pos + 1, None, why
+    if why:
+        return end, None, why
     try:
         rec = EpisodeRecord.from_bytes(data[start:end])
     except RecordError as exc:
@@ -197,7 +197,7 @@ def survey(run: str | Path) -> Survey:
 
     run = Path(run)
     meta = RunStore.read_meta(run)  # a one-line error for a folder that holds no run
-    path = run / "history.bin"
+    path = run / HISTORY_FILE
     try:
         data = path.read_bytes()
         s = survey_bytes(data)
@@ -207,7 +207,7 @@ def survey(run: str | Path) -> Survey:
         raise RunStoreError(f"cannot read {path}: {exc.strerror or exc}") from exc
     s.recorded = recorded_episodes(run)
     try:
-        RunConfig.from_dict(meta["config"], where=run / "run.json")
+        RunConfig.from_dict(meta["config"], where=run / RUN_FILE)
     except RunStoreError as exc:
         s.config_error = str(exc)
     if (run / FRAMES_DIR).is_dir():
@@ -314,7 +314,7 @@ def salvage(run: str | Path) -> SalvageResult:
     RunStore.read_meta(run)
     with run_lock(run):
         check_own_files(run)
-        path = run / "history.bin"
+        path = run / HISTORY_FILE
         data = path.read_bytes() if path.exists() else b""
         s = survey_bytes(data)
         s.recorded = recorded_episodes(run)
@@ -330,15 +330,15 @@ def salvage(run: str | Path) -> SalvageResult:
         damaged = [p for p in rest if p.kind != "record"]
         kept = [p for p in rest if p.kind == "record"]
         try:
-            fsync_write(folder / "damaged.bin", (data[p.start : p.end] for p in damaged))
-            fsync_write(folder / "kept.bin", (data[p.start : p.end] for p in kept))
+            fsync_write(folder / DAMAGED_FILE, (data[p.start : p.end] for p in damaged))
+            fsync_write(folder / KEPT_FILE, (data[p.start : p.end] for p in kept))
             placed: list[dict[str, object]] = []
-            offsets = {"damaged.bin": 0, "kept.bin": 0}
+            offsets = {DAMAGED_FILE: 0, KEPT_FILE: 0}
             for p in s.pieces:
                 if p.start < s.prefix_end:
-                    to, at = "history.bin", p.start
+                    to, at = HISTORY_FILE, p.start
                 else:
-                    to = "kept.bin" if p.kind == "record" else "damaged.bin"
+                    to = KEPT_FILE if p.kind == "record" else DAMAGED_FILE
                     at = offsets[to]
                     offsets[to] += p.size
                 placed.append(
@@ -354,7 +354,7 @@ def salvage(run: str | Path) -> SalvageResult:
                 "recorded_in_metrics": s.recorded,
                 "pieces": placed,
             }
-            fsync_write(folder / "salvage.json", iter([json.dumps(report, indent=1).encode()]))
+            fsync_write(folder / SALVAGE_REPORT, iter([json.dumps(report, indent=1).encode()]))
             fsync_dir(folder)
             with open(path, "r+b") as f:  # the rest is safe on disk: cut it from the history
                 f.truncate(s.prefix_end)

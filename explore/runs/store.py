@@ -51,7 +51,6 @@ import math
 import os
 import stat
 import struct
-import threading
 import time
 import zipfile
 import zlib
@@ -62,60 +61,33 @@ from typing import Any
 
 import numpy as np
 
+from explore.runs.layout import (
+    DAMAGED_FILE,
+    HISTORY_FILE,
+    RUN_FILE,
+    SALVAGE_DIR,
+    SALVAGE_REPORT,
+    SYNCED_FILE,
+    WRITER_DIRS,
+    WRITER_FILES,
+    WRITER_LOCK_FILE,
+    frame,
+    frame_at,
+    frames_path,
+    next_frame,
+)
 from explore.runs.record import EpisodeRecord, RecordError
+from robot.files import NOFOLLOW, atomic_write
 
 RUN_FORMAT = 1
 APP = "ergo-explore"
-MAGIC = b"EREC"
-HEADER = struct.Struct("<4sII")
-FRAMES_DIR = "frames"
-WRITER_LOCK_FILE = "writer.lock"  # the writer's lock (explore/runs/lock.py), not run data
-SYNCED = "history.synced"
-_SYNCED = struct.Struct("<Q")
-SALVAGE_DIR = "salvage"  # damaged or torn history moved aside (explore/runs/repair.py)
-# Files a writer of the run opens for writing (besides writer.lock, checked by the lock), and
-# the folders whose files it writes: ``check_own_files`` refuses a link among them.
-WRITER_FILES = (
-    "run.json", "run.json.tmp", "history.bin", SYNCED, "metrics.csv", "metrics.csv.tmp",
-    "faults.json", "faults.json.tmp", "faults.json.bad", "trial.json", "coverage.png",
-)  # fmt: skip
-WRITER_DIRS = (FRAMES_DIR, SALVAGE_DIR)
-# open flags of a file the writer writes: never through a symbolic link
-_NOFOLLOW = os.O_NOFOLLOW | os.O_CLOEXEC
+_SYNCED = struct.Struct("<Q")  # history.synced: u64 little endian
+# ``explore/campaigns/plan.py`` writes its campaign files with ``atomic_write_text`` from here
+atomic_write_text = atomic_write
 
 
 class RunStoreError(RuntimeError):
     """A run folder is missing, foreign, from another version, or corrupt."""
-
-
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` via a temporary file and an atomic rename (fsync'ed). The
-    temporary file is this writer's own (``NAME.tmp-PID-THREAD``: two processes writing one
-    file, two ``ergo experiment`` writing ``campaign.json``, never rename each other's), made
-    anew (never written through: a link at its name cannot redirect the write); on failure (a
-    full disk) it is removed and ``path`` is left as it was."""
-    tmp = path.with_name(f"{path.name}.tmp-{os.getpid()}-{threading.get_ident()}")
-    with contextlib.suppress(FileNotFoundError):
-        os.unlink(tmp)  # a dead writer's, whose pid and thread id were the same
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | _NOFOLLOW, 0o644)
-    try:
-        try:
-            view = memoryview(data)
-            while view:
-                view = view[os.write(fd, view) :]
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-
-
-def atomic_write_text(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` via a temporary file and an atomic rename (fsync'ed)."""
-    atomic_write_bytes(path, text.encode())
 
 
 def check_own_files(run: Path) -> None:
@@ -173,22 +145,6 @@ def salvage_hint(run: Path) -> str:
     return f"`ergo runs check {run}` says what can be kept, `ergo runs salvage {run}` keeps it"
 
 
-def next_frame(data: bytes, after: int) -> int | None:
-    """Offset of the first frame starting after ``after`` whose marker and checksum hold (a
-    good record's frame), or None. What tells a torn tail (nothing good after it) from damage
-    in the middle (a damaged length field makes a record look as if it ran past the end)."""
-    n = len(data)
-    at = after
-    while (at := data.find(MAGIC, at + 1)) >= 0:
-        if n - at < HEADER.size:
-            return None
-        _, length, crc = HEADER.unpack_from(data, at)
-        end = at + HEADER.size + length
-        if end <= n and zlib.crc32(data[at + HEADER.size : end]) == crc:
-            return at
-    return None
-
-
 def _scan(
     data: bytes, durable: int | None = None, hint: str = ""
 ) -> tuple[list[tuple[int, int]], int]:
@@ -208,21 +164,19 @@ def _scan(
     n = len(data)
     durable = n if durable is None else durable
     while pos < n:
-        if n - pos < HEADER.size:
-            break  # torn header
-        magic, length, crc = HEADER.unpack_from(data, pos)
-        start, end = pos + HEADER.size, pos + HEADER.size + length
-        if pos >= durable and (magic != MAGIC or end > n or zlib.crc32(data[start:end]) != crc):
+        start, end, why = frame_at(data, pos)
+        if why == "torn header":
+            break
+        if why and pos >= durable:
             break  # past what was synced: what a power cut left of the unsynced tail
-        if magic != MAGIC:
-            raise RunStoreError(f"history.bin is corrupt at byte {pos}: bad record marker{hint}")
-        if end > n or zlib.crc32(data[start:end]) != crc:
-            why = "record runs past the end of the file" if end > n else "checksum mismatch"
+        if why == "bad record marker":
+            raise RunStoreError(f"{HISTORY_FILE} is corrupt at byte {pos}: {why}{hint}")
+        if why:
             good = next_frame(data, pos)
             if good is None and end >= n:
                 break  # the last record, incomplete on disk: a torn tail
             after = f", and a good record follows at byte {good}" if good is not None else ""
-            raise RunStoreError(f"history.bin is corrupt at byte {pos}: {why}{after}{hint}")
+            raise RunStoreError(f"{HISTORY_FILE} is corrupt at byte {pos}: {why}{after}{hint}")
         spans.append((start, end))
         pos = end
     return spans, pos
@@ -234,10 +188,10 @@ def _decode(data: bytes, spans: list[tuple[int, int]], hint: str) -> Iterator[Ep
         try:
             rec = EpisodeRecord.from_bytes(data[a:b])
         except RecordError as exc:
-            raise RunStoreError(f"history.bin record {i}: {exc}{hint}") from exc
+            raise RunStoreError(f"{HISTORY_FILE} record {i}: {exc}{hint}") from exc
         if rec.episode != i:
             raise RunStoreError(
-                f"history.bin record {i} is episode {rec.episode}: missing or duplicated{hint}"
+                f"{HISTORY_FILE} record {i} is episode {rec.episode}: missing or duplicated{hint}"
             )
         yield rec
 
@@ -267,7 +221,7 @@ class RunStore:
         path = Path(path)
         make_run_dir(path)
         found = sorted(p.name for p in path.iterdir() if p.name != WRITER_LOCK_FILE)
-        if found and all(name.startswith("run.json.tmp") for name in found):
+        if found and all(name.startswith(f"{RUN_FILE}.tmp") for name in found):
             for name in found:  # a kill during a previous create's atomic write: nothing made
                 (path / name).unlink()
             found = []
@@ -281,7 +235,7 @@ class RunStore:
             "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
             "config": config,
         }
-        atomic_write_text(path / "run.json", json.dumps(meta, indent=2, sort_keys=True))
+        atomic_write(path / RUN_FILE, json.dumps(meta, indent=2, sort_keys=True))
         store = cls(path, meta)
         store._open_for_append()
         return store
@@ -310,15 +264,15 @@ class RunStore:
 
     @staticmethod
     def is_run(path: str | Path) -> bool:
-        return (Path(path) / "run.json").is_file()
+        return (Path(path) / RUN_FILE).is_file()
 
     @staticmethod
     def read_meta(path: Path) -> dict[str, Any]:
-        meta_path = path / "run.json"
+        meta_path = path / RUN_FILE
         if not path.is_dir():
             raise RunStoreError(f"{path} is not a run folder (no such directory)")
         if not meta_path.is_file():
-            raise RunStoreError(f"{path} is not a run folder (no run.json)")
+            raise RunStoreError(f"{path} is not a run folder (no {RUN_FILE})")
         try:
             meta = json.loads(meta_path.read_text())
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:
@@ -337,7 +291,7 @@ class RunStore:
     # ---- history ---------------------------------------------------------------------------
     @property
     def history_path(self) -> Path:
-        return self.path / "history.bin"
+        return self.path / HISTORY_FILE
 
     @property
     def config(self) -> dict[str, Any]:
@@ -379,7 +333,7 @@ class RunStore:
             self.truncated_bytes = self.torn_bytes
 
     def _open_for_append(self) -> None:
-        flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT | _NOFOLLOW
+        flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT | NOFOLLOW
         try:
             self._fd = os.open(self.history_path, flags, 0o644)
         except OSError as exc:
@@ -400,9 +354,9 @@ class RunStore:
 
     def _write_synced(self, length: int) -> None:
         self._synced_length = length
-        path = self.path / SYNCED
+        path = self.path / SYNCED_FILE
         new = not path.exists()
-        fd = os.open(path, os.O_WRONLY | os.O_CREAT | _NOFOLLOW, 0o644)
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | NOFOLLOW, 0o644)
         try:
             os.pwrite(fd, _SYNCED.pack(length), 0)
             os.fsync(fd)
@@ -428,11 +382,11 @@ class RunStore:
                 f"episode {record.episode} appended after {len(self.records)} episodes"
             )
         payload = record.to_bytes()
-        frame = memoryview(HEADER.pack(MAGIC, len(payload), zlib.crc32(payload)) + payload)
+        framed = memoryview(frame(payload))
         size = self._size
         try:
-            while frame:  # unbuffered: in the page cache, nothing left in a buffer to land later
-                frame = frame[os.write(self._fd, frame) :]
+            while framed:  # unbuffered: in the page cache, nothing left in a buffer to land later
+                framed = framed[os.write(self._fd, framed) :]
             self._size = os.fstat(self._fd).st_size
             if time.monotonic() - self._synced >= self.sync_interval_s:
                 self._sync()
@@ -454,13 +408,7 @@ class RunStore:
         path.parent.mkdir(exist_ok=True)
         buf = io.BytesIO()
         np.savez_compressed(buf, frames=np.asarray(frames, dtype=np.uint8))
-        tmp = path.with_name(path.name + ".tmp")
-        with open(tmp, "wb") as f:
-            f.write(buf.getvalue())
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-        return path
+        return atomic_write(path, buf.getvalue())
 
     def close(self) -> None:
         if self._fd is not None:
@@ -520,7 +468,7 @@ def move_tail_aside(run: Path, data: bytes, start: int, records: int) -> Path:
     before the caller cuts it from the history. Returns the folder."""
     folder = new_salvage_folder(run)
     size = len(data) - start
-    fsync_write(folder / "damaged.bin", iter([data[start:]]))
+    fsync_write(folder / DAMAGED_FILE, iter([data[start:]]))
     report = {
         "salvaged": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "by": "resume (a torn last record: a crash mid-append, or a power cut's unsynced tail)",
@@ -529,11 +477,11 @@ def move_tail_aside(run: Path, data: bytes, start: int, records: int) -> Path:
         "good_records_moved": 0,
         "damaged_bytes_moved": size,
         "pieces": [
-            {"start": 0, "end": start, "kind": "records", "file": "history.bin", "at": 0},
-            {"start": start, "end": len(data), "kind": "torn", "file": "damaged.bin", "at": 0},
+            {"start": 0, "end": start, "kind": "records", "file": HISTORY_FILE, "at": 0},
+            {"start": start, "end": len(data), "kind": "torn", "file": DAMAGED_FILE, "at": 0},
         ],
     }
-    fsync_write(folder / "salvage.json", iter([json.dumps(report, indent=1).encode()]))
+    fsync_write(folder / SALVAGE_REPORT, iter([json.dumps(report, indent=1).encode()]))
     fsync_dir(folder)
     return folder
 
@@ -542,7 +490,7 @@ def read_synced(run: str | Path) -> int | None:
     """The length of ``RUN/history.bin`` known to be on disk (``history.synced``), or None
     when the run keeps none (it fsyncs every append)."""
     try:
-        raw = (Path(run) / SYNCED).read_bytes()
+        raw = (Path(run) / SYNCED_FILE).read_bytes()
     except FileNotFoundError:
         return None
     return _SYNCED.unpack(raw[: _SYNCED.size])[0] if len(raw) >= _SYNCED.size else None
@@ -572,11 +520,6 @@ def read_history(run: str | Path) -> History:
     return History(store.meta, store.records, store.torn_bytes)
 
 
-def frames_path(run: str | Path, episode: int) -> Path:
-    """Where episode ``episode``'s camera frames are kept (``RunStore.write_frames``)."""
-    return Path(run) / FRAMES_DIR / f"episode-{episode:06d}.npz"
-
-
 def read_frames(run: str | Path, episode: int) -> np.ndarray | None:
     """Episode ``episode``'s camera frames (T, side, side, 3) BGR uint8, or None when the run
     kept none for it; a ``RunStoreError`` for a file that is not readable."""
@@ -597,7 +540,7 @@ def iter_history(run: Path, left_out: list[int] | None = None) -> Iterator[Episo
     """Read a run's stored episodes without modifying the folder (no torn-tail repair, no
     append handle): safe on a run that another process is still writing. ``left_out``: gets
     the bytes of a torn last record left out (0 if none), for a reader to say so."""
-    path = Path(run) / "history.bin"
+    path = Path(run) / HISTORY_FILE
     if not path.exists():
         return
     data = path.read_bytes()

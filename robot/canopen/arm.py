@@ -380,11 +380,6 @@ class CanArm(Arm):
             raise SafetyStop(self._stop_reason)
 
     @property
-    def stop_reason(self) -> str | None:
-        """Why the arm was stopped (None while running)."""
-        return self._stop_reason
-
-    @property
     def position_resolution(self) -> np.ndarray:
         """One position increment per joint, shape (n,), rad (2 pi / the drive's increments per
         revolution, read from 0x608F at connect; 0 before)."""

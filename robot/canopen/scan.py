@@ -16,6 +16,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from robot.canopen.bus import DEFAULT_BITRATE, CanBusError, open_bus, parse_can_spec
+from robot.cli_errors import error
 
 # How long to listen for answers and heartbeats, s (guess: covers heartbeat times up to 1 s,
 # and the SDO answers of 127 nodes at any bitrate >= 125 kbit/s).
@@ -145,8 +146,7 @@ def scan_cli(args: argparse.Namespace) -> int:
             float(getattr(args, "listen_s", LISTEN_S)),
         )
     except CanBusError as exc:
-        print(f"ergo: error: {exc}", file=sys.stderr)
-        return 2
+        return error(exc)
     if not infos:
         which = "ids " + " ".join(map(str, ids)) if ids else "ids 1..127"
         print(f"no CANopen node answered on {args.can} ({which})", file=sys.stderr)

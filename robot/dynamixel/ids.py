@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import sys
 
+from robot.cli_errors import error
 from robot.dynamixel.bus import DEFAULT_BAUD, DynamixelBus, DynamixelError, NoStatusError, PingReply
 from robot.dynamixel.control_table import MODELS
 from robot.dynamixel.protocol import MAX_SERVO_ID
@@ -81,8 +81,7 @@ def set_id_cli(args: argparse.Namespace) -> int:
         with DynamixelBus(args.port, baud, retries=1, latency_s=SET_ID_LATENCY_S) as bus:
             reply = set_id(bus, args.id, args.new_id)
     except (SetIdError, BusError, DynamixelError) as exc:
-        print(f"ergo: error: {exc}", file=sys.stderr)
-        return 2
+        return error(exc)
     model = MODELS.get(reply.model_number)
     name = model.name if model else f"model {reply.model_number}"
     print(f"servo {args.id} now answers as id {reply.id} ({name}, firmware {reply.firmware})")

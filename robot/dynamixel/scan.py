@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import sys
 from collections.abc import Sequence
 
+from robot.cli_errors import error
 from robot.dynamixel.bus import DEFAULT_BAUD, DynamixelBus, DynamixelError, NoStatusError, PingReply
 from robot.dynamixel.control_table import MODELS
 from robot.dynamixel.protocol import MAX_SERVO_ID
@@ -57,16 +57,14 @@ def scan_cli(args: argparse.Namespace) -> int:
     ids = list(range(MAX_SERVO_ID + 1)) if not args.ids else list(args.ids)
     bad = [i for i in ids if not 0 <= i <= MAX_SERVO_ID]
     if bad:
-        print(f"ergo: error: ids must be in 0..{MAX_SERVO_ID}, got {bad[0]}", file=sys.stderr)
-        return 2
+        return error(f"ids must be in 0..{MAX_SERVO_ID}, got {bad[0]}")
     baud = int(getattr(args, "baud", None) or DEFAULT_BAUD)
     try:
         with DynamixelBus(args.port, baud, retries=0, latency_s=SCAN_LATENCY_S) as bus:
             # the arm's own ids (or the ids asked for) get a second, slower look
             found = scan(bus, ids, again=list(args.ids) if args.ids else list(ARM_IDS))
     except (BusError, DynamixelError) as exc:
-        print(f"ergo: error: {exc}", file=sys.stderr)
-        return 2
+        return error(exc)
     if not found:
         print(
             f"no servo answered on {args.port} at {baud} baud "

@@ -561,11 +561,6 @@ class EmulatedDrives:
         d.muted = mute
         d.node.nmt.stop_heartbeat()
 
-    def resume_heartbeat(self, node_id: int) -> None:
-        d = self.drive(node_id)
-        d.heartbeat_stopped = d.muted = False
-        d.node.nmt.start_heartbeat(d._od_int(0x1017))
-
     def fault(self, node_id: int, code: int, register: int = FAULT_REGISTER) -> None:
         """Trip any fault on the node now: FAULT state and an EMCY with ``code``, e.g.
         0x2310 continuous over-current (an overload) or 0x4310 excess temperature of the
@@ -583,13 +578,3 @@ class EmulatedDrives:
         ``after_s`` seconds of wall time (checked at each SYNC)."""
         self.drive(node_id)
         self._scheduled_faults[node_id] = after_s
-
-
-def make_virtual_drives(twin: Twin, channel: str, **kw: Any) -> EmulatedDrives:
-    """Drives on python-can's in-process ``virtual`` bus ``channel`` (for tests)."""
-    return EmulatedDrives(twin, f"virtual:{channel}", **kw)
-
-
-def joint_positions_counts(drives: EmulatedDrives) -> np.ndarray:
-    """Position actual of every drive, shape (6,), increments."""
-    return np.array([d.actual for d in drives.drives])

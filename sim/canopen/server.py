@@ -33,6 +33,7 @@ import threading
 import time
 from typing import Any
 
+from robot.cli_errors import error
 from sim.canopen.slcan import CanFrame, LineSplitter, SlcanAdapter, SlcanError, encode_frame
 from sim.pty_port import OnPty, PtyPort
 
@@ -204,14 +205,11 @@ def serve(args: argparse.Namespace) -> int:
     delay_ms = float(getattr(args, "delay_ms", 0.0) or 0.0)
     overload = getattr(args, "overload_servo", None)
     if not 0.0 <= drop_rate < 1.0:
-        print(f"ergo: error: --drop-rate {drop_rate} is not in [0, 1)", file=sys.stderr)
-        return 2
+        return error(f"--drop-rate {drop_rate} is not in [0, 1)")
     if delay_ms < 0:
-        print(f"ergo: error: --delay-ms {delay_ms} is negative", file=sys.stderr)
-        return 2
+        return error(f"--delay-ms {delay_ms} is negative")
     if overload is not None and not 1 <= overload <= 6:
-        print(f"ergo: error: --overload-servo {overload} is not a node id in 1..6", file=sys.stderr)
-        return 2
+        return error(f"--overload-servo {overload} is not a node id in 1..6")
     if float(getattr(args, "corrupt_rate", 0.0) or 0.0) > 0:
         print(
             "ergo: warning: --corrupt-rate ignored on CAN (the CRC rejects a corrupted frame and "
@@ -222,8 +220,7 @@ def serve(args: argparse.Namespace) -> int:
     try:
         rig = open_served_rig(args)
     except StandinError as exc:
-        print(f"ergo: error: {exc}", file=sys.stderr)
-        return 2
+        return error(exc)
 
     def _terminate(signum: int, _frame: object) -> None:
         raise KeyboardInterrupt

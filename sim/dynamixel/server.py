@@ -19,10 +19,10 @@ import argparse
 import logging
 import os
 import select
-import sys
 import threading
 import time
 
+from robot.cli_errors import error
 from sim.dynamixel.emulator import DEFAULT_OVERLOAD_AFTER_S, DynamixelEmulator, FaultConfig
 from sim.pty_port import OnPty, PtyPort
 
@@ -130,18 +130,13 @@ def serve(args: argparse.Namespace) -> int:
     try:
         faults = faults_from_args(args)
     except ValueError as exc:
-        print(f"ergo: error: {exc}", file=sys.stderr)
-        return 2
+        return error(exc)
     if faults.overload_servo is not None and not 1 <= faults.overload_servo <= 6:
-        print(
-            f"ergo: error: --overload-servo {faults.overload_servo} is not in 1..6", file=sys.stderr
-        )
-        return 2
+        return error(f"--overload-servo {faults.overload_servo} is not in 1..6")
     try:
         rig = open_served_rig(args)
     except StandinError as exc:
-        print(f"ergo: error: {exc}", file=sys.stderr)
-        return 2
+        return error(exc)
     emulator = DynamixelEmulator(
         rig.twin, faults=faults, directions=rig.directions, offsets=rig.offsets
     )

@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from robot.files import atomic_write
 from robot.spec import ERGO_JR_JOINTS
 from sim.models.make_scene import (
     ARENA_MARKER_SIZE,
@@ -384,7 +385,4 @@ def write_hidden(rig: HiddenRig, path: str | os.PathLike[str]) -> Path:
     """Write the hidden parameters as JSON (atomically: a reader never sees half a file)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(rig.to_dict(), indent=2) + "\n")
-    os.replace(tmp, path)
-    return path
+    return atomic_write(path, json.dumps(rig.to_dict(), indent=2) + "\n")

@@ -15,7 +15,6 @@ from __future__ import annotations
 import argparse
 import shutil
 import signal
-import sys
 import tempfile
 import threading
 import time
@@ -24,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from robot.cli_errors import error
 from sim.mjpeg_server import MjpegServer
 from sim.standin.hands import HOST, Hands, HandsServer
 from sim.standin.hidden import (
@@ -122,11 +122,11 @@ def serve_until_interrupted(rig: ServedRig, args: Any, announce: list[str]) -> i
         hands_server.start()
         print(f"hands on {HOST}:{hands_server.port}", flush=True)
     except OSError as exc:
-        print(f"ergo: error: {exc}", file=sys.stderr)
+        code = error(exc)
         hands_server.stop()
         if camera is not None:
             camera.stop()
-        return 2
+        return code
     for line in rig.lines:
         print(line, flush=True)
     previous = None

@@ -26,6 +26,8 @@ from pathlib import Path
 
 from load import busy, load_average  # tests/stress/load.py, beside this script
 
+from explore.runs.layout import FAULTS_FILE, HISTORY_FILE, RUN_FILE
+
 ROOT = Path(__file__).resolve().parents[2]
 ERGO = [sys.executable, "-m", "explore.cli"]
 SAMPLE_S = 5.0  # how often the load average is read, s
@@ -76,7 +78,7 @@ def main() -> int:
                     break
                 lines = (done.stderr or done.stdout).strip().splitlines() or ["(no output)"]
                 stops.append(f"rc {done.returncode}: {lines[-1]}")
-                if len(stops) > args.max_resumes or not (run / "run.json").exists():
+                if len(stops) > args.max_resumes or not (run / RUN_FILE).exists():
                     break
                 cmd = resume
         wall = time.monotonic() - t0
@@ -85,7 +87,7 @@ def main() -> int:
         serve.terminate()
         serve.wait(timeout=10)
     stored = len(list(_episodes(run)))
-    faults = json.loads((run / "faults.json").read_text()) if (run / "faults.json").exists() else {}
+    faults = json.loads((run / FAULTS_FILE).read_text()) if (run / FAULTS_FILE).exists() else {}
     totals = faults.get("totals", {})
     samples = samples or [load_average()]
     print(f"episodes stored: {stored}/{args.episodes}; resumes: {len(stops)}; {wall:.0f} s")
@@ -103,7 +105,7 @@ def main() -> int:
 def _episodes(run: Path):
     from explore.runs.store import iter_history
 
-    return iter_history(run) if (run / "history.bin").exists() else iter(())
+    return iter_history(run) if (run / HISTORY_FILE).exists() else iter(())
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@ import pytest
 
 from explore.cli import main
 from explore.runs.config import RunConfig, RunConfigError
+from explore.runs.layout import RUN_FILE
 
 RIG_OPTION = "render_size=[64,64]"
 
@@ -38,7 +39,7 @@ def good_run(tmp_path_factory) -> Path:
 
 @pytest.fixture
 def good_config(good_run) -> dict:
-    return json.loads((good_run / "run.json").read_text())["config"]
+    return json.loads((good_run / RUN_FILE).read_text())["config"]
 
 
 # ---- RunConfig.from_dict -------------------------------------------------------------------
@@ -138,9 +139,9 @@ def test_a_run_config_that_is_not_an_object_is_refused():
 def _edited(good_run: Path, tmp_path: Path, edit) -> Path:
     run = tmp_path / "edited"
     shutil.copytree(good_run, run)
-    meta = json.loads((run / "run.json").read_text())
+    meta = json.loads((run / RUN_FILE).read_text())
     text = edit(meta)
-    (run / "run.json").write_text(text if isinstance(text, str) else json.dumps(meta, indent=2))
+    (run / RUN_FILE).write_text(text if isinstance(text, str) else json.dumps(meta, indent=2))
     return run
 
 

@@ -27,6 +27,7 @@ from calibration.joints import JointCalibration
 from explore.rigs.episodes import EpisodeConfig
 from explore.rigs.rig import RigConfig
 from explore.runs.config import RunConfig
+from explore.runs.layout import HISTORY_FILE, RUN_FILE
 from explore.runs.open_run import open_run
 from robot.dynamixel.control_table import XL320
 from robot.spec import ergo_jr_spec
@@ -97,17 +98,17 @@ def test_a_run_on_a_calibrated_rig_never_sends_a_goal_outside_the_calibrated_lim
     q = XL320.steps_to_rad(np.array([g for _, g in sent]))  # directions +1, offsets 0
     assert np.abs(q).max() <= LIMIT + HALF_UNIT, np.abs(q).max()
     assert np.abs(q).max() >= LIMIT - HALF_UNIT  # the commands went for more and were clamped
-    recorded = json.loads((run / "run.json").read_text())["inputs"]
+    recorded = json.loads((run / RUN_FILE).read_text())["inputs"]
     assert [(e["kind"], e["path"]) for e in recorded] == [("joints", str(path.resolve()))]
 
     # recalibrated since: the resume is refused in one line, the run left as it was
     store.save("joints", "lim", JointCalibration(
         tuple(spec.names), np.zeros(n), np.ones(n), np.full(n, -0.2), np.full(n, 0.2)
     ).to_dict())  # fmt: skip
-    before = (run / "run.json").read_bytes(), (run / "history.bin").read_bytes()
+    before = (run / RUN_FILE).read_bytes(), (run / HISTORY_FILE).read_bytes()
     more = [*cmd, "--episodes", str(EPISODES + 1)]
     done = subprocess.run(more, capture_output=True, text=True, timeout=CHILD_BOUND_S, env=env)
     err = done.stderr.strip()
     assert done.returncode == 2 and len(err.splitlines()) == 1, err
     assert "joints.json changed" in err and "--allow-changed-inputs" in err
-    assert ((run / "run.json").read_bytes(), (run / "history.bin").read_bytes()) == before
+    assert ((run / RUN_FILE).read_bytes(), (run / HISTORY_FILE).read_bytes()) == before

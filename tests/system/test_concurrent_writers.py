@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pytest
 
+from explore.runs.layout import HISTORY_FILE
 from explore.runs.repair import survey
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -68,7 +69,7 @@ def test_two_writers_at_once_never_duplicate_an_episode(tmp_path):
 def test_the_lock_of_a_killed_writer_is_taken_over_and_said_so(tmp_path):
     run = tmp_path / "run"
     proc = _explore("--out", str(run), "--episodes", "50")
-    hist, deadline = run / "history.bin", time.monotonic() + BOUND_S
+    hist, deadline = run / HISTORY_FILE, time.monotonic() + BOUND_S
     while not (hist.exists() and hist.stat().st_size > 0):
         assert time.monotonic() < deadline and proc.poll() is None, proc.stderr.read()
         time.sleep(0.02)

@@ -27,6 +27,7 @@ from pathlib import Path
 import pytest
 
 from explore.cli import main
+from explore.runs.layout import HISTORY_FILE, METRICS_FILE
 from explore.runs.record import EpisodeRecord
 from explore.runs.store import RunStore, _scan
 
@@ -52,7 +53,7 @@ def _on_disk(out: Path) -> tuple[int, int]:
 
     Fails the test if the history is corrupt or an episode is missing or duplicated.
     """
-    hist = out / "history.bin"
+    hist = out / HISTORY_FILE
     if not hist.exists():
         return 0, 0
     data = hist.read_bytes()
@@ -93,7 +94,7 @@ def _size(path: Path) -> int:
 def test_twenty_random_sigkills_resume_to_the_uninterrupted_history(tmp_path):
     rng = random.Random(CAMPAIGN_SEED)
     out = tmp_path / "killed"
-    hist = out / "history.bin"
+    hist = out / HISTORY_FILE
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     kills: list[tuple[str, int, int]] = []  # (mode, episodes before, episodes after)
     torn_seen = 0
@@ -148,7 +149,7 @@ def test_twenty_random_sigkills_resume_to_the_uninterrupted_history(tmp_path):
     finally:
         killed.close()
         reference.close()
-    rows = (out / "metrics.csv").read_text().splitlines()[1:]
+    rows = (out / METRICS_FILE).read_text().splitlines()[1:]
     assert [int(r.split(",")[0]) for r in rows] == list(range(EPISODES))
 
     modes = {m: sum(k[0] == m for k in kills) for m in ("launch", "progress", "append")}

@@ -33,6 +33,7 @@ import pytest
 from explore.rigs.episodes import EpisodeConfig
 from explore.rigs.rig import RigConfig
 from explore.runs.config import RunConfig
+from explore.runs.layout import HISTORY_FILE, METRICS_FILE
 from explore.runs.open_run import open_run
 from explore.runs.record import EpisodeRecord
 from explore.runs.store import RunStore, _scan
@@ -89,7 +90,7 @@ def _create_run(out: Path, port: str, camera: str) -> None:
 def _on_disk(out: Path) -> int:
     """Complete episodes in ``out/history.bin``, read without modifying it; fails the test on
     a bad checksum or a missing or duplicated episode."""
-    hist = out / "history.bin"
+    hist = out / HISTORY_FILE
     if not hist.exists():
         return 0
     data = hist.read_bytes()
@@ -115,7 +116,7 @@ def _cmd(out: Path) -> list[str]:
 def test_sigkills_over_the_serial_bus_resume_with_a_verified_history(tmp_path):
     rng = random.Random(CAMPAIGN_SEED)
     out = tmp_path / "run"
-    hist = out / "history.bin"
+    hist = out / HISTORY_FILE
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     kills: list[tuple[str, int, int]] = []
     t_start = time.monotonic()
@@ -164,7 +165,7 @@ def test_sigkills_over_the_serial_bus_resume_with_a_verified_history(tmp_path):
         assert [r.episode for r in store] == list(range(EPISODES))
     finally:
         store.close()
-    rows = (out / "metrics.csv").read_text().splitlines()[1:]
+    rows = (out / METRICS_FILE).read_text().splitlines()[1:]
     assert [int(r.split(",")[0]) for r in rows] == list(range(EPISODES))
     modes = {m: sum(k[0] == m for k in kills) for m in ("launch", "progress")}
     mid_run = sum(0 < k[1] < EPISODES for k in kills)

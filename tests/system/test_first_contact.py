@@ -16,6 +16,7 @@ from explore.cli import main, version
 from explore.learner.strategies import STRATEGIES
 from explore.rigs.rig import RigConfig, RigError
 from explore.runs.config import RunConfig, StrategyConfig
+from explore.runs.layout import COVERAGE_FILE, RECORDING_FILE
 from explore.runs.lock import LOCK_FILE
 from explore.runs.open_run import open_run
 
@@ -156,7 +157,7 @@ def test_rerun_spawn_finds_the_viewer_beside_python_without_path(tmp_path, monke
     assert code == 0, err
     beside = Path(sys.executable).parent / "rerun"
     assert beside.is_file() and spawned[0]["executable_path"] == str(beside)
-    assert (out / "coverage.png").is_file()
+    assert (out / COVERAGE_FILE).is_file()
 
 
 def test_rerun_spawn_without_a_viewer_fails_in_one_line_before_any_folder(
@@ -181,7 +182,7 @@ def test_rerun_spawn_without_a_display_saves_the_recording_and_the_coverage(
     out = tmp_path / "run"
     code, _, err = _cli(_explore_spawn(out, "--rerun", "spawn"), capsys)
     assert code == 0 and "no display here" in err
-    assert (out / "recording.rrd").is_file() and (out / "coverage.png").is_file()
+    assert (out / RECORDING_FILE).is_file() and (out / COVERAGE_FILE).is_file()
 
 
 def test_the_coverage_figure_is_drawn_before_the_recording_is_closed(tmp_path, monkeypatch, capsys):
@@ -196,7 +197,7 @@ def test_the_coverage_figure_is_drawn_before_the_recording_is_closed(tmp_path, m
     out = tmp_path / "run"
     code, _, err = _cli(_explore_spawn(out, "--rerun", "save"), capsys)
     assert code != 0 and "interrupted" in err
-    assert (out / "coverage.png").is_file()
+    assert (out / COVERAGE_FILE).is_file()
 
 
 @pytest.mark.parametrize(

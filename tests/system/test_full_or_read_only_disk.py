@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 from explore.cli import main
+from explore.runs.layout import HISTORY_FILE
 from explore.runs.repair import survey
 
 DRIVER = Path(__file__).with_name("disk_faults.py")
@@ -46,7 +47,7 @@ def report(tmp_path_factory) -> dict:
                  "--no-progress", "--rerun", "off"]) == 0  # fmt: skip
     damaged = root / "damaged"
     shutil.copytree(run, damaged)
-    hist = damaged / "history.bin"
+    hist = damaged / HISTORY_FILE
     data = bytearray(hist.read_bytes())
     data[survey(damaged).good[1].start + 100] ^= 0xFF  # inside episode 1: salvage has work
     hist.write_bytes(bytes(data))

@@ -17,6 +17,7 @@ import os
 import numpy as np
 import pytest
 
+from explore.runs.layout import RUN_FILE
 from explore.runs.store import read_history
 from sim.standin.owner import Owner, ServedRig, read_saved
 from sim.standin.truth import arena_error_mm, camera_errors, joint_errors, read_hidden
@@ -78,7 +79,7 @@ def test_the_guide_calibrates_a_rig_never_seen_and_explores_with_it(bus, tmp_pat
     assert len(history.records) == EPISODES
     tracked = [bool(np.isfinite(r.ball).all()) for r in history.records]
     assert all(tracked), tracked  # the camera saw the ball after every episode
-    kinds = {i["kind"] for i in json.loads((run / "run.json").read_text())["inputs"]}
+    kinds = {i["kind"] for i in json.loads((run / RUN_FILE).read_text())["inputs"]}
     assert kinds == {"joints", "camera", "arena"}  # the run used the three calibrations
     lower, upper = np.asarray(joints["lower"]), np.asarray(joints["upper"])
     for r in history.records:  # every target inside the calibrated limits

@@ -30,6 +30,7 @@ from explore.rigs.ball import TwinSensor
 from explore.rigs.clock import TwinClock
 from explore.rigs.rig import Rig, RigConfig
 from explore.runs.config import RunConfig
+from explore.runs.layout import FAULTS_FILE
 from explore.runs.open_run import open_run
 from explore.runs.store import RunStore
 from robot.arm import RecoveryPolicy
@@ -121,7 +122,7 @@ def test_an_adapter_that_stays_unplugged_stops_the_run_which_resumes_once_it_is_
             run.explore()
         assert _history(tmp_path / "run") == [0, 1, 2, 3, 4]
         assert not any(emulator.torque_states().values())
-        faults = json.loads((tmp_path / "run" / "faults.json").read_text())  # both sessions
+        faults = json.loads((tmp_path / "run" / FAULTS_FILE).read_text())  # both sessions
         assert faults["sessions"] == 2 and faults["totals"]["stops_after_link_loss"] == 1
 
 

@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from vision.camera import CameraError
+from vision.camera import CameraError, EndOfStream
 from vision.file_camera import FileCamera
 
 
@@ -30,7 +30,7 @@ def test_folder_replays_in_order_then_ends(folder):
     with FileCamera(folder, fps=10.0) as cam:
         assert len(cam) == 5
         frames = [cam.read() for _ in range(5)]
-        with pytest.raises(CameraError, match="end of replay"):
+        with pytest.raises(EndOfStream, match="end of replay"):
             cam.read()
     for i, f in enumerate(frames):
         assert f.image.shape == (48, 64, 3) and f.image.dtype == np.uint8
@@ -54,7 +54,7 @@ def test_video_replay(tmp_path):
     with FileCamera(path) as cam:
         assert cam.fps == pytest.approx(25.0)
         frames = [cam.read() for _ in range(6)]
-        with pytest.raises(CameraError, match="end of replay"):
+        with pytest.raises(EndOfStream, match="end of replay"):
             cam.read()
     means = [f.image.mean() for f in frames]
     assert means == sorted(means)  # the frames come back in order (JPEG: approximately equal)

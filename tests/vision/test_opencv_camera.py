@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 import pytest
 
-from vision.camera import CameraError
+from vision.camera import CameraError, EndOfStream
 from vision.opencv_camera import OpenCVCamera
 
 
@@ -37,7 +37,7 @@ def test_video_file_frames_then_end(tmp_path, caplog):
         assert cam.settings_warnings == ["width 320 requested, frames are 64 px wide"]
         assert "ignored a setting" in caplog.text
         frames = []
-        with pytest.raises(CameraError, match="ended"):
+        with pytest.raises(EndOfStream, match="ended"):
             for _ in range(100):
                 frames.append(cam.read())
     assert 1 <= len(frames) <= 10

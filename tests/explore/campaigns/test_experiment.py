@@ -7,6 +7,7 @@ import csv
 import pytest
 
 from explore.cli import main
+from explore.runs.layout import HISTORY_FILE, METRICS_FILE, RUN_FILE, TRIAL_FILE
 
 
 def _summary(out):
@@ -29,7 +30,7 @@ def test_tiny_campaign_writes_summary_and_skips_finished_runs(tmp_path, capsys):
         "campaign_coverage.png", "summary.md", "summary.html"
     }  # fmt: skip
     assert "Welch p vs rpe" in (report / "summary.md").read_text()
-    hist = out / "rge-efr" / "seed-0" / "history.bin"
+    hist = out / "rge-efr" / "seed-0" / HISTORY_FILE
     stamp = hist.stat().st_mtime_ns, hist.stat().st_size
     assert main(args) == 0  # finished: skipped
     assert (hist.stat().st_mtime_ns, hist.stat().st_size) == stamp
@@ -49,7 +50,7 @@ def test_an_option_can_go_to_one_strategy_of_the_campaign(tmp_path, capsys):
     assert main(args) == 0
 
     def options(strategy: str) -> dict:
-        run = json.loads((out / strategy / "seed-0" / "run.json").read_text())
+        run = json.loads((out / strategy / "seed-0" / RUN_FILE).read_text())
         return run["config"]["strategy"]["options"]
 
     assert options("rpe") == {}
@@ -112,11 +113,11 @@ def test_a_campaign_killed_with_sigkill_leaves_no_worker_running(tmp_path):
     trials = [out / "rpe" / f"seed-{s}" for s in (0, 1)]
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and not all(
-        (t / "metrics.csv").exists() and len((t / "metrics.csv").read_text().splitlines()) > 3
+        (t / METRICS_FILE).exists() and len((t / METRICS_FILE).read_text().splitlines()) > 3
         for t in trials
     ):
         time.sleep(0.05)
-    workers = [json.loads((t / "trial.json").read_text())["pid"] for t in trials]
+    workers = [json.loads((t / TRIAL_FILE).read_text())["pid"] for t in trials]
     assert driver.pid not in workers and all(_alive(p) for p in workers)
     os.kill(driver.pid, signal.SIGKILL)
     driver.wait()
@@ -124,7 +125,7 @@ def test_a_campaign_killed_with_sigkill_leaves_no_worker_running(tmp_path):
     while time.monotonic() < deadline and any(_alive(p) for p in workers):
         time.sleep(0.05)
     assert not any(_alive(p) for p in workers), "a worker outlived its campaign"
-    left = [len((t / "metrics.csv").read_text().splitlines()) - 1 for t in trials]
+    left = [len((t / METRICS_FILE).read_text().splitlines()) - 1 for t in trials]
     assert all(0 < n < 80 for n in left), left
     assert main(args) == 0  # resumes both
     rows = _summary(out)
@@ -132,8 +133,8 @@ def test_a_campaign_killed_with_sigkill_leaves_no_worker_running(tmp_path):
 
 
 def test_seeds_are_a_count_a_list_or_a_range_as_the_issue_writes_them():
-    from explore.cli import CliError
     from explore.cli.experiment import parse_seeds
+    from robot.cli_errors import CliError
 
     assert parse_seeds("8") == list(range(8))  # `--seeds 8`: eight seeds
     assert parse_seeds("0,2,5") == [0, 2, 5]

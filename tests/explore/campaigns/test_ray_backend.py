@@ -29,6 +29,7 @@ from explore.campaigns.plan import campaign_id, run_campaign
 from explore.campaigns.ray_backend import LOCAL_OBJECT_STORE_BYTES, check_rig_resources, run_ray
 from explore.campaigns.trial import CampaignError, Trial, run_trial, trial_resources
 from explore.cli import main
+from explore.runs.layout import HISTORY_FILE, METRICS_FILE, TRIAL_FILE
 
 EPISODES = 20
 STRATEGIES = ["rpe", "rge-efr"]
@@ -67,7 +68,7 @@ def local_reference(tmp_path_factory) -> Path:
 
 
 def _metrics(run_dir: Path) -> list[dict[str, str]]:
-    with open(run_dir / "metrics.csv", newline="") as f:
+    with open(run_dir / METRICS_FILE, newline="") as f:
         return list(csv.DictReader(f))
 
 
@@ -92,17 +93,17 @@ def test_ray_campaign_gives_the_local_backends_per_seed_results(cluster, local_r
             run = out / s / f"seed-{seed}"
             # every episode's cells, not just the last: the same runs
             assert _metrics(run) == _metrics(local_reference / s / f"seed-{seed}")
-    trial = (out / "rpe" / "seed-0" / "trial.json").read_text()
+    trial = (out / "rpe" / "seed-0" / TRIAL_FILE).read_text()
     assert f'"pid": {os.getpid()},' not in trial  # it ran in a Ray worker, not here
-    stamp = (out / "rpe" / "seed-0" / "history.bin").stat().st_mtime_ns
+    stamp = (out / "rpe" / "seed-0" / HISTORY_FILE).stat().st_mtime_ns
     assert main(_args(out)) == 0  # finished trials are not re-run
-    assert (out / "rpe" / "seed-0" / "history.bin").stat().st_mtime_ns == stamp
+    assert (out / "rpe" / "seed-0" / HISTORY_FILE).stat().st_mtime_ns == stamp
 
 
 def _wait_for_rows(run_dir: Path, n: int, timeout_s: float = 60.0) -> None:
     end = time.monotonic() + timeout_s
     while time.monotonic() < end:
-        path = run_dir / "metrics.csv"
+        path = run_dir / METRICS_FILE
         if path.exists() and len(path.read_text().splitlines()) > n:
             return
         time.sleep(0.02)
@@ -112,7 +113,7 @@ def _wait_for_rows(run_dir: Path, n: int, timeout_s: float = 60.0) -> None:
 def _kill_trial_worker(run_dir: Path, after_rows: int) -> None:
     """SIGKILL the process running the trial once the run holds ``after_rows`` episodes."""
     _wait_for_rows(run_dir, after_rows)
-    pid = json.loads((run_dir / "trial.json").read_text())["pid"]
+    pid = json.loads((run_dir / TRIAL_FILE).read_text())["pid"]
     assert pid != os.getpid()
     os.kill(pid, signal.SIGKILL)
 

@@ -17,6 +17,7 @@ import pytest
 from explore.cli import main
 from explore.export.episodes import ExportError
 from explore.export.lerobot import VIDEO_KEY, export_lerobot, run_names
+from explore.runs.layout import HISTORY_FILE
 from explore.runs.lock import run_lock
 from explore.runs.store import read_frames, read_history
 
@@ -252,12 +253,12 @@ def test_a_run_being_written_is_refused(runs, tmp_path, capsys):
 def test_a_damaged_history_is_refused_and_left_as_it_was(runs, tmp_path, capsys):
     run = tmp_path / "damaged"
     shutil.copytree(runs["no_video"], run)
-    data = bytearray((run / "history.bin").read_bytes())
+    data = bytearray((run / HISTORY_FILE).read_bytes())
     data[len(data) // 3] ^= 0xFF  # a bad record followed by good ones: corruption
-    (run / "history.bin").write_bytes(bytes(data))
+    (run / HISTORY_FILE).write_bytes(bytes(data))
     err = _one_line(["export", "lerobot", str(run), "--out", str(tmp_path / "o")], capsys)
     assert "corrupt" in err or "record" in err
-    assert (run / "history.bin").read_bytes() == bytes(data)
+    assert (run / HISTORY_FILE).read_bytes() == bytes(data)
     assert not (tmp_path / "o").exists() and not any(tmp_path.glob(".o.partial*"))
 
 

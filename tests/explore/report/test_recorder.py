@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import rerun.chunk as rrc
 
-from explore.cli import CliError, main
+from explore.cli import main
 from explore.cli.rerun_flags import add_rerun_arguments, make_recorder
 from explore.learner.goal_outcomes import goal_outcome_of, strategy_outcome_of
 from explore.report.recorder import (
@@ -28,8 +28,10 @@ from explore.report.recorder import (
 )
 from explore.rigs.arena import TWIN_ARENA
 from explore.runs.config import RunConfig, StrategyConfig
+from explore.runs.layout import METRICS_FILE, RECORDING_FILE
 from explore.runs.open_run import open_run
 from explore.runs.store import iter_history
+from robot.cli_errors import CliError
 
 N = 8
 # one line of ChunkStore.summary(): "{entity}  rows={n}  static={bool}  timelines=[...]  cols=[...]"
@@ -86,12 +88,12 @@ def explore_with_recorder(
 @pytest.fixture(scope="module")
 def recorded_run(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("rec") / "run"
-    explore_with_recorder(out, out / "recording.rrd")
+    explore_with_recorder(out, out / RECORDING_FILE)
     return out
 
 
 def test_recording_has_the_documented_entities_and_timelines(recorded_run):
-    rows, timelines, reader = read_rrd(recorded_run / "recording.rrd")
+    rows, timelines, reader = read_rrd(recorded_run / RECORDING_FILE)
     for entity in (
         *EPISODE_ENTITIES,
         *STRIDE_ENTITIES,
@@ -118,7 +120,7 @@ def test_recording_has_the_documented_entities_and_timelines(recorded_run):
 def test_cells_logged_match_the_run_metrics(recorded_run):
     from explore.runs.metrics import read_metrics
 
-    m = read_metrics(recorded_run / "metrics.csv")
+    m = read_metrics(recorded_run / METRICS_FILE)
     rec = Recorder("save", path=recorded_run / "check.rrd", scene=TWIN_ARENA)
     rec.prime(iter_history(recorded_run))
     rec.close()
@@ -155,7 +157,7 @@ def goal_run(tmp_path_factory) -> Path:
     """A goal-exploration run on the twin (3 random episodes, then 4 with goals), recorded
     with the running strategy's goal space."""
     out = tmp_path_factory.mktemp("goal") / "run"
-    explore_with_recorder(out, out / "recording.rrd", N_GOAL, GOAL_RUN, live_outcomes=True)
+    explore_with_recorder(out, out / RECORDING_FILE, N_GOAL, GOAL_RUN, live_outcomes=True)
     return out
 
 
@@ -164,7 +166,7 @@ def test_goal_exploration_logs_goal_and_reached_in_goal_space(goal_run):
     with_goal = [r for r in records if r.goal.size]
     assert len(with_goal) == N_GOAL - 3
     seen = [r for r in with_goal if np.all(np.isfinite(r.ball))]
-    rows, timelines, _ = read_rrd(goal_run / "recording.rrd")
+    rows, timelines, _ = read_rrd(goal_run / RECORDING_FILE)
     assert rows["goal/target"] == len(with_goal)
     for entity in ("goal/reached", "goal/miss", "goal/error"):
         assert rows[entity] == len(seen), entity
@@ -211,7 +213,7 @@ def test_make_recorder_numbers_files_on_resume_and_continues_counts(recorded_run
     assert rec.clock_s > 0
     rec.close()
     assert recording_paths(recorded_run)[:2] == [
-        recorded_run / "recording.rrd",
+        recorded_run / RECORDING_FILE,
         recorded_run / "recording-2.rrd",
     ]
     # a resumed session's file shares the run's recording id (the viewer merges them)
@@ -224,7 +226,7 @@ def test_replay_prints_the_viewer_command(recorded_run, capsys, monkeypatch):
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     assert main(["replay", str(recorded_run), "--print"]) == 0
     line = capsys.readouterr().out.strip().splitlines()[-1]
-    assert line.startswith("rerun ") and str((recorded_run / "recording.rrd").resolve()) in line
+    assert line.startswith("rerun ") and str((recorded_run / RECORDING_FILE).resolve()) in line
 
 
 def test_replay_writes_a_recording_when_the_run_has_none(recorded_run, tmp_path, capsys):
@@ -235,7 +237,7 @@ def test_replay_writes_a_recording_when_the_run_has_none(recorded_run, tmp_path,
     for name in ("run.json", "history.bin"):
         shutil.copy(recorded_run / name, bare / name)
     assert main(["replay", str(bare), "--print"]) == 0
-    rows, _, _ = read_rrd(bare / "recording.rrd")
+    rows, _, _ = read_rrd(bare / RECORDING_FILE)
     assert rows["arena/ball"] == N
 
 

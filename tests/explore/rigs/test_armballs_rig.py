@@ -14,6 +14,7 @@ import torch
 from explore.campaigns.trial import Trial, run_trial
 from explore.cli import main
 from explore.learner.presets import preset_options
+from explore.runs.layout import HISTORY_FILE, METRICS_FILE
 from explore.runs.metrics import read_metrics
 from explore.runs.store import RunStore, read_synced
 from sim.armballs.render import pixel_to_world
@@ -78,7 +79,7 @@ def test_every_strategy_runs_50_iterations_on_both_rigs(strategy, rig_name, mode
     elif strategy != "rge-online":
         assert {r.kind for r in later} <= {"explore", "exploit", "random"}
         assert sum(r.kind in ("explore", "exploit") for r in later) >= len(later) // 2
-    m = read_metrics(tmp_path / "r" / "metrics.csv")
+    m = read_metrics(tmp_path / "r" / METRICS_FILE)
     assert list(m["episode"]) == list(range(N)) and m["ball_cells"][-1] >= 1
 
 
@@ -182,7 +183,7 @@ def test_a_run_killed_with_sigkill_or_a_power_cut_resumes_to_the_same_history(
     assert main(["explore", *args, "--out", str(ref)]) == 0
     out = tmp_path / "killed"
     explore_killed_at(args, out, 600_000)
-    hist = out / "history.bin"
+    hist = out / HISTORY_FILE
     data = hist.read_bytes()
     synced = read_synced(out)
     assert synced is not None and 0 < synced <= len(data)
@@ -195,7 +196,7 @@ def test_a_run_killed_with_sigkill_or_a_power_cut_resumes_to_the_same_history(
         damaged = bytearray(data)
         end = min(len(data), synced + 12 + int.from_bytes(data[synced + 4 : synced + 8], "little"))
         damaged[synced:end] = bytes(end - synced)
-        (power_cut / "history.bin").write_bytes(bytes(damaged))
+        (power_cut / HISTORY_FILE).write_bytes(bytes(damaged))
     with RunStore.open(power_cut) as cut:  # cut at the first record the disk lost
         assert len(cut) <= done and cut.history_path.stat().st_size == synced
     a = RunStore.open(ref).records
@@ -203,7 +204,7 @@ def test_a_run_killed_with_sigkill_or_a_power_cut_resumes_to_the_same_history(
         assert main(["explore", "--resume", str(run), "--rerun", "off", "--no-progress"]) == 0
         b = RunStore.open(run).records
         assert len(a) == len(b) and all(x.equals(y) for x, y in zip(a, b, strict=True))
-        assert list(read_metrics(run / "metrics.csv")["episode"]) == list(range(4000))
+        assert list(read_metrics(run / METRICS_FILE)["episode"]) == list(range(4000))
 
 
 def test_records_hold_bgr_images_showing_the_balls_where_the_record_says(tmp_path):
@@ -230,7 +231,7 @@ def test_the_metric_is_the_published_exploration_ratio_on_the_square(tmp_path):
     from explore.runs.metrics import checkpoints, exploration_ratio
 
     recs = run(tmp_path / "r", "rpe", {}, "armballs", 400)
-    m = read_metrics(tmp_path / "r" / "metrics.csv")
+    m = read_metrics(tmp_path / "r" / METRICS_FILE)
     finals = np.array([r.ball for r in recs])
     # the published binning: 30 x 30 cells of [-1, 1]^2 (points on an edge go to the upper cell)
     cells = {tuple(np.floor((p + 1) / 2 * 30).astype(int).clip(0, 29)) for p in finals}

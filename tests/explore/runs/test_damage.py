@@ -14,8 +14,16 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from explore.cli import main
+from explore.runs.layout import (
+    DAMAGED_FILE,
+    HEADER,
+    HISTORY_FILE,
+    KEPT_FILE,
+    SALVAGE_DIR,
+    SALVAGE_REPORT,
+)
 from explore.runs.repair import iter_records, salvage, survey
-from explore.runs.store import HEADER, RunStore, RunStoreError, read_history
+from explore.runs.store import RunStore, RunStoreError, read_history
 
 N = 10
 
@@ -48,7 +56,7 @@ def test_a_flipped_bit_in_a_length_field_is_damage_and_no_good_record_is_cut(run
     """The issue's case: bit 4 of byte 6 of record 3's frame (its u32 length) makes the
     record seem to run past the end of the file, as a torn tail would. Before, resume cut
     records 3..9 for good and export/report quietly used 3 episodes."""
-    hist = run / "history.bin"
+    hist = run / HISTORY_FILE
     at = _starts(run)[3] + 6
     damaged = bytearray(hist.read_bytes())
     damaged[at] ^= 1 << 4
@@ -69,12 +77,12 @@ def test_a_flipped_bit_in_a_length_field_is_damage_and_no_good_record_is_cut(run
     assert ergo("runs", "check", str(run)) == 1
     assert "good records after it: 6 (episodes 4..9)" in capsys.readouterr().out
     assert ergo("runs", "salvage", str(run)) == 0
-    kept = [r.episode for r in iter_records(run / "salvage" / "1" / "kept.bin")]
+    kept = [r.episode for r in iter_records(run / SALVAGE_DIR / "1" / KEPT_FILE)]
     assert kept == [4, 5, 6, 7, 8, 9] and len(RunStore.read(run).records) == 3
 
 
 def test_a_damaged_last_record_is_moved_aside_not_deleted(run, capsys):
-    hist = run / "history.bin"
+    hist = run / HISTORY_FILE
     data = hist.read_bytes()
     last = _starts(run)[-1]
     hist.write_bytes(data[:-100])  # a crash mid-append: the last record torn
@@ -82,10 +90,10 @@ def test_a_damaged_last_record_is_moved_aside_not_deleted(run, capsys):
     assert "a torn tail of" in capsys.readouterr().out
     assert ergo("explore", "--resume", str(run)) == 0
     err = capsys.readouterr().err
-    folder = run / "salvage" / "1"
+    folder = run / SALVAGE_DIR / "1"
     assert f"moved a torn last record ({len(data) - 100 - last} bytes" in err and str(folder) in err
-    assert (folder / "damaged.bin").read_bytes() == data[last:-100]  # kept, byte for byte
-    report = json.loads((folder / "salvage.json").read_text())
+    assert (folder / DAMAGED_FILE).read_bytes() == data[last:-100]  # kept, byte for byte
+    report = json.loads((folder / SALVAGE_REPORT).read_text())
     assert (
         report["kept_in_history"] == N - 1
         and report["damaged_bytes_moved"] == len(data) - 100 - last
@@ -96,7 +104,7 @@ def test_a_damaged_last_record_is_moved_aside_not_deleted(run, capsys):
 def test_readers_say_what_they_leave_out(run, caplog, capsys):
     """A torn tail left in place (a reader never repairs): ``read_history`` counts its bytes,
     which export and report name; ``runs check`` names it too."""
-    hist = run / "history.bin"
+    hist = run / HISTORY_FILE
     data = hist.read_bytes()
     last = _starts(run)[-1]
     hist.write_bytes(data[:-7])
@@ -125,7 +133,7 @@ def small(tmp_path_factory) -> tuple[bytes, list[tuple[int, int]], Path]:
     """A 5-episode run built once: (history bytes, (start, end) of each record frame, run)."""
     out = tmp_path_factory.mktemp("small") / "run"
     assert ergo("explore", "--episodes", "5", "--seed", "1", "--out", str(out)) == 0
-    data = (out / "history.bin").read_bytes()
+    data = (out / HISTORY_FILE).read_bytes()
     pieces = [(p.start, p.end) for p in survey(out).good]
     return data, pieces, out
 
@@ -158,7 +166,7 @@ def _resume_keeps_every_undamaged_record(
     a resume) keeps each ``intact`` record in the history or moves it aside, and every byte of
     the damaged file is in the history or under ``RUN/salvage/``."""
     shutil.copytree(source, run)
-    (run / "history.bin").write_bytes(damaged)
+    (run / HISTORY_FILE).write_bytes(damaged)
 
     # a reader says what it leaves out, or refuses in one line
     try:
@@ -178,7 +186,9 @@ def _resume_keeps_every_undamaged_record(
     store.close()
     kept = [r.to_bytes() for r in store.records]
     aside = [
-        r.to_bytes() for f in sorted((run / "salvage").glob("*/kept.bin")) for r in iter_records(f)
+        r.to_bytes()
+        for f in sorted((run / SALVAGE_DIR).glob(f"*/{KEPT_FILE}"))
+        for r in iter_records(f)
     ]
     for i in intact:  # still in the history, or moved aside: never deleted
         assert originals[i] in kept or originals[i] in aside, (i, len(kept), len(aside))
@@ -186,14 +196,14 @@ def _resume_keeps_every_undamaged_record(
     moved = (
         sum(
             (f / name).stat().st_size
-            for f in (run / "salvage").glob("*")
-            for name in ("kept.bin", "damaged.bin")
+            for f in (run / SALVAGE_DIR).glob("*")
+            for name in (KEPT_FILE, DAMAGED_FILE)
             if (f / name).exists()
         )
-        if (run / "salvage").exists()
+        if (run / SALVAGE_DIR).exists()
         else 0
     )
-    assert (run / "history.bin").stat().st_size + moved == len(damaged)
+    assert (run / HISTORY_FILE).stat().st_size + moved == len(damaged)
 
 
 def _frame_ends(originals: list[bytes]) -> list[int]:

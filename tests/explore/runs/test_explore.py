@@ -9,6 +9,7 @@ import pytest
 
 from explore.cli import main
 from explore.rigs.arena import TWIN_ARENA
+from explore.runs.layout import COVERAGE_FILE, FAULTS_FILE, HISTORY_FILE, METRICS_FILE
 from explore.runs.metrics import CellCounter, read_metrics
 from explore.runs.store import RunStore
 
@@ -42,11 +43,11 @@ def test_rpe_run_is_deterministic_for_a_seed(reference_run, tmp_path):
 
 
 def test_a_run_writes_history_metrics_and_a_coverage_curve(reference_run):
-    assert (reference_run / "history.bin").stat().st_size > 0
-    m = read_metrics(reference_run / "metrics.csv")
+    assert (reference_run / HISTORY_FILE).stat().st_size > 0
+    m = read_metrics(reference_run / METRICS_FILE)
     assert list(m["episode"]) == list(range(N))
     assert np.all(np.diff(m["ball_cells"]) >= 0) and m["ball_cells"][-1] >= 1
-    assert (reference_run / "coverage.png").stat().st_size > 1000
+    assert (reference_run / COVERAGE_FILE).stat().st_size > 1000
     rec = RunStore.open(reference_run).records[0]
     assert rec.image.shape == (64, 64, 3) and rec.image.dtype == np.uint8
     assert rec.targets.shape == (40, 6) and rec.end_effector.shape == (40, 3)
@@ -62,7 +63,7 @@ def test_a_run_killed_with_sigkill_resumes_to_the_same_history(
     assert 0 < done < N, f"kill landed outside the run ({done} episodes)"
     assert ergo("explore", "--resume", str(out)) == 0
     assert histories_equal(reference_run, out)
-    m = read_metrics(out / "metrics.csv")
+    m = read_metrics(out / METRICS_FILE)
     assert list(m["episode"]) == list(range(N))  # metrics rebuilt, nothing duplicated
 
 
@@ -220,8 +221,8 @@ def test_fault_counters_are_summed_per_session_and_never_mask_the_runs_error(tmp
     assert add_fault_counts(tmp_path, {"bus_retries": 2, "recovery_s": 0.5})["bus_retries"] == 2
     totals = add_fault_counts(tmp_path, {"bus_retries": 3, "links_lost": 1})
     assert totals == {"bus_retries": 5.0, "recovery_s": 0.5, "links_lost": 1.0}
-    assert json.loads((tmp_path / "faults.json").read_text())["sessions"] == 2
-    (tmp_path / "faults.json").write_text("{not json")  # a damaged file is kept aside
+    assert json.loads((tmp_path / FAULTS_FILE).read_text())["sessions"] == 2
+    (tmp_path / FAULTS_FILE).write_text("{not json")  # a damaged file is kept aside
     assert add_fault_counts(tmp_path, {"bus_retries": 1}) == {"bus_retries": 1.0}
     assert (tmp_path / "faults.json.bad").read_text() == "{not json"
 
@@ -241,4 +242,4 @@ def test_fault_counters_are_summed_per_session_and_never_mask_the_runs_error(tmp
         pytest.raises(ValueError, match="the strategy failed"),
     ):
         run.explore()
-    assert not (tmp_path / "run" / "faults.json").exists()
+    assert not (tmp_path / "run" / FAULTS_FILE).exists()

@@ -16,6 +16,15 @@ from pathlib import Path
 import pytest
 
 from explore.cli import main
+from explore.runs.layout import (
+    FAULTS_FILE,
+    FRAMES_DIR,
+    HISTORY_FILE,
+    METRICS_FILE,
+    RUN_FILE,
+    SALVAGE_DIR,
+    WRITER_LOCK_FILE,
+)
 
 VICTIM = b"precious data\n" * 100
 
@@ -54,25 +63,33 @@ def _one_line(capsys) -> str:
     return lines[0]
 
 
-@pytest.mark.parametrize("link", ["symbolic", "hard"])
-@pytest.mark.parametrize(
-    "name", ["writer.lock", "history.bin", "metrics.csv", "faults.json", "run.json.tmp"]
-)
-def test_a_linked_file_in_a_received_run_is_refused_and_left_alone(run, victim, capsys, name, link):
-    target = run / name
-    if name == "history.bin":  # the victim holds the history's bytes: a valid run to resume
-        victim.write_bytes(target.read_bytes())
-    before = victim.read_bytes()
-    target.unlink(missing_ok=True)
+def _resume_through_link(run: Path, target: Path, victim: Path, link: str, capsys) -> str:
+    """Make ``target`` (a file of ``run``) a ``link`` ("symbolic" or "hard") to ``victim``,
+    resume the run (refused: exit code 2) and return its one error line."""
     if link == "symbolic":
         target.symlink_to(victim)
     else:
         os.link(victim, target)
     assert ergo("explore", "--resume", str(run), "--episodes", "5") == 2
-    line = _one_line(capsys)
+    return _one_line(capsys)
+
+
+@pytest.mark.parametrize("link", ["symbolic", "hard"])
+@pytest.mark.parametrize(
+    # run.json.tmp: an older version's temporary file, a name the writer still refuses as a link
+    "name",
+    [WRITER_LOCK_FILE, HISTORY_FILE, METRICS_FILE, FAULTS_FILE, f"{RUN_FILE}.tmp"],
+)
+def test_a_linked_file_in_a_received_run_is_refused_and_left_alone(run, victim, capsys, name, link):
+    target = run / name
+    if name == HISTORY_FILE:  # the victim holds the history's bytes: a valid run to resume
+        victim.write_bytes(target.read_bytes())
+    before = victim.read_bytes()
+    target.unlink(missing_ok=True)
+    line = _resume_through_link(run, target, victim, link, capsys)
     assert name in line and ("symbolic link" in line or "hard link" in line), line
     assert victim.read_bytes() == before
-    if name in ("writer.lock", "history.bin"):
+    if name in (WRITER_LOCK_FILE, HISTORY_FILE):
         assert ergo("runs", "salvage", str(run)) == 2
         assert name in _one_line(capsys) and victim.read_bytes() == before
 
@@ -81,24 +98,19 @@ def test_a_linked_file_in_a_received_run_is_refused_and_left_alone(run, victim, 
 def test_a_linked_frames_file_is_refused_and_left_alone(run, victim, capsys, link):
     """The camera frames the writer would write next (``frames/episode-000003.npz``) linked to
     a file elsewhere."""
-    target = run / "frames" / "episode-000003.npz"
+    target = run / FRAMES_DIR / "episode-000003.npz"
     target.parent.mkdir()
-    if link == "symbolic":
-        target.symlink_to(victim)
-    else:
-        os.link(victim, target)
-    assert ergo("explore", "--resume", str(run), "--episodes", "5") == 2
-    line = _one_line(capsys)
+    line = _resume_through_link(run, target, victim, link, capsys)
     assert "episode-000003.npz" in line and f"{link} link" in line, line
     assert victim.read_bytes() == VICTIM
 
 
 def test_a_salvage_folder_linked_elsewhere_is_refused(run, tmp_path, capsys):
-    hist = run / "history.bin"
+    hist = run / HISTORY_FILE
     hist.write_bytes(hist.read_bytes()[:-50] + b"x" * 10)  # damaged: salvage has work
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
-    (run / "salvage").symlink_to(elsewhere)
+    (run / SALVAGE_DIR).symlink_to(elsewhere)
     assert ergo("runs", "salvage", str(run)) == 2
     assert "salvage" in _one_line(capsys) and not any(elsewhere.iterdir())
 
@@ -137,9 +149,9 @@ def test_two_exports_to_one_out_never_remove_each_other(reference, tmp_path):
 
 
 def test_runs_check_does_not_call_an_invalid_run_json_resumable(run, capsys):
-    meta = json.loads((run / "run.json").read_text())
+    meta = json.loads((run / RUN_FILE).read_text())
     meta["config"]["seed"] = "abc"
-    (run / "run.json").write_text(json.dumps(meta))
+    (run / RUN_FILE).write_text(json.dumps(meta))
     assert ergo("runs", "check", str(run)) == 1
     out = capsys.readouterr().out
     assert "ok: resumable" not in out and "not resumable: run.json" in out and "seed" in out

@@ -15,6 +15,7 @@ from calibration.joints import JointCalibration
 from explore.rigs.rig import RigConfig, make_rig
 from explore.runs.config import RunConfig, StrategyConfig
 from explore.runs.inputs import ALLOW_FLAG, InputsChanged, check_inputs, record_inputs
+from explore.runs.layout import RUN_FILE
 from explore.runs.open_run import open_run
 from explore.runs.store import RunStore
 from robot.spec import ergo_jr_spec
@@ -44,7 +45,7 @@ def test_run_json_records_each_calibration_file_with_its_hash(tmp_path):
     joints_path = store.save("joints", "bench", joints())
     config = physical()
     run = new_store(tmp_path, config)
-    recorded = json.loads((run.path / "run.json").read_text())["inputs"]
+    recorded = json.loads((run.path / RUN_FILE).read_text())["inputs"]
     assert recorded == [
         {
             "kind": "joints",
@@ -59,13 +60,13 @@ def test_a_resume_after_a_recalibration_is_refused_naming_the_file_and_the_overr
     path = store.save("joints", "bench", joints(1.0))
     config = physical()
     run = new_store(tmp_path, config)
-    before = (run.path / "run.json").read_text()
+    before = (run.path / RUN_FILE).read_text()
     store.save("joints", "bench", joints(0.5))  # recalibrated
     with pytest.raises(InputsChanged) as caught:
         check_inputs(run, config)
     message = str(caught.value)
     assert f"joints {path.resolve()} changed (sha256 " in message and ALLOW_FLAG in message
-    assert "\n" not in message and (run.path / "run.json").read_text() == before
+    assert "\n" not in message and (run.path / RUN_FILE).read_text() == before
     # a calibration made after the run started is a change too
     store.save("joints", "bench", joints(1.0))
     arena = store.calibration_path("arena", "bench")
@@ -78,7 +79,7 @@ def test_a_resume_after_a_recalibration_is_refused_naming_the_file_and_the_overr
     store.save("joints", "bench", joints(0.5))
     note = check_inputs(run, config, allow_changed=True)
     assert note and "changed input files" in note
-    meta = json.loads((run.path / "run.json").read_text())
+    meta = json.loads((run.path / RUN_FILE).read_text())
     assert meta["inputs"][0]["sha256"] == store.file_sha256(path)
     assert meta["inputs_before"][0]["until_episode"] == 0
     assert check_inputs(run, config) is None
@@ -106,10 +107,10 @@ def test_an_older_run_json_without_the_record_resumes_and_gets_one(tmp_path):
     store.save("joints", "bench", joints())
     config = physical()
     run = RunStore.create(tmp_path / "run", config.to_dict())  # as before the record existed
-    assert "inputs" not in json.loads((run.path / "run.json").read_text())
+    assert "inputs" not in json.loads((run.path / RUN_FILE).read_text())
     note = check_inputs(run, config)
     assert note and "no record of its input files" in note
-    assert len(json.loads((run.path / "run.json").read_text())["inputs"]) == 1
+    assert len(json.loads((run.path / RUN_FILE).read_text())["inputs"]) == 1
     assert check_inputs(run, config) is None
 
 
@@ -119,7 +120,7 @@ def test_open_run_records_and_checks_the_inputs(tmp_path):
     config = physical()
     path = tmp_path / "run"
     open_run(path, config, mode="new").close()
-    assert json.loads((path / "run.json").read_text())["inputs"][0]["kind"] == "joints"
+    assert json.loads((path / RUN_FILE).read_text())["inputs"][0]["kind"] == "joints"
     store.save("joints", "bench", joints(0.7))
     with pytest.raises(InputsChanged, match=ALLOW_FLAG):
         open_run(path, mode="resume")

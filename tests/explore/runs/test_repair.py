@@ -13,9 +13,17 @@ from pathlib import Path
 import pytest
 
 from explore.cli import main
+from explore.runs.layout import (
+    DAMAGED_FILE,
+    HEADER,
+    HISTORY_FILE,
+    KEPT_FILE,
+    SALVAGE_DIR,
+    SALVAGE_REPORT,
+)
 from explore.runs.lock import run_lock
 from explore.runs.repair import iter_records, survey
-from explore.runs.store import HEADER, RunStore
+from explore.runs.store import RunStore
 
 N = 10
 
@@ -62,7 +70,7 @@ def test_a_healthy_run_checks_ok(reference, capsys):
 def test_a_flipped_byte_is_salvaged_losslessly_and_the_resumed_run_is_the_uninterrupted_one(
     run, reference, capsys
 ):
-    hist = run / "history.bin"
+    hist = run / HISTORY_FILE
     original = hist.read_bytes()
     starts = _offsets(run)
     at = starts[4] + HEADER.size + 100  # inside episode 4's payload
@@ -85,18 +93,18 @@ def test_a_flipped_byte_is_salvaged_losslessly_and_the_resumed_run_is_the_uninte
     line = capsys.readouterr().out
     assert "kept episodes 0..3 (4)" in line and "5 good record(s)" in line
     assert f"resume with: ergo explore --resume {run}" in line
-    folder = run / "salvage" / "1"
-    report = json.loads((folder / "salvage.json").read_text())
+    folder = run / SALVAGE_DIR / "1"
+    report = json.loads((folder / SALVAGE_REPORT).read_text())
     assert report["kept_in_history"] == 4 and report["good_records_moved"] == 5
-    files = {"history.bin": hist.read_bytes(), "kept.bin": (folder / "kept.bin").read_bytes(),
-             "damaged.bin": (folder / "damaged.bin").read_bytes()}  # fmt: skip
+    files = {HISTORY_FILE: hist.read_bytes(), KEPT_FILE: (folder / KEPT_FILE).read_bytes(),
+             DAMAGED_FILE: (folder / DAMAGED_FILE).read_bytes()}  # fmt: skip
     rebuilt = b"".join(files[p["file"]][p["at"] : p["at"] + p["end"] - p["start"]]
                        for p in report["pieces"])  # fmt: skip
     assert rebuilt == bytes(damaged)  # every byte is somewhere: nothing was deleted
-    assert [r.episode for r in iter_records(folder / "kept.bin")] == [5, 6, 7, 8, 9]
+    assert [r.episode for r in iter_records(folder / KEPT_FILE)] == [5, 6, 7, 8, 9]
     damaged_span = [p for p in report["pieces"] if p["kind"] == "damaged"]
     assert [(p["start"], p["end"]) for p in damaged_span] == [(starts[4], starts[5])]
-    assert len(files["damaged.bin"]) == report["damaged_bytes_moved"] == starts[5] - starts[4]
+    assert len(files[DAMAGED_FILE]) == report["damaged_bytes_moved"] == starts[5] - starts[4]
 
     assert ergo("runs", "check", str(run)) == 0  # resumable now (6 short of what it had)
     assert "6 episode(s) short" in capsys.readouterr().out
@@ -106,7 +114,7 @@ def test_a_flipped_byte_is_salvaged_losslessly_and_the_resumed_run_is_the_uninte
 
 
 def test_duplicated_episodes_of_two_writers_are_moved_aside(run, capsys):
-    hist = run / "history.bin"
+    hist = run / HISTORY_FILE
     data = hist.read_bytes()
     starts = _offsets(run)
     hist.write_bytes(data + data[starts[7] :])  # episodes 7..9 appended twice
@@ -125,7 +133,7 @@ def test_duplicated_episodes_of_two_writers_are_moved_aside(run, capsys):
 def test_a_history_that_lost_episodes_is_rerun_with_a_line_saying_how_many(
     how, run, reference, capsys
 ):
-    hist = run / "history.bin"
+    hist = run / HISTORY_FILE
     if how == "cut short":
         hist.write_bytes(hist.read_bytes()[: _offsets(run)[6]])
     elif how == "emptied":
@@ -142,10 +150,10 @@ def test_a_history_that_lost_episodes_is_rerun_with_a_line_saying_how_many(
 
 
 def test_salvage_is_refused_while_a_writer_holds_the_run(run, capsys):
-    hist = run / "history.bin"
+    hist = run / HISTORY_FILE
     hist.write_bytes(hist.read_bytes()[:-1] + b"\0" + b"junk" * 10)
     before = hist.read_bytes()
     with run_lock(run):
         assert ergo("runs", "salvage", str(run)) == 2
     assert "being written by another process" in capsys.readouterr().err
-    assert hist.read_bytes() == before and not (run / "salvage").exists()
+    assert hist.read_bytes() == before and not (run / SALVAGE_DIR).exists()

@@ -8,6 +8,7 @@ import os
 import numpy as np
 import pytest
 
+from explore.runs.layout import HISTORY_FILE, RUN_FILE
 from explore.runs.record import EpisodeRecord, RecordError
 from explore.runs.store import RunStore, RunStoreError
 
@@ -56,7 +57,7 @@ def test_a_torn_last_record_is_cut_and_the_rest_kept(tmp_path, cut):
     with RunStore.create(tmp_path / "run", {}) as s:
         for k in range(3):
             s.append(make_record(k))
-    hist = tmp_path / "run" / "history.bin"
+    hist = tmp_path / "run" / HISTORY_FILE
     data = hist.read_bytes()
     hist.write_bytes(data[:-cut])
     s = RunStore.open(tmp_path / "run")
@@ -70,7 +71,7 @@ def test_corruption_in_the_middle_is_refused_and_nothing_is_written(tmp_path):
     with RunStore.create(tmp_path / "run", {}) as s:
         for k in range(3):
             s.append(make_record(k))
-    hist = tmp_path / "run" / "history.bin"
+    hist = tmp_path / "run" / HISTORY_FILE
     data = bytearray(hist.read_bytes())
     data[100] ^= 0xFF  # inside the first payload
     hist.write_bytes(bytes(data))
@@ -91,15 +92,15 @@ def test_foreign_old_and_broken_folders_get_one_line_errors(tmp_path):
     with pytest.raises(RunStoreError, match=r"no run\.json"):
         RunStore.open(tmp_path / "empty")
     (tmp_path / "foreign").mkdir()
-    (tmp_path / "foreign" / "run.json").write_text(json.dumps({"app": "other"}))
+    (tmp_path / "foreign" / RUN_FILE).write_text(json.dumps({"app": "other"}))
     with pytest.raises(RunStoreError, match="field 'app'"):
         RunStore.open(tmp_path / "foreign")
     (tmp_path / "old").mkdir()
-    (tmp_path / "old" / "run.json").write_text(json.dumps({"app": "ergo-explore", "format": 0}))
+    (tmp_path / "old" / RUN_FILE).write_text(json.dumps({"app": "ergo-explore", "format": 0}))
     with pytest.raises(RunStoreError, match="field 'format'"):
         RunStore.open(tmp_path / "old")
     (tmp_path / "bad").mkdir()
-    (tmp_path / "bad" / "run.json").write_text("{nope")
+    (tmp_path / "bad" / RUN_FILE).write_text("{nope")
     with pytest.raises(RunStoreError, match="not valid JSON"):
         RunStore.open(tmp_path / "bad")
 
@@ -127,7 +128,7 @@ def _unsynced_run(path, monkeypatch, n=6, synced_after=2):
         now[0] += 1.0 if k + 1 < synced_after else 0.0
     os.close(s._fd)  # a crash: no close(), no final sync
     s._fd = None
-    return (path / "history.bin").read_bytes(), store_module.read_synced(path)
+    return (path / HISTORY_FILE).read_bytes(), store_module.read_synced(path)
 
 
 def test_with_a_sync_interval_the_synced_length_follows_each_fsync_and_close(tmp_path, monkeypatch):
@@ -165,7 +166,7 @@ def test_a_power_cut_tail_past_the_synced_length_is_cut_and_resumes(tmp_path, mo
     else:  # record 3 never reached the disk, records 4 and 5 did
         a, b = spans[3]
         disk[a:b] = bytes(b - a)
-    (tmp_path / "run" / "history.bin").write_bytes(bytes(disk))
+    (tmp_path / "run" / HISTORY_FILE).write_bytes(bytes(disk))
     keep = {"lost": 2, "zeros": 2, "prefix": 3, "hole": 3}[damage]
     s = RunStore.open(tmp_path / "run")
     assert len(s) == keep and s.truncated_bytes == len(disk) - spans[keep][0]
@@ -174,7 +175,7 @@ def test_a_power_cut_tail_past_the_synced_length_is_cut_and_resumes(tmp_path, mo
     s.close()
     again = RunStore.open(tmp_path / "run")
     assert all(a.equals(make_record(k)) for k, a in enumerate(again)) and len(again) == 6
-    assert (tmp_path / "run" / "history.bin").read_bytes() == data
+    assert (tmp_path / "run" / HISTORY_FILE).read_bytes() == data
 
 
 def test_damage_before_the_synced_length_is_still_refused_as_corruption(tmp_path, monkeypatch):
@@ -183,10 +184,10 @@ def test_damage_before_the_synced_length_is_still_refused_as_corruption(tmp_path
     assert b <= synced  # synced: a power cut cannot have touched it
     disk = bytearray(data)
     disk[a:b] = bytes(b - a)
-    (tmp_path / "run" / "history.bin").write_bytes(bytes(disk))
+    (tmp_path / "run" / HISTORY_FILE).write_bytes(bytes(disk))
     with pytest.raises(RunStoreError, match=f"corrupt at byte {a}"):
         RunStore.open(tmp_path / "run")
-    assert (tmp_path / "run" / "history.bin").read_bytes() == bytes(disk)
+    assert (tmp_path / "run" / HISTORY_FILE).read_bytes() == bytes(disk)
 
 
 def test_a_store_with_a_sync_interval_opened_and_closed_without_appending_writes_nothing(tmp_path):

@@ -17,7 +17,6 @@ arms of the child and of the parent are built in one place.
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import sys
 import time
@@ -36,17 +35,11 @@ CONTRACT_MAX_STEP = 0.02
 # Reply slack per Dynamixel exchange over an emulator's pty, s: as tests/system/test_link_loss.py
 # (the emulator thread shares two busy cores; 20 ms let a ping fail its 3 tries once).
 EMULATED_DYNAMIXEL_LATENCY_S = 0.05
-# The CAN rig behind an SLCAN pty: the settings of tests/system/test_can_faults.py's pty case
-# (a 500 ms heartbeat and 50 ms for the TPDOs ride out a loaded machine).
-CAN_HEARTBEAT_MS = 500
+# The TPDO wait of the suite's CAN arm, s: the settings of tests/system/test_can_faults.py's
+# pty case (50 ms for the TPDOs ride out a loaded machine). Its heartbeat and SDO timeout on
+# the emulator's pty are the product's own for a pty (``robot.canopen.arm.PTY_SETTINGS``,
+# through ``config_for``); a real bus keeps the defaults.
 CAN_PDO_TIMEOUT_S = 0.05
-# SDO response timeout of the emulated drives, s: with tests/stress/load.py --busy 6 beside the
-# lead's campaign (2026-12-02) one SDO of the connect's configuration went unanswered for
-# canopen's default 0.3 s at load 6-8, and for 1.0 s at load 13-15 (the drives, the SLCAN
-# bridge and the notifier threads waiting for a CPU). A bound on the emulator's answers at
-# connect, not a safety bound (the heartbeat and the TPDO wait are unchanged); a real arm
-# keeps 0.3 s.
-EMULATED_CAN_SDO_TIMEOUT_S = 2.0
 
 # Half-width of the joint window the suite commands in, around the pose found at connect, rad
 # (5.7 degrees): every goal of the suite stays inside it and inside the Ergo Jr's limits. A
@@ -87,8 +80,8 @@ def make_arm(
             port ``address``; a pty gets the emulator's slack) or ``canopen`` (``CanArm`` on
             the CAN bus ``address``, e.g. ``slcan:/dev/pts/7``, ``socketcan:can0``).
         address: the port or bus (ignored for the twin).
-        emulated: an emulator answers (the Dynamixel bus then gets the emulator's slack, the
-            CAN drives a longer SDO timeout);
+        emulated: an emulator answers (the Dynamixel bus then gets the emulator's slack; the
+            CAN arm gets the pty's settings from its address);
             a real Dynamixel arm's baud rate is ``ERGO_TEST_BAUD`` (default 1 Mbit/s, the
             Poppy Ergo Jr's).
         spec: joints, limits, step bound (default ``contract_spec()``).
@@ -110,11 +103,9 @@ def make_arm(
         baud = DEFAULT_BAUD if emulated else int(os.environ.get("ERGO_TEST_BAUD", DEFAULT_BAUD))
         return DynamixelArm(address, baud=baud, spec=spec, latency_s=latency, recovery=recovery)
     if kind == "canopen":
-        from robot.canopen.arm import CanArm, CanArmConfig
+        from robot.canopen.arm import CanArm, config_for
 
-        config = CanArmConfig(heartbeat_ms=CAN_HEARTBEAT_MS, pdo_timeout_s=CAN_PDO_TIMEOUT_S)
-        if emulated:
-            config = dataclasses.replace(config, sdo_timeout_s=EMULATED_CAN_SDO_TIMEOUT_S)
+        config = config_for(address, pdo_timeout_s=CAN_PDO_TIMEOUT_S)  # a pty: PTY_SETTINGS
         return CanArm(address, spec=spec, config=config, recovery=recovery)
     raise ValueError(f"unknown arm kind {kind!r}: expected twin, dynamixel or canopen")
 
