@@ -36,8 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from explore.campaigns.plan import run_campaign
 from explore.campaigns.ray_backend import LOCAL_OBJECT_STORE_BYTES, import_ray
-from explore.campaigns.trial import TRIAL_FILE
-from explore.runs.layout import METRICS_FILE
+from explore.runs.layout import METRICS_FILE, TRIAL_FILE
 
 
 def trial_walls(out: Path, strategies: list[str], seeds: list[int]) -> list[float]:

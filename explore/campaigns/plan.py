@@ -77,8 +77,15 @@ def strategy_options(
 
 
 def campaign_id(out: Path) -> str:
-    """The id in ``out/campaign.json``, written (new) if the file is absent."""
-    from explore.runs.store import atomic_write_text
+    """The id in ``out/campaign.json``, written (new) if the file is absent.
+
+    Two processes starting one campaign at once agree on one id: the new file is written whole
+    under a name of this process's own, then linked into place only if no other process's is
+    there already (``os.link`` refuses an existing name); the loser reads the winner's id.
+    """
+    import os
+
+    from robot.files import atomic_write, temporary_name
 
     marker = out / CAMPAIGN_FILE
     found = read_json(marker).get("id")
@@ -87,7 +94,19 @@ def campaign_id(out: Path) -> str:
     out.mkdir(parents=True, exist_ok=True)
     new = uuid.uuid4().hex
     doc = {"app": "ergo-explore", "id": new, "created": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
-    atomic_write_text(marker, json.dumps(doc, indent=2))
+    own = temporary_name(marker.with_name(marker.name + ".new"))
+    atomic_write(own, json.dumps(doc, indent=2))
+    try:
+        os.link(own, marker)
+    except FileExistsError:
+        found = read_json(marker).get("id")
+        if not (isinstance(found, str) and found):
+            raise CampaignError(
+                f"{marker}: no campaign id in it (damaged?): move it away"
+            ) from None
+        return found
+    finally:
+        own.unlink(missing_ok=True)
     return new
 
 

@@ -27,6 +27,8 @@ from typing import TYPE_CHECKING, Any
 
 from explore.rigs import rig as rigs
 from explore.rigs.rig import RigConfig
+from explore.runs.layout import TRIAL_FILE
+from robot.files import atomic_write
 
 # explore.runs.config loads cv2 (vision.observation): imported where a trial is made, as before
 if TYPE_CHECKING:
@@ -35,7 +37,6 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 CAMPAIGN_FILE = "campaign.json"
-TRIAL_FILE = "trial.json"
 
 RIG_RESOURCE_PREFIX = "rig:"  # Ray custom resource of a physical rig: "rig:<rig_id>"
 
@@ -225,7 +226,7 @@ def run_trial(trial: Trial, progress: bool = False) -> TrialResult:
     from explore.runs.lock import RunLockedError
     from explore.runs.open_run import open_run
     from explore.runs.progress import ProgressBar
-    from explore.runs.store import RunStoreError, atomic_write_text
+    from explore.runs.store import RunStoreError
 
     _check_campaign(trial)
     check_rig_calibration(trial.rig)
@@ -245,7 +246,7 @@ def run_trial(trial: Trial, progress: bool = False) -> TrialResult:
         for note in run.notes():
             log.warning("%s", note)
         info = {"host": host, "pid": pid, "started": started, "resumed_from": run.resumed_from}
-        atomic_write_text(path / TRIAL_FILE, json.dumps(info))
+        atomic_write(path / TRIAL_FILE, json.dumps(info))
         label = f"{trial.strategy} s{trial.seed}"
         bar = ProgressBar(trial.episodes, run.resumed_from, label, 2.0, False) if progress else None
         try:
@@ -259,7 +260,7 @@ def run_trial(trial: Trial, progress: bool = False) -> TrialResult:
             trial.strategy, trial.seed, len(run.store), cells, run.resumed_from, host, pid,
             started, time.time(),
         )  # fmt: skip
-        atomic_write_text(path / TRIAL_FILE, json.dumps(dataclasses.asdict(result)))
+        atomic_write(path / TRIAL_FILE, json.dumps(dataclasses.asdict(result)))
         return result
 
 

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from explore.rigs.arena import R_MAX, R_MIN
+from robot.files import atomic_write
 from robot.spec import ergo_jr_spec
 from vision.observation import OBSERVATION_SIZE
 
@@ -102,10 +103,5 @@ def save_dataset(path: str | Path, data: dict[str, np.ndarray]) -> None:
     """Write a dataset as a compressed ``.npz`` (no pickle), atomically."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.stem + ".tmp.npz")
-    try:
-        np.savez_compressed(tmp, **data)
-        tmp.replace(path)
-    except BaseException:  # a full disk: no half-written file left, an older dataset kept
-        tmp.unlink(missing_ok=True)
-        raise
+    # a full disk: no half-written file left, an older dataset kept (robot.files)
+    atomic_write(path, lambda tmp: np.savez_compressed(tmp, **data))

@@ -1,2 +1,3 @@
-"""Runs: a run's configuration, its folder (config, append-only history, metrics), the episode
-on a rig, and the exploration loop that proposes, plays, stores and learns."""
+"""Runs: a run's configuration, its folder (``layout``: config, append-only history, metrics),
+and the exploration loop that proposes, plays (through the rig's episode player), stores and
+learns."""

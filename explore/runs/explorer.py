@@ -15,14 +15,14 @@ import numpy as np
 from explore.learner.strategies.base import Strategy
 from explore.rigs.episodes import EpisodeConfig, EpisodePlayer
 from explore.rigs.rig import Rig
+from explore.runs.layout import FAULTS_FILE
 from explore.runs.metrics import METRICS_FILE, MetricsLog
 from explore.runs.record import EpisodeRecord
 from explore.runs.store import RunStore, RunStoreError
+from robot.files import atomic_write
 from robot.signals import torque_off_on_signals
 
 log = logging.getLogger(__name__)
-
-FAULTS_FILE = "faults.json"  # the arm's fault and recovery counters, summed over sessions
 
 
 def add_fault_counts(run_path: Path, counts: dict[str, float]) -> dict[str, float]:
@@ -42,13 +42,8 @@ def add_fault_counts(run_path: Path, counts: dict[str, float]) -> dict[str, floa
         sessions = 0
     for k, v in counts.items():
         totals[k] = round(totals.get(k, 0.0) + float(v), 3)
-    tmp = path.with_name(FAULTS_FILE + ".tmp")
-    try:
-        tmp.write_text(json.dumps({"sessions": sessions + 1, "totals": totals}, indent=1))
-        tmp.replace(path)
-    except OSError:
-        tmp.unlink(missing_ok=True)  # a full disk: no half-written file left behind
-        raise
+    # a full disk: no half-written file left behind (robot.files)
+    atomic_write(path, json.dumps({"sessions": sessions + 1, "totals": totals}, indent=1))
     return totals
 
 

@@ -82,8 +82,6 @@ from robot.files import NOFOLLOW, atomic_write
 RUN_FORMAT = 1
 APP = "ergo-explore"
 _SYNCED = struct.Struct("<Q")  # history.synced: u64 little endian
-# ``explore/campaigns/plan.py`` writes its campaign files with ``atomic_write_text`` from here
-atomic_write_text = atomic_write
 
 
 class RunStoreError(RuntimeError):

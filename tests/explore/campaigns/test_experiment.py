@@ -180,3 +180,30 @@ def test_two_campaign_processes_on_one_campaign_say_what_happened(tmp_path):
     for seed in (0, 1):
         history = read_history(out / "rpe" / f"seed-{seed}")  # checks: no duplicate
         assert [r.episode for r in history.records] == list(range(25))
+
+
+def test_processes_starting_one_campaign_at_once_agree_on_its_id(tmp_path):
+    """Eight threads ask for the id of a campaign folder that has none, 20 times over: each
+    time all get the one id the folder's campaign.json holds (before: each could write its
+    own, and two ergo experiment on one folder then disagreed on whose runs they were)."""
+    import threading
+
+    from explore.campaigns.plan import campaign_id
+    from explore.campaigns.trial import CAMPAIGN_FILE, read_json
+
+    for k in range(20):
+        out = tmp_path / f"c{k}"
+        start = threading.Barrier(8)
+        ids: list[str] = []
+
+        def ask(out=out, start=start, ids=ids) -> None:
+            start.wait()
+            ids.append(campaign_id(out))
+
+        threads = [threading.Thread(target=ask) for _ in range(8)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        assert set(ids) == {read_json(out / CAMPAIGN_FILE)["id"]}
+        assert sorted(p.name for p in out.iterdir()) == [CAMPAIGN_FILE]  # no file left behind
