@@ -1,133 +1,64 @@
 """Calibration files: one versioned JSON file per kind (camera, arena, joints, dynamics) per
 rig id (dynamics: the twin's servos fitted to the rig's arm, ``calibration.dynamics``).
 
-Layout: ``<root>/<rig_id>/<kind>.json`` where ``root`` is, in order of precedence, the
-``--dir`` option, the ``ERGO_CALIBRATION_DIR`` environment variable, or
-``~/.config/ergo-explore/calibration``.
-
-Each file is ``{"schema": "ergo-explore/calibration", "kind": ..., "version": N, "rig_id": ...,
-"created": ISO-8601 UTC, "data": {...}}``. Payloads are validated before they are written (a bad
-one never replaces a good file) and after they are read; a validation error is one line that
-names the file and the bad field. Writes are atomic: a temporary file in the same folder, fsync,
-then ``os.replace``.
+Where they live (``<root>/<rig_id>/<kind>.json``) and their envelope (schema, kind, version,
+rig id) are ``robot/calibration_files.py``'s, re-exported here; a dynamics payload's checks are
+``sim/servo_model.py``'s (``check_dynamics``: the served twin reads it too). Payloads are
+validated before they are written (a bad one never replaces a good file) and after they are
+read; a validation error is one line that names the file and the bad field. Writes are
+atomic: a temporary file in the same folder, fsync, then ``os.replace``.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import math
 import os
-import re
 import tempfile
 from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-SCHEMA = "ergo-explore/calibration"
-ENV_DIR = "ERGO_CALIBRATION_DIR"
-DEFAULT_DIR = Path("~/.config/ergo-explore/calibration")
-KINDS = ("camera", "arena", "joints", "dynamics")
-# Current payload version per kind; bump when a payload's fields change meaning.
-VERSIONS = {"camera": 1, "arena": 1, "joints": 1, "dynamics": 1}
-_RIG_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
+from robot.calibration_files import (
+    DEFAULT_DIR,
+    ENV_DIR,
+    KINDS,
+    SCHEMA,
+    VERSIONS,
+    CalibrationError,
+    CalibrationMissing,
+    FieldChecker,
+    calibration_path,
+    calibration_root,
+    check_rig_id,
+    is_matrix,
+    read_document,
+)
 
-
-class CalibrationError(ValueError):
-    """A calibration could not be made, read or written; the message is one line."""
-
-
-class CalibrationMissing(CalibrationError):
-    """There is no calibration file where one was looked for (never made: not a bad file)."""
-
-
-# ---- where files live --------------------------------------------------------------------
-def calibration_root(directory: str | Path | None = None) -> Path:
-    """The folder holding one subfolder per rig id (see the module docstring)."""
-    if directory is not None:
-        return Path(directory).expanduser()
-    env = os.environ.get(ENV_DIR)
-    if env:
-        return Path(env).expanduser()
-    return DEFAULT_DIR.expanduser()
-
-
-def check_rig_id(rig_id: str) -> str:
-    if not isinstance(rig_id, str) or not _RIG_ID.match(rig_id):
-        raise CalibrationError(
-            f"rig id {rig_id!r} must be 1-64 letters, digits, '.', '_' or '-' (no slash)"
-        )
-    return rig_id
-
-
-def calibration_path(kind: str, rig_id: str, directory: str | Path | None = None) -> Path:
-    """``<root>/<rig_id>/<kind>.json``."""
-    if kind not in KINDS:
-        raise CalibrationError(f"unknown calibration kind {kind!r}; known: {', '.join(KINDS)}")
-    return calibration_root(directory) / check_rig_id(rig_id) / f"{kind}.json"
+__all__ = [
+    "DEFAULT_DIR",
+    "ENV_DIR",
+    "KINDS",
+    "SCHEMA",
+    "VERSIONS",
+    "CalibrationError",
+    "CalibrationMissing",
+    "calibration_path",
+    "calibration_root",
+    "check_rig_id",
+    "file_sha256",
+    "load",
+    "load_arena_file",
+    "load_document",
+    "load_file",
+    "save",
+    "validate",
+]
 
 
 # ---- validation --------------------------------------------------------------------------
-class _Checker:
-    """Field checks that raise one-line ``CalibrationError``s naming the field."""
-
-    def __init__(self, where: str, data: Any) -> None:
-        self.where = where
-        if not isinstance(data, dict):
-            self.fail("data", f"must be an object, got {type(data).__name__}")
-        self.data = data
-
-    def fail(self, name: str, why: str) -> None:
-        raise CalibrationError(f"{self.where}: field '{name}' {why}")
-
-    def get(self, name: str, optional: bool = False) -> Any:
-        if name not in self.data:
-            if optional:
-                return None
-            self.fail(name, "is missing")
-        return self.data[name]
-
-    def number(self, name: str, lo: float = -math.inf, hi: float = math.inf, **kw) -> Any:
-        v = self.get(name, **kw)
-        if v is None and kw.get("optional"):
-            return None
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-            self.fail(name, f"must be a finite number, got {v!r}")
-        if not lo <= v <= hi:
-            self.fail(name, f"must be in [{lo:g}, {hi:g}], got {v!r}")
-        return v
-
-    def matrix(self, name: str, shape: tuple[int, ...], optional: bool = False) -> Any:
-        v = self.get(name, optional=optional)
-        if v is None and optional:
-            return None
-        if not _is_matrix(v, shape):
-            dims = "x".join("N" if s < 0 else str(s) for s in shape)
-            self.fail(name, f"must be a {dims} array of finite numbers")
-        return v
-
-    def string(self, name: str, optional: bool = False) -> Any:
-        v = self.get(name, optional=optional)
-        if v is None and optional:
-            return None
-        if not isinstance(v, str) or not v:
-            self.fail(name, f"must be a non-empty string, got {v!r}")
-        return v
-
-
-def _is_matrix(v: Any, shape: tuple[int, ...]) -> bool:
-    """Whether ``v`` is nested lists of finite numbers of this shape (-1: any length >= 1)."""
-    if not shape:
-        return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
-    if not isinstance(v, list) or not v:
-        return False
-    if shape[0] >= 0 and len(v) != shape[0]:
-        return False
-    return all(_is_matrix(x, shape[1:]) for x in v)
-
-
-def _validate_camera(c: _Checker) -> None:
+def _validate_camera(c: FieldChecker) -> None:
     c.matrix("camera_matrix", (3, 3))
     k = c.data["camera_matrix"]
     if not (k[0][0] > 0 and k[1][1] > 0 and k[2] == [0, 0, 1]):
@@ -142,7 +73,7 @@ def _validate_camera(c: _Checker) -> None:
     c.number("n_views", 1, 10_000)
     sd = c.get("std_px", optional=True)
     if sd is not None and not (
-        isinstance(sd, dict) and all(_is_matrix(v, ()) and v >= 0 for v in sd.values())
+        isinstance(sd, dict) and all(is_matrix(v, ()) and v >= 0 for v in sd.values())
     ):
         c.fail("std_px", "must map fx, fy, cx, cy to finite standard deviations >= 0, px")
     c.number("held_out_rms_px", 0.0, 1e4, optional=True)
@@ -159,7 +90,7 @@ ARENA_DISTORTION_MAX_ABS = 1e3
 ARENA_FOCAL_MAX_PX = 1e6
 
 
-def _check_arena_numbers(c: _Checker) -> None:
+def _check_arena_numbers(c: FieldChecker) -> None:
     """What finite is not enough for: a homography that is singular or out of all scale, a
     distortion or focal length no lens has (1e300 passed the finite checks and broke every
     pixel mapped through it)."""
@@ -183,7 +114,7 @@ def _check_arena_numbers(c: _Checker) -> None:
         c.fail("camera_matrix", f"focal lengths must be in (0, {ARENA_FOCAL_MAX_PX:g}] px")
 
 
-def _validate_arena(c: _Checker) -> None:
+def _validate_arena(c: FieldChecker) -> None:
     _validate_camera_like(c)
     c.matrix("homography", (3, 3))
     _check_arena_numbers(c)
@@ -197,7 +128,7 @@ def _validate_arena(c: _Checker) -> None:
         if not isinstance(ranges, list) or not ranges:
             c.fail("ball_hsv_ranges", "must be a non-empty list of [lower, upper] HSV triples")
         for i, r in enumerate(ranges):
-            if not _is_matrix(r, (2, 3)):
+            if not is_matrix(r, (2, 3)):
                 c.fail(f"ball_hsv_ranges[{i}]", "must be [[h, s, v], [h, s, v]]")
             lo, hi = r
             if not (0 <= lo[0] <= hi[0] <= 179 and all(0 <= lo[j] <= hi[j] <= 255 for j in (1, 2))):
@@ -206,13 +137,13 @@ def _validate_arena(c: _Checker) -> None:
     c.number("residual_max_mm", 0.0, 1e4, optional=True)
 
 
-def _validate_camera_like(c: _Checker) -> None:
+def _validate_camera_like(c: FieldChecker) -> None:
     c.matrix("camera_matrix", (3, 3))
     c.matrix("dist_coeffs", (-1,))
     c.matrix("image_size", (2,))
 
 
-def _validate_joints(c: _Checker) -> None:
+def _validate_joints(c: FieldChecker) -> None:
     names = c.get("names")
     if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
         c.fail("names", "must be a non-empty list of joint names")
@@ -229,24 +160,13 @@ def _validate_joints(c: _Checker) -> None:
             c.fail("lower", f"of joint {name} must be below its upper limit")
 
 
-def _validate_dynamics(c: _Checker) -> None:
-    from sim.servo_model import ServoModel, ServoModelError
+def _validate_dynamics(c: FieldChecker) -> None:
+    from sim.servo_model import check_dynamics
 
-    try:
-        ServoModel.from_dict(c.get("servos"))
-    except ServoModelError as exc:
-        c.fail("servos", f"is not a servo model ({exc})")
-    rec = c.get("recording")
-    if not isinstance(rec, dict) or not isinstance(rec.get("sha256"), str):
-        c.fail("recording", "must name the recording fitted (path, sha256)")
-    rms = c.get("held_out_rms_rad")
-    if not isinstance(rms, dict) or not all(
-        _is_matrix(rms.get(k), ()) for k in ("nominal", "fitted")
-    ):
-        c.fail("held_out_rms_rad", "must hold the held-out RMS errors nominal and fitted, rad")
+    check_dynamics(c)
 
 
-VALIDATORS: dict[str, Callable[[_Checker], None]] = {
+VALIDATORS: dict[str, Callable[[FieldChecker], None]] = {
     "camera": _validate_camera,
     "arena": _validate_arena,
     "joints": _validate_joints,
@@ -258,7 +178,7 @@ def validate(kind: str, data: Any, where: str | None = None) -> dict[str, Any]:
     """Check a payload of the given kind; returns it or raises a one-line ``CalibrationError``."""
     if kind not in VALIDATORS:
         raise CalibrationError(f"unknown calibration kind {kind!r}; known: {', '.join(KINDS)}")
-    checker = _Checker(where or f"{kind} calibration", data)
+    checker = FieldChecker(where or f"{kind} calibration", data)
     VALIDATORS[kind](checker)
     return data
 
@@ -395,40 +315,8 @@ def created_at(doc: dict[str, Any]) -> datetime | None:
 
 def load_document(path: str | Path, kind: str | None = None) -> dict[str, Any]:
     """Read and validate one calibration file; returns the whole document (``schema``,
-    ``kind``, ``version``, ``rig_id``, ``created``, ``data``)."""
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise CalibrationMissing(f"no calibration file {path}") from None
-    except OSError as exc:
-        raise CalibrationError(f"cannot read {path}: {exc.strerror}") from None
-    except UnicodeDecodeError as exc:
-        raise CalibrationError(
-            f"{path}: not a calibration file (binary data at byte {exc.start}, not UTF-8 JSON): "
-            "restore it or calibrate again"
-        ) from None
-    try:
-        doc = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise CalibrationError(
-            f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})"
-        ) from None
-    where = str(path)
-    top = _Checker(where, doc)
-    if top.get("schema") != SCHEMA:
-        top.fail("schema", f"must be {SCHEMA!r}, got {doc.get('schema')!r}")
-    file_kind = top.string("kind")
-    if file_kind not in VERSIONS or (kind is not None and file_kind != kind):
-        top.fail("kind", f"must be {kind or ' or '.join(KINDS)!r}, got {file_kind!r}")
-    version = top.get("version")
-    if not isinstance(version, int) or isinstance(version, bool) or version < 1:
-        top.fail("version", f"must be a positive integer, got {version!r}")
-    if version > VERSIONS[file_kind]:
-        top.fail(
-            "version",
-            f"is {version}, newer than this program reads ({VERSIONS[file_kind]}): upgrade",
-        )
-    top.string("rig_id")
-    validate(file_kind, top.get("data"), where=f"{where}: data")
+    ``kind``, ``version``, ``rig_id``, ``created``, ``data``): the envelope checked by
+    ``robot.calibration_files.read_document``, the payload by its kind's validator."""
+    doc = read_document(path, kind)
+    validate(doc["kind"], doc["data"], where=f"{path}: data")
     return doc
