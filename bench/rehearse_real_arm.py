@@ -47,6 +47,10 @@ from explore.runs.store import read_history
 from sim.standin.owner import Owner, ServedRig, read_saved
 from sim.standin.truth import arena_error_mm, camera_errors, joint_errors, read_hidden
 
+# ``ergo calibrate dynamics`` over a bus, s, against hangs: 45 s of recording and a fit that
+# took 108-467 s on 2 shared cores (docs/dynamics.md); a run over 900 s was measured at load 10.
+DYNAMICS_BOUND_S = 3600.0
+
 
 def ball_error_mm(step_stdout: str, hidden) -> float:
     """Distance between the ball the arena calibration located ("-> arena (X, Y) mm") and the
@@ -99,33 +103,41 @@ def rehearse(bus: str, seed: int, args: argparse.Namespace, tmp: Path) -> dict[s
         def saved(kind: str) -> dict:
             return read_saved(owner.calibration_dir, owner.rig_id, kind)
 
-        scan = owner.scan()
-        row["servos"] = sum(1 for line in scan.stdout.splitlines() if line.strip()[:1].isdigit())
-        t = time.monotonic()
-        owner.calibrate_joints()
-        row["joints s"] = time.monotonic() - t
-        row["limp after joints"] = not any(owner.torque_read_back())
-        err, row["directions"] = joint_errors(hidden, saved("joints"))
-        row["offset err deg"] = float(err.max())
-        t = time.monotonic()
-        owner.calibrate_camera()
-        row["camera s"] = time.monotonic() - t
-        cam = camera_errors(hidden, saved("camera"))
-        row["fx %"], row["fy %"] = 100 * cam["fx"], 100 * cam["fy"]
-        row["cx px"], row["cy px"] = cam["cx_px"], cam["cy_px"]
-        arena = owner.calibrate_arena()
-        row["arena err mm"] = arena_error_mm(hidden, saved("arena"))
-        row["ball err mm"] = ball_error_mm(arena.stdout, hidden)
-        owner.show()
         run = tmp / f"run-{bus}-{seed}"
-        t = time.monotonic()
-        owner.explore(run, args.episodes, args.explore_seed, args.strategy, resumes=args.resumes)
-        row["limp after explore"] = not any(owner.torque_read_back())
-        row["stops resumed"] = len(owner.stops)
-        for stop in owner.stops:
-            print(f"  {bus} {seed}: {stop}", flush=True)
-        row["explore s"] = time.monotonic() - t
-        row["cells"], row["tracked"], row["moved"] = run_summary(run)
+        if args.reuse and (run / "run.json").is_file():  # done before: its figures only
+            row["reused"] = str(run)
+            row["cells"], row["tracked"], row["moved"] = run_summary(run)
+        else:
+            scan = owner.scan()
+            row["servos"] = sum(
+                1 for line in scan.stdout.splitlines() if line.strip()[:1].isdigit()
+            )
+            t = time.monotonic()
+            owner.calibrate_joints()
+            row["joints s"] = time.monotonic() - t
+            row["limp after joints"] = not any(owner.torque_read_back())
+            err, row["directions"] = joint_errors(hidden, saved("joints"))
+            row["offset err deg"] = float(err.max())
+            t = time.monotonic()
+            owner.calibrate_camera()
+            row["camera s"] = time.monotonic() - t
+            cam = camera_errors(hidden, saved("camera"))
+            row["fx %"], row["fy %"] = 100 * cam["fx"], 100 * cam["fy"]
+            row["cx px"], row["cy px"] = cam["cx_px"], cam["cy_px"]
+            arena = owner.calibrate_arena()
+            row["arena err mm"] = arena_error_mm(hidden, saved("arena"))
+            row["ball err mm"] = ball_error_mm(arena.stdout, hidden)
+            owner.show()
+            t = time.monotonic()
+            owner.explore(
+                run, args.episodes, args.explore_seed, args.strategy, resumes=args.resumes
+            )
+            row["limp after explore"] = not any(owner.torque_read_back())
+            row["stops resumed"] = len(owner.stops)
+            for stop in owner.stops:
+                print(f"  {bus} {seed}: {stop}", flush=True)
+            row["explore s"] = time.monotonic() - t
+            row["cells"], row["tracked"], row["moved"] = run_summary(run)
         if args.faults:  # Ctrl-C in the middle of a run; a bus fault ends in the explore above
             stopped = owner.interrupt_explore(tmp / f"run-{bus}-{seed}-ctrl-c", after_s=20.0)
             row["ctrl-c rc"] = stopped.rc
@@ -133,8 +145,9 @@ def rehearse(bus: str, seed: int, args: argparse.Namespace, tmp: Path) -> dict[s
         if args.dynamics:
             t = time.monotonic()
             fit = owner.run(
-                "calibrate", "dynamics", "--rig-id", owner.rig_id, *rig.bus_flags(), check=False
-            )
+                "calibrate", "dynamics", "--rig-id", owner.rig_id, *rig.bus_flags(),
+                check=False, timeout=DYNAMICS_BOUND_S,
+            )  # fmt: skip
             row["dynamics s"] = time.monotonic() - t
             row["dynamics rc"] = fit.rc
             row["dynamics"] = next((x for x in fit.stdout.splitlines() if "held-out" in x), "")
@@ -198,6 +211,12 @@ def main() -> None:
         help="also ergo calibrate dynamics on the served rig (with --compare: on its twin too)",
     )
     p.add_argument("--out", type=Path, default=None, help="keep the folders here")
+    p.add_argument(
+        "--reuse",
+        action="store_true",
+        help="with --out: a rig whose run folder exists keeps its calibrations and run (only "
+        "the steps after the exploration are done again)",
+    )
     p.add_argument("--verbose", action="store_true", help="print every command's output")
     args = p.parse_args()
     args.log = print if args.verbose else None
@@ -210,6 +229,9 @@ def main() -> None:
             rows.append(row)
             (tmp / f"row-{bus}-{seed}.json").write_text(json.dumps(row, indent=2, default=str))
             print("  ".join(f"{k}: {fmt(v)}" for k, v in row.items()), flush=True)
+    rows = [r for r in rows if "offset err deg" in r]  # --reuse: no calibration this time
+    if not rows:
+        return
     worst = max(float(r["offset err deg"]) for r in rows)
     focal = max(max(abs(float(r["fx %"])), abs(float(r["fy %"]))) for r in rows)
     centre = max(math.hypot(float(r["cx px"]), float(r["cy px"])) for r in rows)
