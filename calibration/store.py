@@ -1,80 +1,61 @@
 """Calibration files: one versioned JSON file per kind (camera, arena, joints, dynamics) per
 rig id (dynamics: the twin's servos fitted to the rig's arm, ``calibration.dynamics``).
 
-Layout: ``<root>/<rig_id>/<kind>.json`` where ``root`` is, in order of precedence, the
-``--dir`` option, the ``ERGO_CALIBRATION_DIR`` environment variable, or
-``~/.config/ergo-explore/calibration``.
-
-Each file is ``{"schema": "ergo-explore/calibration", "kind": ..., "version": N, "rig_id": ...,
-"created": ISO-8601 UTC, "data": {...}}``. Payloads are validated before they are written (a bad
-one never replaces a good file) and after they are read; a validation error is one line that
-names the file and the bad field. Writes are atomic (``robot.files.atomic_write``: a temporary
-file in the same folder, fsync, then ``os.replace``).
+Where they live (``<root>/<rig_id>/<kind>.json``) and their envelope (schema, kind, version,
+rig id) are ``robot/calibration_files.py``'s, re-exported here; a dynamics payload's checks are
+``sim/servo_model.py``'s (``check_dynamics``: the served twin reads it too). Payloads are
+validated before they are written (a bad one never replaces a good file) and after they are
+read; a validation error is one line that names the file and the bad field. Writes are
+atomic: a temporary file in the same folder, fsync, then ``os.replace``.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import os
-import re
 from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from robot.calibration_files import (
+    DEFAULT_DIR,
+    ENV_DIR,
+    KINDS,
+    SCHEMA,
+    VERSIONS,
+    CalibrationError,
+    CalibrationMissing,
+    calibration_path,
+    calibration_root,
+    check_rig_id,
+    read_document,
+)
 from robot.fields import Fields, is_matrix
 from robot.files import atomic_write
 
-SCHEMA = "ergo-explore/calibration"
-ENV_DIR = "ERGO_CALIBRATION_DIR"
-DEFAULT_DIR = Path("~/.config/ergo-explore/calibration")
-KINDS = ("camera", "arena", "joints", "dynamics")
-# Current payload version per kind; bump when a payload's fields change meaning.
-VERSIONS = {"camera": 1, "arena": 1, "joints": 1, "dynamics": 1}
-_RIG_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
-
-
-class CalibrationError(ValueError):
-    """A calibration could not be made, read or written; the message is one line."""
-
-
-class CalibrationMissing(CalibrationError):
-    """There is no calibration file where one was looked for (never made: not a bad file)."""
-
-
-# ---- where files live --------------------------------------------------------------------
-def calibration_root(directory: str | Path | None = None) -> Path:
-    """The folder holding one subfolder per rig id (see the module docstring)."""
-    if directory is not None:
-        return Path(directory).expanduser()
-    env = os.environ.get(ENV_DIR)
-    if env:
-        return Path(env).expanduser()
-    return DEFAULT_DIR.expanduser()
-
-
-def check_rig_id(rig_id: str) -> str:
-    if not isinstance(rig_id, str) or not _RIG_ID.match(rig_id):
-        raise CalibrationError(
-            f"rig id {rig_id!r} must be 1-64 letters, digits, '.', '_' or '-' (no slash)"
-        )
-    return rig_id
-
-
-def calibration_path(kind: str, rig_id: str, directory: str | Path | None = None) -> Path:
-    """``<root>/<rig_id>/<kind>.json``."""
-    if kind not in KINDS:
-        raise CalibrationError(f"unknown calibration kind {kind!r}; known: {', '.join(KINDS)}")
-    return calibration_root(directory) / check_rig_id(rig_id) / f"{kind}.json"
+__all__ = [
+    "DEFAULT_DIR",
+    "ENV_DIR",
+    "KINDS",
+    "SCHEMA",
+    "VERSIONS",
+    "CalibrationError",
+    "CalibrationMissing",
+    "calibration_path",
+    "calibration_root",
+    "check_rig_id",
+    "file_sha256",
+    "load",
+    "load_arena_file",
+    "load_document",
+    "load_file",
+    "save",
+    "validate",
+]
 
 
 # ---- validation --------------------------------------------------------------------------
-def _checker(where: str, data: Any) -> Fields:
-    """The fields of a calibration file's object, failing as one-line ``CalibrationError``s."""
-    return Fields(where, data, CalibrationError, name="data")
-
-
 def _validate_camera(c: Fields) -> None:
     c.matrix("camera_matrix", (3, 3))
     k = c.data["camera_matrix"]
@@ -178,20 +159,9 @@ def _validate_joints(c: Fields) -> None:
 
 
 def _validate_dynamics(c: Fields) -> None:
-    from sim.servo_model import ServoModel, ServoModelError
+    from sim.servo_model import check_dynamics
 
-    try:
-        ServoModel.from_dict(c.get("servos"))
-    except ServoModelError as exc:
-        c.fail("servos", f"is not a servo model ({exc})")
-    rec = c.get("recording")
-    if not isinstance(rec, dict) or not isinstance(rec.get("sha256"), str):
-        c.fail("recording", "must name the recording fitted (path, sha256)")
-    rms = c.get("held_out_rms_rad")
-    if not isinstance(rms, dict) or not all(
-        is_matrix(rms.get(k), ()) for k in ("nominal", "fitted")
-    ):
-        c.fail("held_out_rms_rad", "must hold the held-out RMS errors nominal and fitted, rad")
+    check_dynamics(c)
 
 
 VALIDATORS: dict[str, Callable[[Fields], None]] = {
@@ -206,7 +176,7 @@ def validate(kind: str, data: Any, where: str | None = None) -> dict[str, Any]:
     """Check a payload of the given kind; returns it or raises a one-line ``CalibrationError``."""
     if kind not in VALIDATORS:
         raise CalibrationError(f"unknown calibration kind {kind!r}; known: {', '.join(KINDS)}")
-    checker = _checker(where or f"{kind} calibration", data)
+    checker = Fields(where or f"{kind} calibration", data, CalibrationError, name="data")
     VALIDATORS[kind](checker)
     return data
 
@@ -333,40 +303,8 @@ def created_at(doc: dict[str, Any]) -> datetime | None:
 
 def load_document(path: str | Path, kind: str | None = None) -> dict[str, Any]:
     """Read and validate one calibration file; returns the whole document (``schema``,
-    ``kind``, ``version``, ``rig_id``, ``created``, ``data``)."""
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise CalibrationMissing(f"no calibration file {path}") from None
-    except OSError as exc:
-        raise CalibrationError(f"cannot read {path}: {exc.strerror}") from None
-    except UnicodeDecodeError as exc:
-        raise CalibrationError(
-            f"{path}: not a calibration file (binary data at byte {exc.start}, not UTF-8 JSON): "
-            "restore it or calibrate again"
-        ) from None
-    try:
-        doc = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise CalibrationError(
-            f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})"
-        ) from None
-    where = str(path)
-    top = _checker(where, doc)
-    if top.get("schema") != SCHEMA:
-        top.fail("schema", f"must be {SCHEMA!r}, got {doc.get('schema')!r}")
-    file_kind = top.string("kind")
-    if file_kind not in VERSIONS or (kind is not None and file_kind != kind):
-        top.fail("kind", f"must be {kind or ' or '.join(KINDS)!r}, got {file_kind!r}")
-    version = top.get("version")
-    if not isinstance(version, int) or isinstance(version, bool) or version < 1:
-        top.fail("version", f"must be a positive integer, got {version!r}")
-    if version > VERSIONS[file_kind]:
-        top.fail(
-            "version",
-            f"is {version}, newer than this program reads ({VERSIONS[file_kind]}): upgrade",
-        )
-    top.string("rig_id")
-    validate(file_kind, top.get("data"), where=f"{where}: data")
+    ``kind``, ``version``, ``rig_id``, ``created``, ``data``): the envelope checked by
+    ``robot.calibration_files.read_document``, the payload by its kind's validator."""
+    doc = read_document(path, kind)
+    validate(doc["kind"], doc["data"], where=f"{path}: data")
     return doc

@@ -15,71 +15,26 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
-from queue import Empty, Queue
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from script_helpers import stop_process  # noqa: E402  (beside this script)
 
 from calibration import store  # noqa: E402
 from robot.spec import ERGO_JR_JOINTS, ergo_jr_spec  # noqa: E402
+from sim.standin.owner import ServedRig  # noqa: E402
 from sim.standin.truth import read_hidden  # noqa: E402
 
 ERGO = [str(Path(sys.executable).parent / "ergo")]
 FIELDS = ("kp", "damping", "armature", "frictionloss")
 TOLERANCE = 0.15  # the issue's: within 15 % of the hidden value (or the interval covers it)
-
-
-def serve(bus: str, seed: int, hidden: Path) -> tuple[subprocess.Popen, str]:
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    log = open(hidden.with_suffix(".server.log"), "w")  # noqa: SIM115 - lives with the server
-    proc = subprocess.Popen(
-        [
-            *ERGO,
-            "twin",
-            "serve",
-            "--bus",
-            bus,
-            "--stand-in",
-            str(seed),
-            "--hidden",
-            str(hidden),
-            "--no-camera",
-        ],
-        cwd=ROOT,
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=log,
-        text=True,
-    )
-    queue: Queue[str] = Queue()
-    threading.Thread(target=lambda: [queue.put(x) for x in proc.stdout], daemon=True).start()
-    port, started = None, False
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and not started:
-        try:
-            line = queue.get(timeout=1.0).strip()
-        except Empty:
-            if proc.poll() is not None:
-                break
-            continue
-        if " bus " in line:
-            port = line.rsplit(" ", 1)[1]
-        started = line.startswith("stand-in")
-    if port is None or not started:
-        proc.kill()
-        raise SystemExit(f"server did not start: {hidden.with_suffix('.server.log').read_text()}")
-    return proc, port
 
 
 def joints_from_truth(hidden_path: Path, rig: str, cal_dir: Path) -> None:
@@ -129,26 +84,33 @@ def truth_floor(rec_path: Path, hidden_path: Path) -> dict:
 def one(bus: str, seed: int, work: Path) -> dict:
     hidden_path = work / f"hidden-{bus}-{seed}.json"
     rig = f"s{seed}-{bus}"
-    proc, port = serve(bus, seed, hidden_path)
-    try:
+    log = hidden_path.with_suffix(".server.log")
+    served = ServedRig(bus, seed, hidden_path, flags=["--no-camera"], log=log)
+    with served:
         joints_from_truth(hidden_path, rig, work)
-        flag = ["--port", port] if bus == "dynamixel" else ["--can", f"slcan:{port}"]
         t0 = time.monotonic()
         done = subprocess.run(
-            [*ERGO, "calibrate", "dynamics", "--rig-id", rig, "--dir", str(work), *flag],
+            [
+                *ERGO,
+                "calibrate",
+                "dynamics",
+                "--rig-id",
+                rig,
+                "--dir",
+                str(work),
+                *served.bus_flags(),
+            ],
             cwd=ROOT,
             capture_output=True,
             text=True,
             timeout=1800,
         )
         wall = time.monotonic() - t0
-    finally:
-        stop_process(proc, timeout_s=20)
     out = {"bus": bus, "seed": seed, "rc": done.returncode, "wall_s": round(wall, 1)}
     if done.returncode != 0:
         out["error"] = (done.stderr.strip().splitlines() or ["?"])[-1]
-        out["server_log_tail"] = hidden_path.with_suffix(".server.log").read_text()[-1500:]
-        out["server_rc"] = proc.returncode
+        out["server_log_tail"] = log.read_text()[-1500:]
+        out["server_rc"] = served.proc.returncode
         return out
     data = store.load("dynamics", rig, work)
     truth = read_hidden(hidden_path).servos

@@ -63,6 +63,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "the temporary folder; for tests, never read by a calibration)",
     )  # fmt: skip
     serve.add_argument(
+        "--rig-id", default=None, metavar="ID",
+        help="the twin's servos fitted to rig ID's arm (its dynamics.json, `ergo calibrate "
+        "dynamics`; ERGO_CALIBRATION_DIR); without the file, the nominal servos (docs/dynamics.md)",
+    )  # fmt: skip
+    serve.add_argument(
         "--hands-port", type=int, default=0,
         help="port of the hands' control channel on 127.0.0.1 (0: any free; docs/standin.md)",
     )  # fmt: skip

@@ -4,7 +4,11 @@ torque ceiling, and the command transport delay.
 One ``ServoModel`` says how the twin's six servos move. ``NOMINAL`` is the hand-set model of
 ``sim/models/ergo_jr.xml`` (its README says where each number comes from); a system
 identification of a user's arm (``ergo calibrate dynamics``) or a stand-in rig's hidden servos
-give others. ``Twin(servos=...)`` builds its servos from one.
+give others. ``Twin(servos=...)`` builds its servos from one. A rig's fitted servos are its
+``dynamics.json`` calibration (``<root>/<rig_id>/dynamics.json``, ``robot/calibration_files.py``):
+``check_dynamics`` is that payload's check (``calibration/store.py`` validates through it) and
+``fitted_servos`` reads it for the twin (``--rig sim --rig-id X``, the Gymnasium environments,
+``ergo twin serve --rig-id X``).
 
 MuJoCo mapping (position actuator on a hinge joint, MJCF reference):
 - ``kp``: actuator ``gainprm[0]`` and ``-biasprm[1]`` (torque = kp * (target - q)), N.m/rad;
@@ -22,9 +26,18 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, fields
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from robot.calibration_files import (
+    CalibrationError,
+    CalibrationMissing,
+    calibration_path,
+    read_document,
+)
+from robot.fields import Fields, is_matrix
 
 N_JOINTS = 6
 # The per-joint fields, in the order reports and fits list them.
@@ -160,3 +173,38 @@ def write_model(model: Any, act_idx: np.ndarray, dof_idx: np.ndarray, servos: Se
     limit = servos.array("force_limit")
     model.actuator_forcerange[act_idx, 0] = -limit
     model.actuator_forcerange[act_idx, 1] = limit
+
+
+# ---- a rig's fitted servos (its dynamics.json) --------------------------------------------
+def check_dynamics(c: Fields) -> ServoModel:
+    """Check a dynamics calibration's payload (``ergo calibrate dynamics``: ``servos``, the
+    ``recording`` fitted, the ``held_out_rms_rad``); returns its servo model. A bad field is a
+    one-line ``CalibrationError`` naming it."""
+    try:
+        servos = ServoModel.from_dict(c.get("servos"))
+    except ServoModelError as exc:
+        c.fail("servos", f"is not a servo model ({exc})")
+    rec = c.get("recording")
+    if not isinstance(rec, dict) or not isinstance(rec.get("sha256"), str):
+        c.fail("recording", "must name the recording fitted (path, sha256)")
+    rms = c.get("held_out_rms_rad")
+    if not isinstance(rms, dict) or not all(
+        is_matrix(rms.get(k), ()) for k in ("nominal", "fitted")
+    ):
+        c.fail("held_out_rms_rad", "must hold the held-out RMS errors nominal and fitted, rad")
+    return servos
+
+
+def fitted_servos(
+    rig_id: str, directory: str | Path | None = None
+) -> tuple[ServoModel | None, Path]:
+    """(servo model, file) of rig ``rig_id``'s dynamics calibration, or (None, the file looked
+    for) without one; a damaged or foreign file raises a one-line ``CalibrationError`` naming
+    it."""
+    path = calibration_path("dynamics", rig_id, directory)
+    try:
+        doc = read_document(path, "dynamics")
+    except CalibrationMissing:
+        return None, path
+    data = Fields(f"{path}: data", doc["data"], CalibrationError, name="data")
+    return check_dynamics(data), path

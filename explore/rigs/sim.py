@@ -154,8 +154,8 @@ def twin_arena_model(camera: Any) -> Any:
 def rig_servos(config: RigConfig):
     """The twin's servos for ``config.rig_id``: its fitted ``dynamics.json`` (``ergo calibrate
     dynamics``) when there is one, else None (the nominal twin's); a bad file is a RigError."""
-    from calibration.dynamics.twin_servos import fitted_servos
     from calibration.store import CalibrationError
+    from sim.servo_model import fitted_servos
 
     try:
         return fitted_servos(config.rig_id)[0]

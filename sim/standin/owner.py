@@ -84,41 +84,69 @@ class Step:
 
 
 class ServedRig:
-    """``ergo twin serve --bus BUS --stand-in SEED --hidden PATH [flags]`` in a subprocess.
+    """``ergo twin serve --bus BUS [--stand-in SEED --hidden PATH] [flags]`` in a subprocess,
+    entered once it has announced its lines (the stand-in's last, else the ``--rig-id``
+    servos line, else the hands').
 
     Attributes (once entered): ``bus_kind``, ``where`` (the pty, or ``slcan:PTY`` for
-    CANopen), ``camera_url``, ``hands_port``, ``lines`` (the announced lines by first word).
+    CANopen), ``camera_url`` (None with ``--no-camera``), ``hands_port``, ``lines`` (the
+    announced lines by first word; the bus's under ``bus``), ``proc``.
+
+    Args:
+        bus: the bus to serve.
+        seed: the stand-in's seed (None: the served twin, nominal or ``--rig-id``'s).
+        hidden: with ``seed``, where the server writes the hidden parameters.
+        flags: more flags of ``ergo twin serve``.
+        env: the server's environment (default: this process's).
+        log: the server's stderr goes to this file (default: a pipe, read if it fails to
+            start).
     """
 
     def __init__(
         self,
         bus: Literal["dynamixel", "canopen"],
-        seed: int,
-        hidden: Path,
+        seed: int | None,
+        hidden: Path | None = None,
         flags: Sequence[str] = (),
         env: Mapping[str, str] | None = None,
+        log: Path | None = None,
     ) -> None:
         self.bus_kind = bus
         self.seed = seed
-        self.hidden = Path(hidden)
+        self.hidden = None if hidden is None else Path(hidden)
         self.flags = list(flags)
         self.env = dict(env or os.environ)
+        self.log = None if log is None else Path(log)
         self.lines: dict[str, str] = {}
         self.proc: subprocess.Popen[str] | None = None
+        self.camera_url: str | None = None
+        if seed is not None:
+            self.ready = "stand-in"
+        else:
+            self.ready = "servos" if "--rig-id" in self.flags else "hands"
 
     def __enter__(self) -> ServedRig:
-        cmd = [*ERGO, "twin", "serve", "--bus", self.bus_kind, "--stand-in", str(self.seed)]
-        cmd += ["--hidden", str(self.hidden), *self.flags]
+        cmd = [*ERGO, "twin", "serve", "--bus", self.bus_kind]
+        if self.seed is not None:
+            cmd += ["--stand-in", str(self.seed)]
+        if self.hidden is not None:
+            cmd += ["--hidden", str(self.hidden)]
+        cmd += self.flags
         env = {**self.env, "PYTHONUNBUFFERED": "1"}
-        self.proc = subprocess.Popen(
-            cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
-        )
+        err = subprocess.PIPE if self.log is None else open(self.log, "w")
+        try:
+            self.proc = subprocess.Popen(
+                cmd, env=env, stdout=subprocess.PIPE, stderr=err, text=True
+            )
+        finally:
+            if self.log is not None:
+                err.close()  # the server holds its own copy
         queue: Queue[str] = Queue()  # a thread reads: select() misses lines already buffered
         threading.Thread(
             target=lambda: [queue.put(x) for x in self.proc.stdout], daemon=True
         ).start()
         deadline = time.monotonic() + START_BOUND_S
-        while "stand-in" not in self.lines and time.monotonic() < deadline:
+        while self.ready not in self.lines and time.monotonic() < deadline:
             try:
                 line = queue.get(timeout=1.0).strip()
             except Empty:
@@ -126,14 +154,23 @@ class ServedRig:
                     break
                 continue
             self.lines.setdefault("bus" if " bus " in line else line.split()[0], line)
-        if "stand-in" not in self.lines:
+        if self.ready not in self.lines:
             self.stop()
-            raise OwnerError(f"ergo twin serve did not start: {self.lines}")
+            raise OwnerError(f"ergo twin serve did not start: {self.lines} {self._stderr_tail()}")
         pty = self.lines["bus"].split()[-1]
         self.where = pty if self.bus_kind == "dynamixel" else f"slcan:{pty}"
-        self.camera_url = self.lines["camera"].split()[-1]
+        if "camera" in self.lines:
+            self.camera_url = self.lines["camera"].split()[-1]
         self.hands_port = int(self.lines["hands"].rsplit(":", 1)[1])
         return self
+
+    def _stderr_tail(self) -> str:
+        """The end of the server's stderr (it has ended), for an error message."""
+        if self.log is not None:
+            return self.log.read_text(errors="replace")[-2000:] if self.log.exists() else ""
+        if self.proc is None or self.proc.stderr is None or self.proc.poll() is None:
+            return ""
+        return self.proc.stderr.read()[-2000:]
 
     def bus_flags(self) -> list[str]:
         """The flags that name this rig's bus on any ``ergo`` command."""

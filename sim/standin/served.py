@@ -8,6 +8,10 @@ package that import it (tests/sim/standin/test_secrecy.py checks it).
     camera on http://127.0.0.1:41234/stream.mjpg
     hands on 127.0.0.1:41235
     stand-in seed 7: hidden parameters in /tmp/ergo-standin-7-hidden.json (tests only)
+
+    $ ergo twin serve --bus dynamixel --rig-id ergo1      # the twin with ergo1's fitted servos
+    ...
+    servos of rig ergo1: fitted, from ~/.config/.../ergo1/dynamics.json (delay 13.9 ms, kp ...)
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ import numpy as np
 
 from robot.cli_errors import error
 from sim.mjpeg_server import MjpegServer
+from sim.servo_model import ServoModel, fitted_servos
 from sim.standin.hands import HOST, Hands, HandsServer
 from sim.standin.hidden import (
     HiddenRig,
@@ -68,16 +73,24 @@ class ServedRig:
 
 
 def open_served_rig(args: argparse.Namespace) -> ServedRig:
-    """The rig ``ergo twin serve`` serves: the nominal twin, or with ``args.stand_in`` a
-    stand-in rig whose hidden parameters are written to ``args.hidden`` (default: a file per
-    seed in the temporary folder).
+    """The rig ``ergo twin serve`` serves: the nominal twin, with ``args.rig_id`` the twin with
+    that rig's fitted servos (its dynamics.json; the nominal ones without it, said in the
+    rig's line), or with ``args.stand_in`` a stand-in rig whose hidden parameters are written
+    to ``args.hidden`` (default: a file per seed in the temporary folder).
 
     Raises:
-        StandinError: a bad seed or an unwritable hidden file (one line).
+        StandinError: a bad seed, an unwritable hidden file, a damaged dynamics.json, or
+            ``--rig-id`` with ``--stand-in`` (one line).
     """
     seed = getattr(args, "stand_in", None)
+    rig_id = getattr(args, "rig_id", None)
+    if seed is not None and rig_id is not None:
+        raise StandinError(
+            "--rig-id and --stand-in: a stand-in rig has its own (hidden) servos; give one"
+        )
     rig = nominal_rig() if seed is None else draw_hidden(seed)
     lines = []
+    servos = None
     if seed is not None:
         path = getattr(args, "hidden", None) or default_hidden_path(seed)
         try:
@@ -85,18 +98,44 @@ def open_served_rig(args: argparse.Namespace) -> ServedRig:
         except OSError as exc:
             raise StandinError(f"cannot write the hidden parameters to {path}: {exc}") from None
         lines.append(f"stand-in seed {seed}: hidden parameters in {path} (tests only)")
-    twin, plan = served_twin(rig)
+    elif rig_id is not None:
+        servos, line = rig_servos(rig_id)
+        lines.append(line)
+    twin, plan = served_twin(rig, servos)
     return ServedRig(twin, rig.directions.copy(), rig.offsets.copy(), plan, lines)
 
 
-def served_twin(rig: HiddenRig) -> tuple[Twin, RenderPlan]:
+def rig_servos(rig_id: str) -> tuple[ServoModel | None, str]:
+    """Rig ``rig_id``'s fitted servos (None: the nominal ones, no dynamics.json) and the line
+    that says which, for ``ergo twin serve --rig-id``; a damaged file is a ``StandinError``."""
+    from robot.calibration_files import CalibrationError, check_rig_id
+
+    try:
+        check_rig_id(rig_id)
+    except CalibrationError as exc:
+        raise StandinError(f"--rig-id: {exc}") from None
+    try:
+        servos, path = fitted_servos(rig_id)
+    except CalibrationError as exc:
+        raise StandinError(f"{exc} (a damaged twin calibration is not ignored)") from None
+    if servos is None:
+        return None, f"servos of rig {rig_id}: nominal (no dynamics calibration {path})"
+    kp = servos.array("kp")
+    return servos, (
+        f"servos of rig {rig_id}: fitted, from {path} (delay {servos.delay_s * 1e3:.1f} ms, "
+        f"kp {kp.min():.2f}-{kp.max():.2f} N.m/rad)"
+    )
+
+
+def served_twin(rig: HiddenRig, servos: ServoModel | None = None) -> tuple[Twin, RenderPlan]:
     """The twin of a served rig (its scene written to a temporary folder, compiled, removed)
-    and how its camera's frames are made."""
+    and how its camera's frames are made; its servos are a stand-in's hidden ones, else
+    ``servos`` (None: the nominal ones)."""
     plan = render_plan(rig.camera)
     folder = tempfile.mkdtemp(prefix="ergo-served-")
     try:
         scene = write_served_scene(folder, rig, plan)
-        twin = Twin(scene=scene, servos=None if rig.seed is None else rig.servos)
+        twin = Twin(scene=scene, servos=servos if rig.seed is None else rig.servos)
     finally:
         shutil.rmtree(folder, ignore_errors=True)  # the model is compiled: files not needed
     return twin, plan
@@ -120,19 +159,21 @@ def serve_until_interrupted(rig: ServedRig, args: Any, announce: list[str]) -> i
             camera.start()
             print(f"camera on {camera.url}", flush=True)
         hands_server.start()
-        print(f"hands on {HOST}:{hands_server.port}", flush=True)
     except OSError as exc:
         code = error(exc)
         hands_server.stop()
         if camera is not None:
             camera.stop()
         return code
-    for line in rig.lines:
-        print(line, flush=True)
     previous = None
     if threading.current_thread() is threading.main_thread():  # SIGTERM stops as Ctrl-C does
         previous = signal.signal(signal.SIGTERM, _interrupt)
     try:
+        # the hands' line and the rig's own last, once SIGTERM is handled: a parent that stops
+        # the server as soon as it has read them gets the clean exit (code 0)
+        print(f"hands on {HOST}:{hands_server.port}", flush=True)
+        for line in rig.lines:
+            print(line, flush=True)
         while True:
             time.sleep(1.0)
     except KeyboardInterrupt:

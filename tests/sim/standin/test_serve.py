@@ -8,16 +8,13 @@ No assertion is on durations: waits are bounded by counts or generous bounds aga
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
-import threading
 import time
 import urllib.request
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from queue import Empty, Queue
 
 import numpy as np
 import pytest
@@ -26,6 +23,7 @@ from robot.errors import SafetyStop
 from robot.spec import ERGO_JR_JOINTS
 from sim.standin.board import BoardGeometry
 from sim.standin.hands import HandsClient, HandsError, board_to_world
+from sim.standin.owner import ServedRig
 from sim.standin.truth import read_hidden
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -40,39 +38,15 @@ pytestmark = pytest.mark.slow
 
 
 @contextmanager
-def serve(*flags: str) -> Iterator[dict[str, str]]:
-    """``ergo twin serve FLAGS``; yields its announced lines by their first words (``bus``,
-    ``camera``, ``hands``, ``stand-in``); stops it with SIGTERM and expects exit code 0."""
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    cmd = [*ERGO_SERVE, *flags]
-    proc = subprocess.Popen(
-        cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
-    )
-    lines: dict[str, str] = {}
-    # a thread reads the lines (select() on a buffered pipe misses lines already buffered)
-    queue: Queue[str] = Queue()
-    threading.Thread(target=lambda: [queue.put(x) for x in proc.stdout], daemon=True).start()
-    try:
-        deadline = time.monotonic() + START_BOUND_S
-        while "stand-in" not in lines and time.monotonic() < deadline:
-            try:
-                line = queue.get(timeout=1.0).strip()
-            except Empty:
-                if proc.poll() is not None:
-                    break
-                continue
-            key = "bus" if " bus " in line else line.split()[0]
-            lines.setdefault(key, line)
-        if "stand-in" not in lines:
-            proc.kill()
-            pytest.fail(f"server did not start: {lines} {proc.stderr.read()[-2000:]}")
-        yield lines
-        proc.terminate()
-        assert proc.wait(timeout=20) == 0
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(timeout=5)
+def serve(bus: str, seed: int, hidden: Path, *flags: str) -> Iterator[dict[str, str]]:
+    """``ergo twin serve --bus BUS --stand-in SEED --hidden HIDDEN FLAGS``
+    (``sim.standin.owner.ServedRig``); yields its announced lines by their first words
+    (``bus``, ``camera``, ``hands``, ``stand-in``); stops it with SIGTERM and expects exit
+    code 0."""
+    rig = ServedRig(bus, seed, hidden, flags=flags)
+    with rig:
+        yield rig.lines
+    assert rig.proc.returncode == 0
 
 
 def hands_port(lines: dict[str, str]) -> int:
@@ -104,9 +78,11 @@ def test_dynamixel_raw_positions_follow_the_hidden_mounting(tmp_path):
     from robot.dynamixel.arm import DynamixelArm
     from robot.dynamixel.bus import DynamixelBus
 
-    flags = ["--bus", "dynamixel", "--stand-in", "21", "--hidden", str(tmp_path / "h.json")]
-    flags += ["--overload-servo", "6", "--overload-after", "1.0"]  # the fault flags still work
-    with serve(*flags) as lines, HandsClient(hands_port(lines)) as hands:
+    flags = ["--overload-servo", "6", "--overload-after", "1.0"]  # the fault flags still work
+    with (
+        serve("dynamixel", 21, tmp_path / "h.json", *flags) as lines,
+        HandsClient(hands_port(lines)) as hands,
+    ):
         port = lines["bus"].split()[-1]
         hidden = hidden_of(lines)
         assert hidden.seed == 21
@@ -157,9 +133,11 @@ def test_dynamixel_raw_positions_follow_the_hidden_mounting(tmp_path):
 def test_canopen_raw_positions_follow_the_hidden_mounting(tmp_path):
     from robot.canopen.arm import CanArm, CanArmConfig
 
-    flags = ["--bus", "canopen", "--stand-in", "22", "--hidden", str(tmp_path / "h.json")]
-    flags += ["--no-camera", "--overload-servo", "2", "--overload-after", "1.0"]
-    with serve(*flags) as lines, HandsClient(hands_port(lines)) as hands:
+    flags = ["--no-camera", "--overload-servo", "2", "--overload-after", "1.0"]
+    with (
+        serve("canopen", 22, tmp_path / "h.json", *flags) as lines,
+        HandsClient(hands_port(lines)) as hands,
+    ):
         hidden = hidden_of(lines)
         assert "camera" not in lines
         # the pty rig's heartbeat (explore/rigs/canopen.py; tests/sim/canopen/test_server.py)
