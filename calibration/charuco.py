@@ -23,12 +23,13 @@ How the views cover the image and how tilted they are become advice printed with
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from calibration.camera import INTRINSIC_NAMES, Intrinsics
 from calibration.store import CalibrationError
 
 # Fewest views: the held-out check fits the intrinsics on all views but one group, so each fit
@@ -56,7 +57,6 @@ GOOD_TILTED_VIEWS = 3  # views tilted by at least GOOD_TILT_DEG (guess)
 GOOD_TILT_DEG = 20.0  # a tilt that makes the perspective, hence the focal length, seen (guess)
 GOOD_VIEWS = 10  # OpenCV's tutorial: 10-15 views
 HELD_OUT_RATIO = 1.5  # held-out RMS over the views' RMS above which views are too few (guess)
-INTRINSIC_NAMES = ("fx", "fy", "cx", "cy")
 
 
 @dataclass(frozen=True)
@@ -133,84 +133,6 @@ class BoardView:
     object_points: np.ndarray
     image_points: np.ndarray
     name: str = ""
-
-
-@dataclass
-class Intrinsics:
-    """The result of a camera calibration.
-
-    Attributes:
-        camera_matrix: shape (3, 3), pixels.
-        dist_coeffs: (k1, k2, p1, p2, k3), shape (5,).
-        image_size: (width, height), pixels.
-        rms_px: RMS reprojection error over all corners, pixels.
-        per_view_rms_px: shape (n_views,), pixels.
-        n_views: views used.
-        view_names: their names, in order.
-        std_px: standard deviation of fx, fy, cx, cy, pixels (the larger of OpenCV's estimate
-            and the held-out spread).
-        held_out_rms_px: RMS reprojection error of the views held out (each with the
-            intrinsics fitted without it), pixels.
-        held_out_per_view_px: shape (n_views,), pixels.
-        advice: what views to add, in words (coverage, tilt, number), one item each.
-    """
-
-    camera_matrix: np.ndarray
-    dist_coeffs: np.ndarray
-    image_size: tuple[int, int]
-    rms_px: float
-    per_view_rms_px: np.ndarray
-    n_views: int
-    view_names: list[str] = field(default_factory=list)
-    std_px: dict[str, float] = field(default_factory=dict)
-    held_out_rms_px: float = float("nan")
-    held_out_per_view_px: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    advice: list[str] = field(default_factory=list)
-
-    def describe(self) -> str:
-        """The intrinsics with their standard deviations and the errors, one line."""
-        k, sd = self.camera_matrix, self.std_px
-        values = dict(zip(INTRINSIC_NAMES, (k[0, 0], k[1, 1], k[0, 2], k[1, 2]), strict=True))
-        parts = [
-            f"{n} {v:.1f} +-{sd[n]:.1f}" if n in sd else f"{n} {v:.1f}" for n, v in values.items()
-        ]
-        return (
-            f"{', '.join(parts)} px (1 sd); RMS reprojection error {self.rms_px:.3f} px over "
-            f"{self.n_views} views, {self.held_out_rms_px:.3f} px on views held out"
-        )
-
-    def to_dict(self, board: BoardSpec | None = None) -> dict[str, Any]:
-        d: dict[str, Any] = {
-            "camera_matrix": self.camera_matrix.tolist(),
-            "dist_coeffs": self.dist_coeffs.reshape(-1).tolist(),
-            "image_size": list(self.image_size),
-            "rms_px": float(self.rms_px),
-            "n_views": int(self.n_views),
-            "per_view_rms_px": [float(x) for x in self.per_view_rms_px],
-        }
-        if self.std_px:
-            d["std_px"] = {k: float(v) for k, v in self.std_px.items()}
-        if math.isfinite(self.held_out_rms_px):
-            d["held_out_rms_px"] = float(self.held_out_rms_px)
-        if self.advice:
-            d["advice"] = list(self.advice)
-        if board is not None:
-            d["board"] = board.to_dict()
-        return d
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> Intrinsics:
-        return cls(
-            camera_matrix=np.asarray(d["camera_matrix"], np.float64),
-            dist_coeffs=np.asarray(d["dist_coeffs"], np.float64),
-            image_size=(int(d["image_size"][0]), int(d["image_size"][1])),
-            rms_px=float(d.get("rms_px", float("nan"))),
-            per_view_rms_px=np.asarray(d.get("per_view_rms_px", []), np.float64),
-            n_views=int(d.get("n_views", 0)),
-            std_px={k: float(v) for k, v in (d.get("std_px") or {}).items()},
-            held_out_rms_px=float(d.get("held_out_rms_px", float("nan"))),
-            advice=list(d.get("advice") or []),
-        )
 
 
 def detect_view(image: np.ndarray, spec: BoardSpec, name: str = "") -> BoardView | None:

@@ -18,6 +18,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from calibration.camera import check_camera_payload
 from robot.calibration_files import (
     DEFAULT_DIR,
     ENV_DIR,
@@ -56,27 +57,6 @@ __all__ = [
 
 
 # ---- validation --------------------------------------------------------------------------
-def _validate_camera(c: Fields) -> None:
-    c.matrix("camera_matrix", (3, 3))
-    k = c.data["camera_matrix"]
-    if not (k[0][0] > 0 and k[1][1] > 0 and k[2] == [0, 0, 1]):
-        c.fail("camera_matrix", "must have positive focal lengths and last row [0, 0, 1]")
-    c.matrix("dist_coeffs", (-1,))
-    if len(c.data["dist_coeffs"]) not in (4, 5, 8, 12, 14):
-        c.fail("dist_coeffs", "must have 4, 5, 8, 12 or 14 values")
-    c.matrix("image_size", (2,))
-    if any(int(s) != s or s <= 0 for s in c.data["image_size"]):
-        c.fail("image_size", "must be two positive integers (width, height)")
-    c.number("rms_px", 0.0, 100.0)
-    c.number("n_views", 1, 10_000)
-    sd = c.get("std_px", optional=True)
-    if sd is not None and not (
-        isinstance(sd, dict) and all(is_matrix(v, ()) and v >= 0 for v in sd.values())
-    ):
-        c.fail("std_px", "must map fx, fy, cx, cy to finite standard deviations >= 0, px")
-    c.number("held_out_rms_px", 0.0, 1e4, optional=True)
-
-
 # Bounds of an arena file's numbers that no real calibration comes near (guesses, far out):
 # a pixel -> metre homography normalised to h[2][2] = 1 has entries of about 1e-3 (metres per
 # pixel) to 1; its condition number is about 1e3 for a camera looking down at a 0.5 m arena
@@ -165,7 +145,7 @@ def _validate_dynamics(c: Fields) -> None:
 
 
 VALIDATORS: dict[str, Callable[[Fields], None]] = {
-    "camera": _validate_camera,
+    "camera": check_camera_payload,
     "arena": _validate_arena,
     "joints": _validate_joints,
     "dynamics": _validate_dynamics,
