@@ -10,14 +10,13 @@ forcing x (psi . w) / sum(psi), start y0 = 0. Unlike the original (which dropped
 integration, a bug), the system is integrated properly with semi-implicit Euler sub-steps.
 
 The normalised trajectory is clipped to [-1, 1] and mapped linearly, per joint, onto the
-joint ranges of ``DmpConfig`` (radians): these are the twin's, chosen and measured so that
-random parameters move the ball in a clear fraction of episodes (docs/twin.md).
+joint ranges of ``DmpConfig`` (radians), which the rig gives: the Ergo Jr rigs' are
+``explore.rigs.motor.ERGO_JR_LOWER`` / ``ERGO_JR_UPPER``, chosen for the arena.
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
@@ -37,38 +36,22 @@ ALPHA_X = 1.0  # canonical system x' = -x (original)
 RATE_HZ = 40.0
 
 
-def _deg(values: list[float]) -> tuple[float, ...]:
-    return tuple(math.radians(v) for v in values)
-
-
-# Joint ranges the normalised trajectory maps onto (radians), inside the Ergo Jr limits. Chosen
-# for the twin's arena (docs/twin.md): m1 sweeps the servo's 300 degrees; m2 leans the arm
-# forwards (to 110 degrees) or backwards (to -90, its limit), so the tool reaches the 60-degree
-# sector behind the arm that m1 alone cannot face; m3/m5/m6 fold either way. Measured with
-# experiments/touch_rate.py: random parameters move the ball in 7.3-8.0% of episodes (3 seeds x
-# 1000),
-# against 1.0-2.8% for the earlier forward-only ranges, whose dead sector behind the arm
-# collected the ball for good.
-TWIN_LOWER = _deg([-150.0, -90.0, -90.0, -60.0, -90.0, -90.0])
-TWIN_UPPER = _deg([150.0, 110.0, 90.0, 60.0, 90.0, 90.0])
-
-
 @dataclass(frozen=True)
 class DmpConfig:
     """DMP settings.
 
     Attributes:
+        lower, upper: joint angles that -1 and +1 map to, shape (6,), rad (the rig's).
         n_points: trajectory points (played at ``rate_hz``).
         rate_hz: control rate, Hz (the trajectory lasts n_points / rate_hz seconds).
         substeps: integration sub-steps per point.
-        lower, upper: joint angles that -1 and +1 map to, shape (6,), rad.
     """
 
+    lower: tuple[float, ...]
+    upper: tuple[float, ...]
     n_points: int = 40
     rate_hz: float = RATE_HZ
     substeps: int = 10
-    lower: tuple[float, ...] = field(default=TWIN_LOWER)
-    upper: tuple[float, ...] = field(default=TWIN_UPPER)
 
     @property
     def duration(self) -> float:
@@ -107,12 +90,13 @@ def check_parameters(theta: np.ndarray) -> np.ndarray:
 
 
 class Dmp:
-    """Six DMPs in parallel: the Ergo Jr's ``MotorPrimitive``."""
+    """Six DMPs in parallel: the Ergo Jr's ``MotorPrimitive`` (``explore.rigs.motor`` gives it
+    the rig's joint ranges)."""
 
     n_params = N_PARAMS
 
-    def __init__(self, config: DmpConfig | None = None) -> None:
-        self.config = config or DmpConfig()
+    def __init__(self, config: DmpConfig) -> None:
+        self.config = config
         self.centres = np.exp(-np.linspace(0.8, 0.0, N_BASIS))  # shape (7,)
         self.widths = 8.0 * N_BASIS**2 / self.centres**1.5  # shape (7,)
         self.lower = np.asarray(self.config.lower, dtype=float)

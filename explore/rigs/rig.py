@@ -22,12 +22,13 @@ from typing import Any
 
 import numpy as np
 
-from explore.learner.dmp import Dmp, MotorPrimitive
+from explore.learner.dmp import MotorPrimitive
 from explore.learner.scene import Scene
 from explore.options import OptionsError, parse_options
 from explore.rigs.ball import NO_STATE, BallSensor
 from explore.rigs.clock import Clock
 from explore.rigs.episodes import EpisodeConfig, EpisodePlayer
+from explore.rigs.motor import ergo_jr_dmp
 from robot.arm import Arm
 from robot.registry import LazyTable
 from vision.camera import Camera
@@ -88,7 +89,7 @@ class Rig:
     clock: Clock | None = None
     sensor: BallSensor | None = None
     #: motor parameters (n_params,) -> joint trajectory (T, n_joints) rad
-    motor: MotorPrimitive = field(default_factory=Dmp)
+    motor: MotorPrimitive = field(default_factory=ergo_jr_dmp)
     #: a rig that plays its own episodes: the run's ``EpisodeConfig`` -> its player; None: the
     #: arm's ``EpisodeRunner``
     player: Callable[[EpisodeConfig], EpisodePlayer] | None = None

@@ -26,7 +26,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from explore.learner.dmp import Dmp, DmpConfig
+from explore.rigs.motor import ergo_jr_dmp
 from robot.arm import Arm, JointState, RecoveryPolicy
 from robot.errors import BusError, LinkLost, NotConnectedError, SafetyStop
 from robot.spec import ArmSpec, JointSpec, ergo_jr_spec
@@ -317,7 +317,7 @@ def test_any_motor_parameters_played_through_any_faults_stay_safe(spec, fracs, t
     arm = ScriptedArm(spec, start, faults=[])
     arm.connect()
     arm.faults = list(faults)
-    trajectory = Dmp(DmpConfig()).trajectory(np.asarray(theta))
+    trajectory = ergo_jr_dmp().trajectory(np.asarray(theta))
     _drive(arm, [("command", q) for q in trajectory])
     _check_sent(arm, spec, start)
 

@@ -8,10 +8,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from explore.learner.dmp import N_PARAMS, Dmp, DmpConfig, ParameterError
+from explore.learner.dmp import N_PARAMS, ParameterError
+from explore.rigs.motor import ergo_jr_dmp
 
 params = arrays(np.float64, (N_PARAMS,), elements=st.floats(-1.0, 1.0))
-DMP = Dmp()
+DMP = ergo_jr_dmp()
 
 
 def test_shape_is_48_to_40_by_6():
@@ -36,7 +37,7 @@ def test_converges_to_the_goal():
     theta = np.zeros(N_PARAMS).reshape(6, 8)
     goals = np.array([0.5, -0.3, 0.8, -0.9, 0.1, 0.0])
     theta[:, 7] = goals
-    long = Dmp(DmpConfig(n_points=200))  # 5 s: the transient has died out
+    long = ergo_jr_dmp(n_points=200)  # 5 s: the transient has died out
     y = long.normalised(theta.ravel())
     np.testing.assert_allclose(y[-1], goals, atol=1e-3)
     # and the 1 s trajectory is already most of the way there
@@ -48,7 +49,7 @@ def test_weights_shape_the_path_but_not_the_end_point():
     theta = np.zeros((6, 8))
     theta[:, 7] = 0.4
     theta[0, :7] = 1.0
-    long = Dmp(DmpConfig(n_points=400))  # 10 s: the phase (and the forcing) has decayed
+    long = ergo_jr_dmp(n_points=400)  # 10 s: the phase (and the forcing) has decayed
     y = long.normalised(theta.ravel())
     assert abs(y[:, 0] - y[:, 1]).max() > 0.1  # forcing bends joint 1's path
     assert y[-1, 0] == pytest.approx(0.4, abs=1e-2)  # the forcing fades with the phase
