@@ -19,6 +19,7 @@ from explore.campaigns.backends import BACKENDS, DEFAULT_RETRIES
 from explore.campaigns.trial import CampaignError
 from explore.cli.explore import add_rig_arguments, parse_key_values, rig_of
 from explore.learner.presets import PRESETS
+from explore.learner.strategies.registry import MODELS
 from robot.cli_errors import CliError
 
 # Rigs that can render an outcome database (``--rig``): the twin (explore/rigs/sim_dataset.py)
@@ -59,9 +60,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--retries", type=int, default=DEFAULT_RETRIES,
         help="ray: restarts of a trial whose worker or node died; it resumes (default 2)",
     )  # fmt: skip
-    p.add_argument("--vae", type=Path, help="VAE model for the *-vae strategies")
-    p.add_argument("--betavae", type=Path, help="beta-VAE model for the *-betavae strategies")
-    p.add_argument("--sae", type=Path, help="spatial autoencoder for the *-sae strategies")
+    for model in MODELS:
+        p.add_argument(
+            f"--{model.flag}", type=Path, help=f"{model.what} for the *-{model.flag} strategies"
+        )
     p.add_argument(
         "--option", action="append", default=[], metavar="KEY=JSON",
         help="strategy option for every goal-exploration run, e.g. bootstrap=100, or for one "
@@ -145,7 +147,7 @@ def run_experiment(args: argparse.Namespace) -> int:
     try:
         rows = run_campaign(
             args.out, strategies, seeds, args.episodes, args.jobs,
-            {"vae": args.vae, "betavae": args.betavae, "sae": args.sae},
+            {model.flag: getattr(args, model.flag) for model in MODELS},
             parse_key_values(args.option, "--option"), progress=not args.no_progress,
             backend=args.backend, ray_address=args.ray_address, rig=rig, retries=args.retries,
             preset=args.preset,

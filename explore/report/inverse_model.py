@@ -33,13 +33,14 @@ from pathlib import Path
 import numpy as np
 
 from explore.learner.goal_spaces import LatentGoalSpace
-from explore.learner.strategies import StrategyError, make_strategy
+from explore.learner.strategies import STRATEGIES, StrategyError, make_strategy
 from explore.report.run_data import run_scene
 from explore.runs.metrics import CellCounter
 from explore.runs.store import RunStore
 
-ENGINEERED = ("rge-efr", "mge-efr")
-LEARNED = ("rge-vae", "mge-vae", "rge-betavae", "mge-betavae", "rge-sae", "mge-sae")
+# the strategies with an inverse model over a goal space: engineered, or a model's (registry)
+ENGINEERED = tuple(name for name, entry in STRATEGIES.items() if entry.engineered)
+LEARNED = tuple(name for name, entry in STRATEGIES.items() if entry.model is not None)
 PAIRS = 20000  # random outcome pairs for the distance profile of the figure
 
 
@@ -91,7 +92,7 @@ def goal_space_vectors(
     if name not in ENGINEERED + LEARNED:
         raise DiagnosisError(f"{run}: strategy {name!r} has no inverse model to diagnose")
     if vae_dir is not None and name in LEARNED:
-        options["sae" if name.endswith("-sae") else "vae"] = str(vae_dir)
+        options[STRATEGIES[name].model.option] = str(vae_dir)  # type: ignore[union-attr]
     try:
         space = make_strategy(name, scene=run_scene(config), **options).space
     except StrategyError as exc:

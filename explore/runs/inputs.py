@@ -22,6 +22,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from explore.learner.strategies.registry import MODELS
 from explore.runs.config import RunConfig
 from explore.runs.layout import INPUTS_KEY, RUN_FILE
 from explore.runs.store import RunStore, RunStoreError
@@ -48,7 +49,8 @@ def _model_files(option: str, path: str) -> list[Path]:
     return [folder / MODEL_FILE, folder / CONFIG_FILE]
 
 
-MODEL_OPTIONS = ("vae", "sae")  # strategy options that name a goal-space model
+# strategy options that name a goal-space model (the registry's models: vae, sae)
+MODEL_OPTIONS = tuple(dict.fromkeys(model.option for model in MODELS))
 
 
 def current_inputs(config: RunConfig) -> list[dict[str, str]]:

@@ -41,11 +41,13 @@ class Model:
         option: the strategy option that names its folder (``vae=PATH``).
         recipe: the ``ergo`` commands that make one (shown when it is missing). The strategy's
             own error names it too, so it lives here rather than in the campaign layer.
+        what: what it is, for the flag's help ("a VAE").
     """
 
     flag: str
     option: str
     recipe: str
+    what: str = "a model"
 
 
 # "vae" is the recipe of docs/results.md: a plain VAE (beta 1) collapses at CPU-sized schedules.
@@ -55,19 +57,24 @@ VAE = Model(
     "ergo dataset outcomes --n 3000 --out data/outcomes.npz && "
     "ergo vae train --data data/outcomes.npz --out models/vae --beta 10 --capacity 10 "
     "--capacity-iterations 500 --iterations 700",
+    "a VAE",
 )
 BETAVAE = Model(
     "betavae",
     "vae",
     "ergo dataset outcomes --n 10000 --out data/outcomes.npz && "
     "ergo vae train --data data/outcomes.npz --out models/betavae --beta 4 --capacity 10",
+    "a beta-VAE",
 )
 SAE = Model(
     "sae",
     "sae",
     "ergo dataset outcomes --n 3000 --out data/outcomes.npz && "
     "ergo sae train --data data/outcomes.npz --out models/sae",
+    "a spatial autoencoder",
 )
+# Every model a strategy may need (``ergo experiment``'s flags, the options a run's inputs name)
+MODELS = (VAE, BETAVAE, SAE)
 
 
 @dataclass(frozen=True)
