@@ -138,6 +138,22 @@ class ArmSpec:
         return [j.lower for j in self.joints], [j.upper for j in self.joints]
 
 
+def joint_mounting(
+    n: int, directions: object = None, offsets: object = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """How ``n`` servos sit on their joints: ``directions``, shape (n,), +1 where the servo's
+    angle grows with the joint's and -1 where against it, and ``offsets``, shape (n,), rad,
+    the joint angle at servo angle 0 (None: all +1, all 0). Returns float arrays; a one-line
+    ``ValueError`` naming the wrong argument."""
+    d = np.ones(n) if directions is None else np.asarray(directions, float)
+    o = np.zeros(n) if offsets is None else np.asarray(offsets, float)
+    if d.shape != (n,) or not np.all(np.isin(d, (-1.0, 1.0))):
+        raise ValueError(f"directions must be {n} values of +1 or -1, got {directions}")
+    if o.shape != (n,) or not np.all(np.isfinite(o)):
+        raise ValueError(f"offsets must be {n} finite angles in rad, got {offsets}")
+    return d, o
+
+
 def _read_only(values: list[float]) -> np.ndarray:
     a = np.array(values, dtype=float)
     a.flags.writeable = False

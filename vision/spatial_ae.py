@@ -29,9 +29,8 @@ This module imports no other package of the project but ``vision``.
 
 from __future__ import annotations
 
-import json
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -44,10 +43,9 @@ from vision.vae import (
     check_statistics,
     few_threads_for,
     load_state,
-    read_config_json,
-    save_state,
+    read_model_folder,
     to_tensor,
-    write_text_atomically,
+    write_model_folder,
 )
 
 FEATURES = 8  # feature maps, a 16-D code (guess, tried: see docs/results.md)
@@ -230,11 +228,7 @@ class SpatialAutoencoder(nn.Module):
     # ---- files -------------------------------------------------------------------------------
     def save(self, folder: str | Path) -> Path:
         """Write ``sae.pt`` and ``sae.json`` into ``folder``; returns the folder."""
-        folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        save_state(self.state_dict(), folder / MODEL_FILE)
-        write_text_atomically(folder / CONFIG_FILE, json.dumps(asdict(self.config), indent=2))
-        return folder
+        return write_model_folder(folder, (MODEL_FILE, CONFIG_FILE), self.state_dict(), self.config)
 
 
 def is_sae_folder(path: str | Path) -> bool:
@@ -247,13 +241,10 @@ def is_sae_folder(path: str | Path) -> bool:
 def load_sae(path: str | Path) -> SpatialAutoencoder:
     """Load a model folder (or its ``sae.pt``) saved by ``SpatialAutoencoder.save``, in eval
     mode."""
-    path = Path(path)
-    folder = path.parent if path.suffix == ".pt" else path
-    model_file, config_file = folder / MODEL_FILE, folder / CONFIG_FILE
-    for f in (model_file, config_file):
-        if not f.is_file():
-            raise VaeError(f"{f} not found: is {folder} a model folder from `ergo sae train`?")
-    raw = read_config_json(config_file, "spatial autoencoder")
+    model_file, raw = read_model_folder(
+        path, (MODEL_FILE, CONFIG_FILE), "spatial autoencoder", "ergo sae train"
+    )
+    config_file = model_file.with_name(CONFIG_FILE)
     try:
         config = SaeConfig(**raw)
         model = SpatialAutoencoder(config)

@@ -58,6 +58,34 @@ def read_config_json(path: Path, what: str) -> dict:
     return raw
 
 
+def read_model_folder(
+    path: str | Path, files: tuple[str, str], what: str, command: str
+) -> tuple[Path, dict]:
+    """A model folder (or the model file in it) named by ``path``: its model file and its
+    config's JSON object. ``files``: (model file, config file) names; ``what``: the kind of
+    model for messages; ``command``: the command that writes such folders. A one-line
+    ``VaeError`` where a file is missing or the config is not a JSON object."""
+    path = Path(path)
+    folder = path.parent if path.suffix == ".pt" else path
+    model_file, config_file = folder / files[0], folder / files[1]
+    for f in (model_file, config_file):
+        if not f.is_file():
+            raise VaeError(f"{f} not found: is {folder} a model folder from `{command}`?")
+    return model_file, read_config_json(config_file, what)
+
+
+def write_model_folder(
+    folder: str | Path, files: tuple[str, str], state: dict, config: Any
+) -> Path:
+    """Write a model's ``state`` (its state dict) and ``config`` (a dataclass, as JSON) into
+    ``folder`` under ``files`` (model file, config file names); returns the folder."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    save_state(state, folder / files[0])
+    write_text_atomically(folder / files[1], json.dumps(asdict(config), indent=2))
+    return folder
+
+
 def load_state(path: Path, what: str) -> Any:
     """``torch.load`` of a file written by ``torch.save`` (tensors only); a one-line
     ``VaeError`` for one that is empty, truncated or not a torch file."""
@@ -291,11 +319,7 @@ class Vae(nn.Module):
     # ---- files -------------------------------------------------------------------------------
     def save(self, folder: str | Path) -> Path:
         """Write ``vae.pt`` and ``vae.json`` into ``folder``; returns the folder."""
-        folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        save_state(self.state_dict(), folder / MODEL_FILE)
-        write_text_atomically(folder / CONFIG_FILE, json.dumps(asdict(self.config), indent=2))
-        return folder
+        return write_model_folder(folder, (MODEL_FILE, CONFIG_FILE), self.state_dict(), self.config)
 
 
 def kl_per_latent(mu: torch.Tensor, logvar: torch.Tensor) -> torch.Tensor:
@@ -305,13 +329,8 @@ def kl_per_latent(mu: torch.Tensor, logvar: torch.Tensor) -> torch.Tensor:
 
 def load_vae(path: str | Path) -> Vae:
     """Load a model folder (or its ``vae.pt``) saved by ``Vae.save``, in eval mode."""
-    path = Path(path)
-    folder = path.parent if path.suffix == ".pt" else path
-    model_file, config_file = folder / MODEL_FILE, folder / CONFIG_FILE
-    for f in (model_file, config_file):
-        if not f.is_file():
-            raise VaeError(f"{f} not found: is {folder} a model folder from `ergo vae train`?")
-    raw = read_config_json(config_file, "VAE")
+    model_file, raw = read_model_folder(path, (MODEL_FILE, CONFIG_FILE), "VAE", "ergo vae train")
+    config_file = model_file.with_name(CONFIG_FILE)
     try:
         config = VaeConfig(**raw)
         vae = Vae(config)

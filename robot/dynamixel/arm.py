@@ -43,7 +43,7 @@ from robot.dynamixel.bus import (
 )
 from robot.dynamixel.control_table import MODELS, Model, model_by_name
 from robot.errors import BusError, SafetyStop
-from robot.spec import ArmSpec, ergo_jr_spec
+from robot.spec import ArmSpec, ergo_jr_spec, joint_mounting
 from robot.torque_guardian import EmergencyPayload, serial_path
 from robot.watchdog import Watchdog
 
@@ -99,12 +99,7 @@ class DynamixelArm(Arm):
         self.ids = self.spec.ids
         if len(set(self.ids)) != n:
             raise ValueError(f"servo ids must be distinct, got {self.ids}")
-        self.directions = np.ones(n) if directions is None else np.asarray(directions, float)
-        self.offsets = np.zeros(n) if offsets is None else np.asarray(offsets, float)
-        if self.directions.shape != (n,) or not np.all(np.isin(self.directions, (-1.0, 1.0))):
-            raise ValueError(f"directions must be {n} values of +1 or -1, got {directions}")
-        if self.offsets.shape != (n,) or not np.all(np.isfinite(self.offsets)):
-            raise ValueError(f"offsets must be {n} finite angles in rad, got {offsets}")
+        self.directions, self.offsets = joint_mounting(n, directions, offsets)
         if slow_every < 1:
             raise ValueError(f"slow_every must be >= 1, got {slow_every}")
         if return_delay_us is not None and not 0 <= return_delay_us <= 508:

@@ -34,6 +34,7 @@ import numpy as np
 
 from robot.dynamixel import protocol as proto
 from robot.dynamixel.control_table import XL320, Model
+from robot.spec import joint_mounting
 
 if TYPE_CHECKING:
     from sim.twin import Twin
@@ -192,12 +193,7 @@ class DynamixelEmulator:
     ) -> None:
         self.twin = twin
         n = len(ids)
-        self.directions = np.ones(n) if directions is None else np.asarray(directions, float)
-        self.offsets = np.zeros(n) if offsets is None else np.asarray(offsets, float)
-        if self.directions.shape != (n,) or not np.all(np.isin(self.directions, (-1.0, 1.0))):
-            raise ValueError(f"directions must be {n} values of +1 or -1, got {directions}")
-        if self.offsets.shape != (n,) or not np.all(np.isfinite(self.offsets)):
-            raise ValueError(f"offsets must be {n} finite angles in rad, got {offsets}")
+        self.directions, self.offsets = joint_mounting(n, directions, offsets)
         self.model = model
         self.faults = faults or FaultConfig()
         self.servos: dict[int, EmulatedServo] = {

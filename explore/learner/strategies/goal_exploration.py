@@ -231,21 +231,24 @@ class GoalExploration(Strategy):
         if isinstance(space, LatentGoalSpace):
             self._last_latent = np.zeros(space.dim)
 
-    def _record_context(self, record: Experience) -> np.ndarray:
+    def _context(self, engineered: Callable[[], np.ndarray]) -> np.ndarray:
+        """The context part of an inverse model's input: none where the scene puts the ball
+        back for every episode, the last latent code in a learned space, else
+        ``engineered()`` (the engineered space's context features)."""
         assert self.space is not None
         if self.scene.resets:
             return np.zeros(0)
         if isinstance(self.space, LatentGoalSpace):
             return self._last_latent  # type: ignore[return-value]
-        return self.space.context(record)
+        return engineered()
+
+    def _record_context(self, record: Experience) -> np.ndarray:
+        return self._context(lambda: self.space.context(record))  # type: ignore[union-attr]
 
     def _propose_context(self, context: Observation) -> np.ndarray:
-        assert self.space is not None
-        if self.scene.resets:
-            return np.zeros(0)
-        if isinstance(self.space, LatentGoalSpace):
-            return self._last_latent  # type: ignore[return-value]
-        return self.space.context_of(context.ball, context.distractor)  # type: ignore[attr-defined]
+        return self._context(
+            lambda: self.space.context_of(context.ball, context.distractor)  # type: ignore[union-attr]
+        )
 
     def update(self, record: Experience) -> None:
         self.n_seen += 1
