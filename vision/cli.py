@@ -38,6 +38,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="iterations over which C rises from 0 (default 2000; docs/results.md: 500)",
     )  # fmt: skip
     t.add_argument("--lr", type=float, default=None, help="Adam learning rate (default 1e-3)")
+    t.add_argument(
+        "--lr-final", type=float, default=None, metavar="LR",
+        help="decay the rate from --lr to LR along a half cosine over the run (default: none)",
+    )  # fmt: skip
     t.add_argument("--batch", type=int, default=None, help="batch size (default 64)")
     _add_training_arguments(t)
     t.set_defaults(func=_vae_train)
@@ -154,7 +158,8 @@ def _vae_train(args: argparse.Namespace) -> int:
         def train_one(seed: int, out: Path) -> Any:
             cfg = TrainConfig(
                 iterations=args.iterations or defaults.iterations, lr=args.lr or defaults.lr,
-                batch=args.batch or defaults.batch, seed=seed, device=args.device,
+                lr_final=args.lr_final, batch=args.batch or defaults.batch, seed=seed,
+                device=args.device,
             )  # fmt: skip
             return train_vae(
                 images, out, model_cfg, cfg, progress=not args.no_progress, heldout=HELDOUT

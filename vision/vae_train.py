@@ -19,6 +19,7 @@ and the final ``vae.pt`` + ``vae.json`` (``Vae.save``).
 
 from __future__ import annotations
 
+import math
 import sys
 import zipfile
 import zlib
@@ -55,6 +56,8 @@ class TrainConfig:
         iterations: total gradient steps (a guess: 300 measured were not enough, the latents had
             collapsed; docs/goal_exploration.md; ~0.4-0.8 s of CPU each at batch 64).
         lr: Adam learning rate (paper 1e-5 over 300k iterations; 1e-3 here, a guess for short runs).
+        lr_final: None: ``lr`` throughout; else the rate decays from ``lr`` at the first
+            iteration to ``lr_final`` at the last along a half cosine (``lr_at``).
         batch: images per step (paper 64).
         seed: seeds batches and sampling noise.
         checkpoint_every: iterations between checkpoints.
@@ -65,6 +68,7 @@ class TrainConfig:
 
     iterations: int = 3000
     lr: float = 1e-3
+    lr_final: float | None = None
     batch: int = 64
     seed: int = 0
     checkpoint_every: int = 250
@@ -76,6 +80,16 @@ class TrainConfig:
             raise VaeError("iterations, batch and checkpoint_every must be positive")
         if not self.lr > 0:
             raise VaeError(f"lr must be positive, got {self.lr}")
+        if self.lr_final is not None and not 0 < self.lr_final <= self.lr:
+            raise VaeError(f"lr_final must be in (0, lr = {self.lr}], got {self.lr_final}")
+
+    def lr_at(self, iteration: int) -> float:
+        """The learning rate of 0-based ``iteration``: ``lr``, or the half-cosine decay from
+        ``lr`` (first iteration) to ``lr_final`` (last)."""
+        if self.lr_final is None:
+            return self.lr
+        frac = min(1.0, iteration / max(1, self.iterations - 1))
+        return self.lr_final + 0.5 * (self.lr - self.lr_final) * (1.0 + math.cos(math.pi * frac))
         if self.device not in DEVICES:
             raise VaeError(f"device must be one of {', '.join(DEVICES)}, got {self.device!r}")
 
@@ -224,6 +238,8 @@ def fit(
         idx = np.random.default_rng([config.seed, it]).integers(0, len(images), config.batch)
         torch.manual_seed(config.seed * 1_000_003 + it)
         x = batch_tensor(data, torch.from_numpy(idx).to(device))
+        for group in optim.param_groups:
+            group["lr"] = config.lr_at(it)
         terms = model.loss(x, it)
         optim.zero_grad(set_to_none=True)
         terms["loss"].backward()

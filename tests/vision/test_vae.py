@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import itertools
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import torch
@@ -125,6 +128,47 @@ def test_resumed_training_equals_uninterrupted_training(tmp_path):
     with pytest.raises(VaeError, match="remove it or use the same"):
         train_vae(images, tmp_path / "b", VaeConfig(beta=3.0),
                   TrainConfig(iterations=13, threads=1), progress=False)  # fmt: skip
+
+
+def test_a_decaying_learning_rate_runs_from_lr_to_lr_final_and_resumes_exactly(
+    tmp_path, monkeypatch
+):
+    """The half-cosine schedule: lr at the first iteration, lr_final at the last, falling in
+    between; a run cut after its first checkpoint and run again with the same settings ends
+    with the weights of the uninterrupted run (the rate is a function of the iteration)."""
+    import vision.vae_train as vt
+
+    sched = TrainConfig(iterations=5, lr=1e-3, lr_final=1e-5)
+    rates = [sched.lr_at(i) for i in range(5)]
+    assert rates[0] == pytest.approx(1e-3) and rates[-1] == pytest.approx(1e-5)
+    assert all(a > b for a, b in itertools.pairwise(rates))
+    assert TrainConfig(lr=2e-4).lr_at(123) == 2e-4
+    for bad in (0.0, 2e-3):
+        with pytest.raises(VaeError, match="lr_final"):
+            TrainConfig(lr=1e-3, lr_final=bad).validate()
+
+    images = tiny_images(24)
+    cfg = TrainConfig(iterations=12, batch=8, threads=1, checkpoint_every=6, lr_final=1e-5)
+    straight = train_vae(images, tmp_path / "a", VaeConfig(), cfg, progress=False)
+    constant = train_vae(images, tmp_path / "c", VaeConfig(),
+                         replace(cfg, lr_final=None), progress=False)  # fmt: skip
+    append = vt._append_log
+
+    def cut(*args, **kwargs):  # the process dies right after the first checkpoint
+        append(*args, **kwargs)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(vt, "_append_log", cut)
+    with pytest.raises(KeyboardInterrupt):
+        train_vae(images, tmp_path / "b", VaeConfig(), cfg, progress=False)
+    monkeypatch.setattr(vt, "_append_log", append)
+    resumed = train_vae(images, tmp_path / "b", VaeConfig(), cfg, progress=False)
+    pairs = list(zip(straight.state_dict().items(), resumed.state_dict().items(), strict=True))
+    assert all(torch.equal(a, b) for (_, a), (_, b) in pairs)
+    assert not all(
+        torch.equal(a, b)
+        for a, b in zip(straight.state_dict().values(), constant.state_dict().values(), strict=True)
+    )
 
 
 def test_vae_train_command(tmp_path, capsys):
