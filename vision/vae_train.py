@@ -54,10 +54,13 @@ class TrainConfig:
 
     Attributes:
         iterations: total gradient steps (a guess: 300 measured were not enough, the latents had
-            collapsed; docs/goal_exploration.md; ~0.4-0.8 s of CPU each at batch 64).
+            collapsed; docs/goal_exploration.md; 0.11-0.12 s of CPU each at batch 64 on one
+            thread, 2026-12-03, docs/results.md F6).
         lr: Adam learning rate (paper 1e-5 over 300k iterations; 1e-3 here, a guess for short runs).
         lr_final: None: ``lr`` throughout; else the rate decays from ``lr`` at the first
-            iteration to ``lr_final`` at the last along a half cosine (``lr_at``).
+            iteration to ``lr_final`` at the last along a half cosine (``lr_at``). The rates
+            depend on ``iterations``: a run resumed with another total follows the new
+            schedule from where it stopped.
         batch: images per step (paper 64).
         seed: seeds batches and sampling noise.
         checkpoint_every: iterations between checkpoints.
