@@ -89,6 +89,8 @@ class TrainConfig:
             raise VaeError(f"lr must be positive, got {self.lr}")
         if self.lr_final is not None and not 0 < self.lr_final <= self.lr:
             raise VaeError(f"lr_final must be in (0, lr = {self.lr}], got {self.lr_final}")
+        if self.device not in DEVICES:
+            raise VaeError(f"device must be one of {', '.join(DEVICES)}, got {self.device!r}")
 
     def lr_at(self, iteration: int) -> float:
         """The learning rate of 0-based ``iteration``: ``lr``, or the half-cosine decay from
@@ -97,8 +99,6 @@ class TrainConfig:
             return self.lr
         frac = min(1.0, iteration / max(1, self.iterations - 1))
         return self.lr_final + 0.5 * (self.lr - self.lr_final) * (1.0 + math.cos(math.pi * frac))
-        if self.device not in DEVICES:
-            raise VaeError(f"device must be one of {', '.join(DEVICES)}, got {self.device!r}")
 
 
 DEVICES = ("cpu", "cuda", "auto")
