@@ -18,8 +18,9 @@ Recipe knobs: ``--lr`` and ``--lr-final`` (cosine decay from one to the other ov
         --iterations 4000 --lr 1e-3 --lr-final 1e-4 --beta 10 --capacity 25 \
         --capacity-iterations 2000 --out runs/vae_recipe/NAME
 
-Writes ``OUT/seed-S.csv`` (one row per evaluation) and prints a row per evaluation and a
-summary per seed.
+Writes ``OUT/seed-S.csv`` (one row per evaluation; ``OUT/seed-S/`` holds the training's
+checkpoint and log, started afresh each time) and prints a row per evaluation and a summary
+per seed.
 """
 
 from __future__ import annotations
@@ -27,16 +28,20 @@ from __future__ import annotations
 import argparse
 import csv
 import math
+import shutil
 import sys
 import time
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 import torch
+from torch.nn import functional as F
 
+from vision.cli import parse_seeds
 from vision.representation_quality import HELDOUT, explained_pixel_variance, heldout_split
-from vision.vae import Vae, VaeConfig, kl_per_latent, limit_threads
-from vision.vae_train import TrainConfig, batch_tensor
+from vision.vae import Vae, VaeConfig, kl_per_latent, to_tensor
+from vision.vae_train import TrainConfig, fit
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from script_helpers import linear_r2  # experiments/script_helpers.py
@@ -46,77 +51,68 @@ from script_helpers import linear_r2  # experiments/script_helpers.py
 def heldout_elbo(vae: Vae, images: np.ndarray) -> tuple[float, float]:
     """Mean BCE (summed over pixels) and KL (summed over latents) of ``images``, nats per
     image, with z at the posterior mean (the reconstruction the criterion scores)."""
-    x = torch.from_numpy(np.ascontiguousarray(images[..., ::-1])).permute(0, 3, 1, 2)
-    x = x.float().div_(255.0)
+    x = to_tensor(images)
     mu, logvar = vae.encode(x)
-    recon = torch.nn.functional.binary_cross_entropy_with_logits(
-        vae.decode(mu), x, reduction="sum"
-    ) / len(x)
+    recon = F.binary_cross_entropy_with_logits(vae.decode(mu), x, reduction="sum") / len(x)
     kl = kl_per_latent(mu, logvar).sum(dim=1).mean()
     return float(recon), float(kl)
 
 
 def evaluate(vae, images, ball, train, test, mean_image) -> dict[str, float]:
+    """The scores of one evaluation (module docstring); leaves ``vae`` in training mode."""
     vae.eval()
-    ev = explained_pixel_variance(
-        lambda x: vae.decode_bgr(vae.encode_bgr(x)), images[test], mean_image
-    )
+    z_test = vae.encode_bgr(images[test])
+    ev = explained_pixel_variance(lambda _: vae.decode_bgr(z_test), images[test], mean_image)
     recon, kl = heldout_elbo(vae, images[test])
     z_fit = vae.encode_bgr(images[train[:1000]])
-    r2 = linear_r2(z_fit, ball[train[:1000]], vae.encode_bgr(images[test]), ball[test],
-                   pooled=False)  # fmt: skip
+    r2 = linear_r2(z_fit, ball[train[:1000]], z_test, ball[test], pooled=False)
     vae.train()
     return {"ev": ev, "recon": recon, "kl": kl, "elbo": recon + kl, "r2": r2}
 
 
 def train_one(seed: int, images, ball, args) -> list[dict[str, float]]:
-    limit_threads(args.threads)
+    """One training by ``vision.vae_train.fit`` (the loop of ``ergo vae train``) into
+    ``OUT/seed-S`` (started afresh), scored every ``--every`` iterations."""
     train, test = heldout_split(len(images), HELDOUT, seed)
     mean_image = images[train].astype(np.float64).mean(axis=0)
-    torch.manual_seed(seed)
-    vae = Vae(VaeConfig(beta=args.beta, capacity=args.capacity,
-                        capacity_iterations=args.capacity_iterations))  # fmt: skip
-    fmt = torch.channels_last if args.channels_last else torch.contiguous_format
-    vae = vae.to(memory_format=fmt)
-    schedule = TrainConfig(iterations=args.iterations, lr=args.lr, lr_final=args.lr_final)
-    optim = torch.optim.Adam(vae.parameters(), lr=args.lr)
-    data = torch.from_numpy(np.ascontiguousarray(images[train]))
+    settings = asdict(VaeConfig(beta=args.beta, capacity=args.capacity,
+                                capacity_iterations=args.capacity_iterations))  # fmt: skip
+    config = TrainConfig(
+        iterations=args.iterations, lr=args.lr, lr_final=args.lr_final, batch=args.batch,
+        seed=seed, checkpoint_every=args.iterations, threads=args.threads,
+        channels_last=args.channels_last,
+    )  # fmt: skip
+    folder = args.out / f"seed-{seed}"
+    shutil.rmtree(folder, ignore_errors=True)
     rows: list[dict[str, float]] = []
-    best, since_best, best_row = math.inf, 0, None
+    best = {"elbo": math.inf, "since": 0, "row": None}
     cpu0 = time.process_time()
-    vae.train()
-    for it in range(args.iterations):
-        for g in optim.param_groups:
-            g["lr"] = schedule.lr_at(it)
-        idx = np.random.default_rng([seed, it]).integers(0, len(train), args.batch)
-        torch.manual_seed(seed * 1_000_003 + it)
-        x = batch_tensor(data, torch.from_numpy(idx)).contiguous(memory_format=fmt)
-        terms = vae.loss(x, it)
-        optim.zero_grad(set_to_none=True)
-        terms["loss"].backward()
-        optim.step()
-        done = it + 1
+
+    def after_step(vae: Vae, done: int) -> bool:
         cpu = time.process_time() - cpu0
         last = done == args.iterations or cpu >= args.cpu_budget
-        if done % args.every == 0 or last:
-            scores = evaluate(vae, images, ball, train, test, mean_image)
-            row = {"seed": seed, "iteration": done, "cpu_s": round(cpu, 1),
-                   "lr": schedule.lr_at(it), **scores}  # fmt: skip
-            rows.append(row)
-            print(f"seed {seed} it {done:5d} cpu {cpu:6.0f} s  lr {row['lr']:.1e}  "
-                  f"EV {row['ev']:+.3f}  R2 {row['r2']:.3f}  BCE {row['recon']:.1f}  "
-                  f"KL {row['kl']:.1f}", flush=True)  # fmt: skip
-            if row["elbo"] < best:
-                best, since_best, best_row = row["elbo"], 0, row
-            else:
-                since_best += 1
-            if args.patience and since_best >= args.patience:
-                print(f"seed {seed}: no better held-out ELBO in {args.patience} evaluations")
-                break
-        if last:
-            break
-    if args.patience and best_row is not None:  # the model early stopping keeps
-        rows.append({**best_row, "kept": 1})
+        if done % args.every and not last:
+            return False
+        row = {"seed": seed, "iteration": done, "cpu_s": round(cpu, 1),
+               "lr": config.lr_at(done - 1),
+               **evaluate(vae, images, ball, train, test, mean_image)}  # fmt: skip
+        rows.append(row)
+        print(f"seed {seed} it {done:5d} cpu {cpu:6.0f} s  lr {row['lr']:.1e}  "
+              f"EV {row['ev']:+.3f}  R2 {row['r2']:.3f}  BCE {row['recon']:.1f}  "
+              f"KL {row['kl']:.1f}", flush=True)  # fmt: skip
+        if row["elbo"] < best["elbo"]:
+            best.update(elbo=row["elbo"], since=0, row=row)
+        else:
+            best["since"] += 1
+        if args.patience and best["since"] >= args.patience:
+            print(f"seed {seed}: no better held-out ELBO in {args.patience} evaluations")
+            return True
+        return last
+
+    vae = fit(lambda s: Vae(VaeConfig(**s)), settings, images[train], folder, config,
+              progress=False, after_step=after_step)  # fmt: skip
+    if args.patience and best["row"] is not None:  # the model early stopping keeps
+        rows.append({**best["row"], "kept": 1})
     if args.figures:
         save_reconstructions(vae, images[test[:8]], args.out / f"seed-{seed}.png")
     return rows
@@ -138,7 +134,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, required=True, help="dataset .npz (images, ball)")
     ap.add_argument("--out", type=Path, required=True, help="folder for seed-S.csv")
-    ap.add_argument("--seeds", default="0", help="training seeds: 0,1 or 0-7")
+    ap.add_argument("--seeds", default="0-0", help="training seeds: 0,1 or 0-7 (ergo's syntax)")
     ap.add_argument("--iterations", type=int, default=4000)
     ap.add_argument("--cpu-budget", type=float, default=600.0, help="CPU seconds per seed")
     ap.add_argument("--every", type=int, default=500)
@@ -153,11 +149,7 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--figures", action="store_true", help="OUT/seed-S.png: reconstructions")
     args = ap.parse_args()
-    if "-" in args.seeds:
-        lo, hi = (int(v) for v in args.seeds.split("-"))
-        seeds = list(range(lo, hi + 1))
-    else:
-        seeds = [int(v) for v in args.seeds.split(",")]
+    seeds = parse_seeds(args.seeds)
     with np.load(args.data, allow_pickle=False) as z:
         images, ball = z["images"], z["ball"][:, :2]
     args.out.mkdir(parents=True, exist_ok=True)

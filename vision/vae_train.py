@@ -188,11 +188,14 @@ def fit(
     config: TrainConfig,
     progress: bool = True,
     desc: str = "train",
+    after_step: Callable[[torch.nn.Module, int], bool] | None = None,
 ) -> Any:
     """The training loop of every representation: ``make_model(settings)`` (a module with a
     ``loss(x, iteration) -> dict`` whose ``"loss"`` is minimised; the other terms are logged)
     trained on ``images`` (n, 64, 64, 3) BGR uint8 with Adam, checkpointed into ``out`` and
-    resumed from there (the checkpoint's settings must equal ``settings``). Returns the model
+    resumed from there (the checkpoint's settings must equal ``settings``). ``after_step``,
+    if given, is called with the model and the iterations done after every step; True stops
+    the training there (checkpointed, as at the end). Returns the model
     on the CPU in eval mode; the caller measures and saves it."""
     config.validate()
     if len(images) < 1:
@@ -262,10 +265,13 @@ def fit(
         if bar is not None:
             bar.update(1)
         done = it + 1
-        if done % config.checkpoint_every == 0 or done == config.iterations:
+        stop = after_step is not None and after_step(model, done)
+        if stop or done % config.checkpoint_every == 0 or done == config.iterations:
             _checkpoint(ckpt_path, model, optim, done, settings)
             _append_log(out / LOG, header, log_rows)
             log_rows = []
+        if stop:
+            break
     if bar is not None:
         bar.close()
     return model.to("cpu", memory_format=torch.contiguous_format).eval()

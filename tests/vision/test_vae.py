@@ -187,6 +187,32 @@ def test_channels_last_training_follows_the_contiguous_run_and_returns_a_contigu
         assert b.is_contiguous(), k
 
 
+def test_a_training_stopped_by_its_after_step_hook_is_checkpointed_where_it_stopped(tmp_path):
+    """``fit(after_step=...)``: called after every step with the iterations done; True ends
+    the training there, checkpointed, and a rerun resumes from that iteration."""
+    from vision.vae_train import CHECKPOINT, fit, load_state
+
+    seen: list[int] = []
+
+    def stop_at_3(model, done: int) -> bool:
+        seen.append(done)
+        return done == 3
+
+    cfg = TrainConfig(iterations=10, batch=4, threads=1, checkpoint_every=100)
+    fit(lambda s: Vae(VaeConfig(**s)), {}, tiny_images(8), tmp_path, cfg, progress=False,
+        after_step=stop_at_3)  # fmt: skip
+    assert seen == [1, 2, 3]
+    assert load_state(tmp_path / CHECKPOINT, "checkpoint")["iteration"] == 3
+
+    def go_on(model, done: int) -> bool:
+        seen.append(done)
+        return False
+
+    fit(lambda s: Vae(VaeConfig(**s)), {}, tiny_images(8), tmp_path, cfg, progress=False,
+        after_step=go_on)  # fmt: skip
+    assert seen == [1, 2, 3, 4, 5, 6, 7, 8, 9, 10]
+
+
 def test_vae_train_command(tmp_path, capsys):
     from explore.cli import main
 
