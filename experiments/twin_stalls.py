@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
+from explore.campaigns.stats import final_cells
+from explore.learner.strategies.goal_exploration import BOOTSTRAP  # the default bootstrap
 from explore.runs.store import RunStore
-
-BOOTSTRAP = 100  # the goal strategies' default bootstrap (explore/learner/strategies)
 
 
 def stalled_episodes(moved: np.ndarray, window: int, moves: int) -> np.ndarray:
@@ -35,10 +35,7 @@ def stalled_episodes(moved: np.ndarray, window: int, moves: int) -> np.ndarray:
 def describe(run: Path, window: int, moves: int) -> str:
     records = RunStore.read(run).records
     moved = np.array([bool(r.ball_moved) for r in records])
-    cells = "see metrics.csv"
-    metrics = run / "metrics.csv"
-    if metrics.exists():
-        cells = metrics.read_text().strip().splitlines()[-1].split(",")[1]
+    cells = final_cells(run)[1]
     idx = np.flatnonzero(stalled_episodes(moved, window, moves))
     if len(idx) == 0:
         return f"| {run} | {cells} | none | | | |"
