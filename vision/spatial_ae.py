@@ -241,10 +241,9 @@ def is_sae_folder(path: str | Path) -> bool:
 def load_sae(path: str | Path) -> SpatialAutoencoder:
     """Load a model folder (or its ``sae.pt``) saved by ``SpatialAutoencoder.save``, in eval
     mode."""
-    model_file, raw = read_model_folder(
+    model_file, config_file, raw = read_model_folder(
         path, (MODEL_FILE, CONFIG_FILE), "spatial autoencoder", "ergo sae train"
     )
-    config_file = model_file.with_name(CONFIG_FILE)
     try:
         config = SaeConfig(**raw)
         model = SpatialAutoencoder(config)

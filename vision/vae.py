@@ -60,18 +60,18 @@ def read_config_json(path: Path, what: str) -> dict:
 
 def read_model_folder(
     path: str | Path, files: tuple[str, str], what: str, command: str
-) -> tuple[Path, dict]:
-    """A model folder (or the model file in it) named by ``path``: its model file and its
-    config's JSON object. ``files``: (model file, config file) names; ``what``: the kind of
-    model for messages; ``command``: the command that writes such folders. A one-line
-    ``VaeError`` where a file is missing or the config is not a JSON object."""
+) -> tuple[Path, Path, dict]:
+    """A model folder (or the model file in it) named by ``path``: its model file, its config
+    file and the config's JSON object. ``files``: (model file, config file) names; ``what``:
+    the kind of model for messages; ``command``: the command that writes such folders. A
+    one-line ``VaeError`` where a file is missing or the config is not a JSON object."""
     path = Path(path)
     folder = path.parent if path.suffix == ".pt" else path
     model_file, config_file = folder / files[0], folder / files[1]
     for f in (model_file, config_file):
         if not f.is_file():
             raise VaeError(f"{f} not found: is {folder} a model folder from `{command}`?")
-    return model_file, read_config_json(config_file, what)
+    return model_file, config_file, read_config_json(config_file, what)
 
 
 def write_model_folder(
@@ -329,8 +329,9 @@ def kl_per_latent(mu: torch.Tensor, logvar: torch.Tensor) -> torch.Tensor:
 
 def load_vae(path: str | Path) -> Vae:
     """Load a model folder (or its ``vae.pt``) saved by ``Vae.save``, in eval mode."""
-    model_file, raw = read_model_folder(path, (MODEL_FILE, CONFIG_FILE), "VAE", "ergo vae train")
-    config_file = model_file.with_name(CONFIG_FILE)
+    model_file, config_file, raw = read_model_folder(
+        path, (MODEL_FILE, CONFIG_FILE), "VAE", "ergo vae train"
+    )
     try:
         config = VaeConfig(**raw)
         vae = Vae(config)
