@@ -68,8 +68,17 @@ RANDOM_EPISODES_RIG = 0.1  # share of random motor babbling episodes after the b
 # what a 1 cm ball move (the rig's ``MOVED_THRESHOLD``) gives in the engineered wrap-safe
 # features (1.9% of their diagonal along the ring, 14% across it). On rge-efr seed 0 (1500
 # twin episodes, 2026-12-03) it called 24 episodes changed that the rig called not moved (ball
-# moves under 1 cm) and none the other way.
+# moves under 1 cm) and none the other way; in the spatial autoencoder's code, on rge-sae seed
+# 1 (without the option), 13 and none.
 STILL_FRACTION = 0.01
+# Option ``stall_window``'s default: 10 episodes that left the outcome where it was turn every
+# episode into random parameters until one changes it (``stall_random`` 1). Chosen from F7
+# (docs/results.md): in the stalls, where the ball lay against the outer wall, goal episodes
+# moved it in 0.6-1.9% of the episodes and random parameters in 5-8%. 10 is a guess; measured
+# with it on development seeds 0-7 (docs/results.md, F8): stalls in 1 of 16 rge-efr and
+# rge-sae runs (8 of 16 without), 11-24% of the episodes after the bootstrap played random
+# parameters (9-11% without).
+STALL_WINDOW = 10
 
 
 @dataclass(frozen=True)
@@ -109,8 +118,9 @@ class GoalExplorationOptions:
         stall_window: after this many consecutive episodes whose outcome in the goal space
             stayed where its context was (within ``STILL_FRACTION`` of the outcomes'
             diagonal), the share of random-parameter episodes becomes ``stall_random`` until
-            an episode changes the outcome again; 0 (default): never. Needs a context (a
-            scene that is not reset between episodes).
+            an episode changes the outcome again (default ``STALL_WINDOW``, 10; 0: never,
+            the setting of every run before 2026-12-03). Needs a context: on a scene reset
+            between episodes (ArmBalls) it never acts.
         stall_random: the share of random-parameter episodes in such a stall (default 1).
     """
 
@@ -129,7 +139,7 @@ class GoalExplorationOptions:
     ties: Literal["first", "spread"] = "first"
     one_outcome: Literal["nearest", "random"] = "nearest"
     context_weight: float = 1.0
-    stall_window: int = 0
+    stall_window: int = STALL_WINDOW
     stall_random: float = 1.0
 
     def __post_init__(self) -> None:

@@ -50,7 +50,7 @@ def test_random_share_rises_after_a_window_of_unchanged_outcomes_and_falls_back(
         for i in range(WINDOW)
     ]
     with_option = make_strategy("rge-efr", scene=TWIN_ARENA, bootstrap=BOOT, stall_window=WINDOW)
-    without = make_strategy("rge-efr", scene=TWIN_ARENA, bootstrap=BOOT)
+    without = make_strategy("rge-efr", scene=TWIN_ARENA, bootstrap=BOOT, stall_window=0)
     for s in (with_option, without):
         for r in moving + still[:-1]:
             s.update(r)
@@ -84,3 +84,13 @@ def test_a_stall_share_is_an_option_with_checked_values():
         make_strategy("rge-efr", scene=TWIN_ARENA, stall_window=-1)
     with pytest.raises(StrategyError, match="context_weight must be > 0"):
         make_strategy("rge-efr", scene=TWIN_ARENA, context_weight=0.0)
+
+
+def test_on_a_scene_reset_before_every_episode_the_stall_option_never_acts():
+    from explore.rigs.armballs import ARM_BALLS_SQUARE
+
+    s = make_strategy("rge-efr", scene=ARM_BALLS_SQUARE, bootstrap=BOOT, stall_window=2)
+    ball = np.array([0.3, -0.2])  # in reach units; the ball never moves
+    for i in range(BOOT + 5):
+        s.update(Episode(i, ball, ball.copy()))
+    assert s.still == 0 and s.random_share() == s.settings.random_episodes
