@@ -63,8 +63,9 @@ LATENT_FORMS = ("raw", "zscore")
 # reached fewer cells than RPE (docs/notebook.md, section 2).
 SIGMA_RIG = 0.2  # exploration noise in the [-1, 1] parameter space, original rig
 RANDOM_EPISODES_RIG = 0.1  # share of random motor babbling episodes after the bootstrap, rig
-# An outcome within this fraction of the diagonal of the bounds of the contexts and outcomes
-# seen so far from its context counts as "unchanged" (option ``stall_window``). A guess, under
+# An outcome less than this fraction of a diagonal away from its context counts as "unchanged"
+# (option ``stall_window``), the diagonal of the box holding every context and outcome seen so
+# far (in the goal space's coordinates). A guess, under
 # what a 1 cm ball move (the rig's ``MOVED_THRESHOLD``) gives in the engineered wrap-safe
 # features (1.9% of their diagonal along the ring, 14% across it). On rge-efr seed 0 (1500
 # twin episodes, 2026-12-03) it called 24 episodes changed that the rig called not moved (ball
