@@ -65,12 +65,11 @@ SIGMA_RIG = 0.2  # exploration noise in the [-1, 1] parameter space, original ri
 RANDOM_EPISODES_RIG = 0.1  # share of random motor babbling episodes after the bootstrap, rig
 # An outcome less than this fraction of a diagonal away from its context counts as "unchanged"
 # (option ``stall_window``), the diagonal of the box holding every context and outcome seen so
-# far (in the goal space's coordinates). A guess, under
-# what a 1 cm ball move (the rig's ``MOVED_THRESHOLD``) gives in the engineered wrap-safe
-# features (1.9% of their diagonal along the ring, 14% across it). On rge-efr seed 0 (1500
-# twin episodes, 2026-12-03) it called 24 episodes changed that the rig called not moved (ball
-# moves under 1 cm) and none the other way; in the spatial autoencoder's code, on rge-sae seed
-# 1 (without the option), 13 and none.
+# far (in the goal space's coordinates). A guess, under what a 1 cm ball move (the rig's
+# ``MOVED_THRESHOLD``) gives in the engineered wrap-safe features (1.9% of their diagonal along
+# the ring, 14% across it). On rge-efr seed 0 (1500 twin episodes, 2026-12-03) it called 24
+# episodes changed that the rig called not moved (ball moves under 1 cm) and none the other
+# way; in the spatial autoencoder's code, on rge-sae seed 1 (without the option), 13 and none.
 STILL_FRACTION = 0.01
 # Option ``stall_window``'s default: 10 episodes that left the outcome where it was turn every
 # episode into random parameters until one changes it (``stall_random`` 1). Chosen from F7
