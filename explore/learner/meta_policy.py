@@ -177,6 +177,11 @@ class MetaPolicy:
         ties: which of several equally near episodes answers a query: ``"first"`` (the
             default: the earliest, the same one for every query) or ``"spread"`` (one picked
             by a hash of the query, ``NearestNeighbourIndex.nearest_spread``).
+        context_weight: factor w on the context's coordinates in the distance, so a query
+            (c, g) is answered by the stored (c', o') nearest in w² |c - c'|² + |g - o'|²
+            (1, the default: the joint (context, outcome) search of the paper and explauto;
+            larger: the replayed episode started from a context nearer the current one, the
+            inverse model conditioned on the context as w grows). Must be positive.
 
     ``varied(module)`` says whether a module has seen two different (context, outcome) points:
     explauto's ``NonParametric`` (the original ArmBalls campaign's inverse model,
@@ -186,10 +191,18 @@ class MetaPolicy:
     """
 
     def __init__(
-        self, context_dim: int, module_dims: Sequence[int], n_params: int, ties: str = "first"
+        self,
+        context_dim: int,
+        module_dims: Sequence[int],
+        n_params: int,
+        ties: str = "first",
+        context_weight: float = 1.0,
     ) -> None:
         if ties not in TIES:
             raise ValueError(f"ties must be one of {', '.join(TIES)}, got {ties!r}")
+        if not context_weight > 0:
+            raise ValueError(f"context_weight must be positive, got {context_weight}")
+        self.context_weight = float(context_weight)
         self.context_dim = context_dim
         self.module_dims = tuple(int(d) for d in module_dims)
         self.n_params = n_params
@@ -204,7 +217,7 @@ class MetaPolicy:
         theta = np.asarray(theta, dtype=float).reshape(-1)
         if theta.shape != (self.n_params,):
             raise ValueError(f"theta has shape {theta.shape}, expected ({self.n_params},)")
-        c = np.asarray(context, dtype=float).reshape(-1)
+        c = self.context_weight * np.asarray(context, dtype=float).reshape(-1)
         for k, o in enumerate(outcomes):
             if o is None or not np.all(np.isfinite(o)):
                 continue
@@ -224,7 +237,8 @@ class MetaPolicy:
 
     def nearest_theta(self, module: int, context: np.ndarray, goal: np.ndarray) -> np.ndarray:
         """Parameters of the episode nearest to (context, goal) in ``module``, shape (n_params,)."""
-        q = np.concatenate([np.asarray(context, float).reshape(-1), np.asarray(goal, float)])
+        c = self.context_weight * np.asarray(context, float).reshape(-1)
+        q = np.concatenate([c, np.asarray(goal, float)])
         index = self.indexes[module]
         i, _ = index.nearest_spread(q) if self.ties == "spread" else index.nearest(q)
         return self.thetas[module][i]

@@ -84,8 +84,8 @@ def goal_space_vectors(
 ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
     """The vectors the run's meta-policy stored, in the run's own goal space (its strategy
     rebuilt from ``run.json``, as ``explore.learner.goal_outcomes.goal_outcome_of`` does):
-    contexts (n, c), outcomes (n, d) (NaN where not seen), modules (coordinate index arrays of
-    the outcome)."""
+    contexts (n, c) (times the run's ``context_weight``, as its meta-policy stored them),
+    outcomes (n, d) (NaN where not seen), modules (coordinate index arrays of the outcome)."""
     config = RunStore.read_meta(run)["config"]
     strategy = config["strategy"]
     name, options = strategy["name"], dict(strategy.get("options", {}))
@@ -94,9 +94,11 @@ def goal_space_vectors(
     if vae_dir is not None and name in LEARNED:
         options[STRATEGIES[name].model.option] = str(vae_dir)  # type: ignore[union-attr]
     try:
-        space = make_strategy(name, scene=run_scene(config), **options).space
+        made = make_strategy(name, scene=run_scene(config), **options)
     except StrategyError as exc:
         raise DiagnosisError(f"{run}: {exc}") from None
+    space = made.space
+    weight = made.settings.context_weight
     if isinstance(space, LatentGoalSpace):
         out = space.outcomes(np.stack([r.image for r in recs]))
         ctx = np.vstack([np.zeros((1, space.dim)), out[:-1]])  # previous outcome; zeros first
@@ -104,7 +106,7 @@ def goal_space_vectors(
         ctx = np.array([space.context(r) for r in recs])
         unseen = np.full(space.dim, np.nan)
         out = np.array([o if (o := space.outcome(r)) is not None else unseen for r in recs])
-    return ctx, out, list(space.modules)
+    return weight * ctx, out, list(space.modules)
 
 
 def diagnose(

@@ -63,6 +63,22 @@ LATENT_FORMS = ("raw", "zscore")
 # reached fewer cells than RPE (docs/notebook.md, section 2).
 SIGMA_RIG = 0.2  # exploration noise in the [-1, 1] parameter space, original rig
 RANDOM_EPISODES_RIG = 0.1  # share of random motor babbling episodes after the bootstrap, rig
+# An outcome less than this fraction of a diagonal away from its context counts as "unchanged"
+# (option ``stall_window``), the diagonal of the box holding every context and outcome seen so
+# far (in the goal space's coordinates). A guess, under what a 1 cm ball move (the rig's
+# ``MOVED_THRESHOLD``) gives in the engineered wrap-safe features (1.9% of their diagonal along
+# the ring, 14% across it). On rge-efr seed 0 (1500 twin episodes, 2026-12-03) it called 24
+# episodes changed that the rig called not moved (ball moves under 1 cm) and none the other
+# way; in the spatial autoencoder's code, on rge-sae seed 1 (without the option), 13 and none.
+STILL_FRACTION = 0.01
+# Option ``stall_window``'s default: 10 episodes that left the outcome where it was turn every
+# episode into random parameters until one changes it (``stall_random`` 1). Chosen from F7
+# (docs/results.md): in the stalls, where the ball lay against the outer wall, goal episodes
+# moved it in 0.6-1.9% of the episodes and random parameters in 5-8%. 10 is a guess; measured
+# with it on development seeds 0-7 (docs/results.md, F8): stalls in 1 of 16 rge-efr and
+# rge-sae runs (8 of 16 without), 11-24% of the episodes after the bootstrap played random
+# parameters (9-11% without).
+STALL_WINDOW = 10
 
 
 @dataclass(frozen=True)
@@ -96,6 +112,16 @@ class GoalExplorationOptions:
             outcome: "nearest" (default: the neighbour, which is then any of them) or "random"
             (uniform parameters, explore and exploit alike: explauto's ``NonParametric``,
             the original ArmBalls campaign's inverse model).
+        context_weight: factor on the context in the inverse model's nearest-neighbour
+            distance (``MetaPolicy``): 1 (default) the joint (context, outcome) search; larger,
+            the replayed episode started from a scene nearer the current one.
+        stall_window: after this many consecutive episodes whose outcome in the goal space
+            stayed where its context was (within ``STILL_FRACTION`` of the outcomes'
+            diagonal), the share of random-parameter episodes becomes ``stall_random`` until
+            an episode changes the outcome again (default ``STALL_WINDOW``, 10; 0: never,
+            the setting of every run before 2026-12-03). Needs a context: on a scene reset
+            between episodes (ArmBalls) it never acts.
+        stall_random: the share of random-parameter episodes in such a stall (default 1).
     """
 
     bootstrap: int = BOOTSTRAP
@@ -112,12 +138,17 @@ class GoalExplorationOptions:
     competence: Literal["scaled", "distance"] = "scaled"
     ties: Literal["first", "spread"] = "first"
     one_outcome: Literal["nearest", "random"] = "nearest"
+    context_weight: float = 1.0
+    stall_window: int = STALL_WINDOW
+    stall_random: float = 1.0
 
     def __post_init__(self) -> None:
-        for key in ("bootstrap", "sigma"):
+        if not self.context_weight > 0:
+            raise BadOption("context_weight", f"must be > 0, got {self.context_weight}")
+        for key in ("bootstrap", "sigma", "stall_window"):
             if getattr(self, key) < 0:
                 raise BadOption(key, f"must be >= 0, got {getattr(self, key)}")
-        for key in ("exploit", "random_episodes", "random_choice"):
+        for key in ("exploit", "random_episodes", "random_choice", "stall_random"):
             p = getattr(self, key)
             if p is not None and not 0.0 <= p <= 1.0:
                 raise BadOption(key, f"must be a probability, got {p}")
@@ -188,6 +219,9 @@ class GoalExploration(Strategy):
         self.modular = self.modular_default if s.modular is None else s.modular
         self.exploit = (EXPLOIT_MGE if self.modular else 0.0) if s.exploit is None else s.exploit
         self.random_episodes = s.random_episodes
+        self.stall_window = s.stall_window
+        self.stall_random = s.stall_random
+        self.still = 0  # consecutive episodes whose outcome stayed at its context
         self.goal_sampling = s.goals
         self.window = s.window
         self.random_choice = s.random_choice
@@ -221,10 +255,15 @@ class GoalExploration(Strategy):
             return
         dims = [len(m) for m in space.modules]
         context_dim = 0 if self.scene.resets else space.context_dim
-        self.policy = MetaPolicy(context_dim, dims, self.n_params, ties=self.settings.ties)
+        s = self.settings
+        self.policy = MetaPolicy(
+            context_dim, dims, self.n_params, ties=s.ties, context_weight=s.context_weight
+        )
         self.low = [np.full(d, np.inf) for d in dims]
         self.high = [np.full(d, -np.inf) for d in dims]
-        s = self.settings
+        # bounds of the outcome's part that describes what the context does (stall_window)
+        self._still_low = np.full(context_dim, np.inf)
+        self._still_high = np.full(context_dim, -np.inf)
         self.interest = ModuleInterest(
             dims, self.window, self.random_choice, average=s.interest, competence=s.competence
         )
@@ -283,6 +322,7 @@ class GoalExploration(Strategy):
                 self._goal_cycle = (k, np.asarray(record.goal, dtype=float), base)
             self.n_goal_episodes += 1
         self.policy.add(context, parts, record.theta)
+        self._count_still(context, outcome)
         for k, o in enumerate(parts):
             if o is not None:
                 self.low[k] = np.minimum(self.low[k], o)
@@ -296,6 +336,30 @@ class GoalExploration(Strategy):
             )  # fmt: skip
         if outcome is not None and isinstance(space, LatentGoalSpace):
             self._last_latent = outcome
+
+    def _count_still(self, context: np.ndarray, outcome: np.ndarray | None) -> None:
+        """Update ``still``, the run of consecutive episodes whose outcome stayed where its
+        context was: the outcome's first ``len(context)`` coordinates (the same features as
+        the context: the ball's before and after in an engineered space, the code of the
+        scene before and after in a learned one) within ``STILL_FRACTION`` of the diagonal
+        of their bounds so far. An episode without an outcome (the ball unseen) leaves it."""
+        if self.stall_window == 0 or outcome is None or len(context) == 0:
+            return
+        o = np.asarray(outcome, dtype=float)[: len(context)]
+        if not np.all(np.isfinite(o)) or not np.all(np.isfinite(context)):
+            return
+        self._still_low = np.minimum(self._still_low, np.minimum(o, context))
+        self._still_high = np.maximum(self._still_high, np.maximum(o, context))
+        diag = float(np.linalg.norm(self._still_high - self._still_low))
+        moved = float(np.linalg.norm(o - context)) > STILL_FRACTION * diag
+        self.still = 0 if moved else self.still + 1
+
+    def random_share(self) -> float:
+        """The probability that the next episode after the bootstrap plays random parameters:
+        ``random_episodes``, or ``stall_random`` after ``stall_window`` unchanged outcomes."""
+        if self.stall_window and self.still >= self.stall_window:
+            return max(self.random_episodes, self.stall_random)
+        return self.random_episodes
 
     def _plays_random(self, module: int) -> bool:
         """Whether ``module`` answers with uniform parameters (``one_outcome="random"`` and
@@ -325,7 +389,8 @@ class GoalExploration(Strategy):
     def propose(self, context: Observation, rng: np.random.Generator) -> Proposal:
         if self.space is None or self.n_seen < self.bootstrap:
             return self._random(rng)
-        if self.random_episodes > 0 and rng.random() < self.random_episodes:
+        share = self.random_share()
+        if share > 0 and rng.random() < share:
             return self._random(rng)
         if self.cycle:
             return self._propose_in_cycle(context, rng)

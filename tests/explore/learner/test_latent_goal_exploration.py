@@ -24,7 +24,7 @@ def vae_dir(tmp_path_factory):
 
 def test_mge_vae_runs_with_modules_ranked_by_kl(vae_dir, tmp_path):
     out = tmp_path / "mge"
-    opts = {"vae": str(vae_dir), "bootstrap": 10, "random_episodes": 0}
+    opts = {"vae": str(vae_dir), "bootstrap": 10, "random_episodes": 0, "stall_window": 0}
     run_one(str(out), "mge-vae", opts, 0, 30, False)
     recs = RunStore.open(out).records
     later = recs[10:]
@@ -33,7 +33,7 @@ def test_mge_vae_runs_with_modules_ranked_by_kl(vae_dir, tmp_path):
 
 
 def test_online_variant_trains_after_bootstrap_and_resumes_identically(tmp_path):
-    opts = {"bootstrap": 12, "vae_iterations": 4, "random_episodes": 0}
+    opts = {"bootstrap": 12, "vae_iterations": 4, "random_episodes": 0, "stall_window": 0}
     a, b = tmp_path / "a", tmp_path / "b"
     run_one(str(a), "rge-online", opts, 1, 20, False)
     run_one(str(b), "rge-online", opts, 1, 15, False)

@@ -130,3 +130,23 @@ def test_a_module_is_varied_once_it_has_recorded_two_different_points():
     assert not policy.varied(0) and not policy.varied(1)  # one point each so far
     policy.add(np.ones(1), [np.array([0.6, 0.6]), np.array([0.1, 0.2])], np.zeros(2))
     assert policy.varied(0) and policy.varied(1)  # the context differs: another point
+
+
+def test_a_weighted_context_replays_an_episode_played_from_a_nearby_context():
+    # two stored episodes: one from the current context (c = 0) that moved its outcome part
+    # of the way to the goal, one from a context 1 away that reached the goal exactly
+    here, there = np.full(3, 0.1), np.full(3, 0.9)
+    joint = MetaPolicy(context_dim=1, module_dims=[1], n_params=3)
+    weighted = MetaPolicy(context_dim=1, module_dims=[1], n_params=3, context_weight=3.0)
+    for policy in (joint, weighted):
+        policy.add(np.zeros(1), [np.array([0.5])], here)
+        policy.add(np.ones(1), [np.array([2.0])], there)
+    ctx, goal = np.zeros(1), np.array([2.0])
+    # joint search: |(0, 2) - (1, 2)| = 1 < |(0, 2) - (0, 0.5)| = 1.5, the far context wins
+    assert np.array_equal(joint.nearest_theta(0, ctx, goal), there)
+    # context weighted by 3: the far episode is 3 away, the near one still 1.5
+    assert np.array_equal(weighted.nearest_theta(0, ctx, goal), here)
+    # from the far context, the weighted policy replays the far episode again
+    assert np.array_equal(weighted.nearest_theta(0, np.ones(1), goal), there)
+    with pytest.raises(ValueError, match="context_weight"):
+        MetaPolicy(1, [1], 3, context_weight=0.0)
