@@ -130,7 +130,7 @@ def ball_lead_early(run: Path) -> float:
     from explore.runs.store import RunStore
 
     store = RunStore.read(run)  # a reader: cuts nothing
-    strategy = strategy_for(RunConfig.from_dict(store.config, run / RUN_FILE))
+    strategy = strategy_for(RunConfig.of_run(store.config, run / RUN_FILE))
     lead = []
     try:
         for rec in store:

@@ -33,7 +33,7 @@ from explore.runs.store import RunStore
 def interests_over_time(run: Path) -> tuple[np.ndarray, list[str]]:
     """(interest after each episode (n, modules), module names) of an MGE run."""
     store = RunStore.read(run)  # a reader: cuts nothing
-    strategy = strategy_for(RunConfig.from_dict(store.config, run / RUN_FILE))
+    strategy = strategy_for(RunConfig.of_run(store.config, run / RUN_FILE))
     rows = []
     for rec in store:
         strategy.update(rec)

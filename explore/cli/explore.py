@@ -149,7 +149,10 @@ def _refuse_changes(args: argparse.Namespace) -> Any:
                     f"{flag} {value} differs from the run's {held!r}: a run keeps its config"
                 )
         given = _strategy_options(args, config.strategy.name)
-        if given and given != config.strategy.options:
+        # each option given as the run holds it (a new run's run.json also holds the options
+        # whose default changed, written out: runs.config.CHANGED_STRATEGY_DEFAULTS)
+        kept = config.strategy.options
+        if any(key not in kept or kept[key] != value for key, value in given.items()):
             raise CliError(
                 f"--strategy-option {given} differs from the run's {config.strategy.options}: "
                 "a run keeps the strategy options it started with"

@@ -113,7 +113,7 @@ def open_source(path: str | Path) -> RunSource:
         )
     try:
         history = read_history(path)
-        config = RunConfig.from_dict(history.meta["config"], where=path / RUN_FILE)
+        config = RunConfig.of_run(history.meta["config"], where=path / RUN_FILE)
     except RunStoreError as exc:
         raise ExportError(str(exc) if str(path) in str(exc) else f"{path}: {exc}") from None
     if not history.records:

@@ -458,7 +458,7 @@ def open_recorder(
     if config is None:
         from explore.runs.store import RunStore
 
-        config = RunConfig.from_dict(RunStore.read_meta(run_path)["config"], run_path / RUN_FILE)
+        config = RunConfig.of_run(RunStore.read_meta(run_path)["config"], run_path / RUN_FILE)
     from explore.rigs.rig import rig_scene
 
     scene = rig_scene(config.rig)

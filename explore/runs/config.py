@@ -6,7 +6,10 @@ and raises ``RunConfigError`` with one line naming the field and what was expect
 or foreign ``run.json``, or a new run's flags. The rig's and the strategy's options are checked
 against their own ``Options`` dataclasses (unknown keys refused with the list of known ones).
 ``run.json`` keeps storing names and the options as given, so existing run folders keep
-loading.
+loading; with one exception, the options whose default changed after runs had been made
+(``CHANGED_STRATEGY_DEFAULTS``): a new run writes them out (``RunConfig.with_defaults_pinned``),
+and a run's config read back (``RunConfig.of_run``) gives the ones it lacks the value it was
+made with, so a run resumed, replayed or exported under a newer version does what it did.
 
 ``RunConfigError`` is a ``RunStoreError``, so ``ergo explore`` already turns it into its
 one-line ``ergo: error: ...``.
@@ -41,6 +44,13 @@ EPISODE_BOUNDS: dict[str, tuple[float, float]] = {
     "obs_size": (8, 1024),
 }
 TOP_LEVEL = ("rig", "strategy", "seed", "episodes", "episode")
+# Strategy options whose default changed after runs had been made without the key in their
+# run.json: option -> the value those runs were made with.
+CHANGED_STRATEGY_DEFAULTS: dict[str, Any] = {
+    # 10 since 2026-12-03 (goal exploration's random parameters in a stall, docs/results.md
+    # F8); the runs before had no such behaviour, which stall_window 0 is
+    "stall_window": 0,
+}
 
 
 class RunConfigError(RunStoreError):
@@ -103,6 +113,39 @@ class RunConfig:
         return dataclasses.replace(
             self, rig=rig, episodes=self.episodes if episodes is None else episodes
         )
+
+    def with_defaults_pinned(self) -> RunConfig:
+        """A new run's config with each ``CHANGED_STRATEGY_DEFAULTS`` option its strategy takes
+        and that was not given written out at today's default (into its ``run.json``)."""
+        return self._with_missing_options(new=True)
+
+    def as_made(self) -> RunConfig:
+        """A made run's config with each ``CHANGED_STRATEGY_DEFAULTS`` option its strategy
+        takes and its ``run.json`` lacks at the value it was made with (the old default)."""
+        return self._with_missing_options(new=False)
+
+    def _with_missing_options(self, new: bool) -> RunConfig:
+        from explore.learner.strategies import STRATEGIES
+
+        options_class = STRATEGIES.options_class(self.strategy.name)
+        if not dataclasses.is_dataclass(options_class):
+            return self
+        defaults = {f.name: f.default for f in dataclasses.fields(options_class)}
+        missing = {
+            key: defaults[key] if new else old
+            for key, old in CHANGED_STRATEGY_DEFAULTS.items()
+            if key in defaults and key not in self.strategy.options
+        }
+        if not missing:
+            return self
+        options = {**self.strategy.options, **missing}
+        return dataclasses.replace(self, strategy=StrategyConfig(self.strategy.name, options))
+
+    @classmethod
+    def of_run(cls, config: Any, where: Any = "run.json") -> RunConfig:
+        """``from_dict`` for a made run's ``run.json`` config, ``as_made``: what the run was
+        made with, whatever today's defaults are. Raises ``RunConfigError`` as ``from_dict``."""
+        return cls.from_dict(config, where).as_made()
 
     def checked(self, where: str = "command line") -> RunConfig:
         """Itself, checked as ``from_dict`` checks a ``run.json`` (``RunConfigError``)."""

@@ -204,6 +204,7 @@ def open_run(
             run_config = RunConfig.from_dict(store.config, where=path / RUN_FILE)
             if check_resumed is not None:
                 check_resumed(run_config)
+            run_config = run_config.as_made()  # options whose default changed since
             if episodes is not None or rig_options:
                 run_config = run_config.with_overrides(episodes, rig_options).checked()
             # the same calibrations and model as when it started, unless allowed: before
@@ -213,6 +214,7 @@ def open_run(
             if config is None:
                 raise RunStoreError(f"{path} holds no run and no config was given for a new one")
             run_config = config.with_overrides(episodes, rig_options).checked()
+            run_config = run_config.with_defaults_pinned()
             store = None
             note = None
         # rig and strategy before a new run folder exists: a bad name leaves nothing

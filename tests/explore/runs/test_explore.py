@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from explore.cli import main
+from explore.learner.strategies.goal_exploration import STALL_WINDOW
 from explore.rigs.arena import TWIN_ARENA
 from explore.runs.layout import COVERAGE_FILE, FAULTS_FILE, HISTORY_FILE, METRICS_FILE
 from explore.runs.metrics import CellCounter, read_metrics
@@ -81,7 +82,8 @@ def test_strategy_options_are_stored_and_kept_on_resume(tmp_path, capsys):
     args = ["explore", "--strategy", "rge-efr", "--episodes", "4", "--out", str(out)]
     assert ergo(*args, "--strategy-option", "bootstrap=2", "--rerun", "off") == 0
     store = RunStore.open(out)
-    assert store.config["strategy"]["options"] == {"bootstrap": 2}
+    # as given, and the option whose default changed written out (test_changed_defaults.py)
+    assert store.config["strategy"]["options"] == {"bootstrap": 2, "stall_window": STALL_WINDOW}
     kinds = [r.kind for r in store.records]
     assert kinds[:2] == ["random", "random"] and set(kinds[2:]) - {"random"}, kinds
     assert ergo(*args, "--strategy-option", "bootstrap=2", "--resume-or-new") == 0  # the same
