@@ -15,6 +15,7 @@ import os
 import threading
 from collections import deque
 from pathlib import Path
+from typing import Protocol
 
 from robot.spec import ERGO_JR_JOINTS
 from sim.headless import ensure_fork_safe_software_gl, ensure_headless_gl
@@ -36,6 +37,14 @@ JOINTS = ERGO_JR_JOINTS  # the MJCF's joint and actuator names (sim/models/ergo_
 # driver state, so the child never draws with, frees or garbage-collects them (freeing one
 # calls into the driver, which can block in a child). Kept referenced until the child exits.
 _INHERITED_RENDERERS: list[mujoco.Renderer] = []
+
+
+class Pacer(Protocol):
+    """What keeps a twin's simulated time at wall time (``sim.realtime.RealtimeLoop``)."""
+
+    def catch_up(self, request: bool = True) -> float:
+        """Step the twin up to the current wall time; returns how far behind it was, s."""
+        ...
 
 
 class TwinError(RuntimeError):
@@ -66,6 +75,9 @@ class Twin:
         self.data = mujoco.MjData(self.model)
         self._timestep = float(self.model.opt.timestep)
         self.lock = threading.RLock()
+        # Who keeps simulated time at wall time (a sim.realtime.RealtimeLoop sets itself here
+        # while it runs; None: whoever calls ``step`` decides the time): ``catch_up`` asks it.
+        self.pacer: Pacer | None = None
         m = self.model
         self._qpos_idx = np.array([m.joint(j).qposadr[0] for j in JOINTS])
         self._qvel_idx = np.array([m.joint(j).dofadr[0] for j in JOINTS])
@@ -222,6 +234,16 @@ class Twin:
             self._apply_due()
             if n > 0:
                 mujoco.mj_step(self.model, self.data, nstep=n)
+
+    def catch_up(self) -> None:
+        """Bring the physics up to the present of the twin's pacer (its real-time loop, which
+        steps it to the current wall time), before a request reads or writes the state; does
+        nothing without a pacer (the caller's steps are the time). Emulators call it under
+        ``lock`` so that nothing steps between the catch-up and their reading."""
+        pacer = self.pacer
+        if pacer is not None:
+            with self.lock:
+                pacer.catch_up(request=True)
 
     def _apply_due(self) -> None:
         # 1e-9 s: simulated time is a sum of float steps (guess, far below one 5 ms step).
