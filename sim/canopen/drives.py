@@ -402,6 +402,14 @@ class EmulatedDrives:
         if not self._started:
             return
         self._started = False
+        if not self.sync_step_s:
+            log.info(
+                "emulated drives: %d SYNCs, %d of them answered with the pump's positions (the "
+                "twin's lock busy for %.0f ms)",
+                self.syncs,
+                self.stale_syncs,
+                SYNC_LOCK_WAIT_S * 1e3,
+            )
         self._pump_stop.set()
         self._pump_wake.set()
         if self._pump_thread is not None:
