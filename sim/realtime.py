@@ -8,8 +8,9 @@ consistent two ways:
 - **catch-up on demand**: the loop registers itself as the twin's pacer (``Twin.pacer``), and
   an emulator calls ``twin.catch_up()`` under ``twin.lock`` before it reads or writes the
   twin's state for a request; the physics is then stepped up to the current wall time (to the
-  nearest 5 ms physics step). A reading answered at wall time t shows the state at t, a
-  command takes effect at the time it is handled, however late the loop's own thread runs.
+  last 5 ms physics step at or before it). A reading answered at wall time t shows the joints
+  at t (``Twin.joint_positions_now``: the last step's carried on by their velocities), a
+  command's delay counts from t (``Twin.set_targets``), however late the loop's thread runs.
 - **the background loop** does the same every ``slice_s`` (for what moves between requests:
   the ball, the hands, the camera's frames). Behind by more than ``REBASE_S`` (an absurd
   lag: the process was stopped, or the machine suspended), it drops the lag instead of
@@ -23,6 +24,7 @@ physics steps only, about 6 ms per simulated second of the served stand-in's sce
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 
@@ -116,8 +118,8 @@ class RealtimeLoop:
         return self._sim0 + (wall - self._wall0) * self.speed
 
     def catch_up(self, request: bool = True) -> float:
-        """Step the twin up to the current wall time (to the nearest physics step); returns
-        how far behind it was, wall s (negative: ahead by less than half a step). Takes
+        """Step the twin up to the current wall time (to the last physics step at or before
+        it); returns how far behind it was, wall s. Takes
         ``twin.lock`` (callers usually hold it already: it is re-entrant). ``request``: a
         request's catch-up (counted apart from the background loop's)."""
         twin = self.twin
@@ -139,7 +141,9 @@ class RealtimeLoop:
                 self._wall0, self._sim0 = now, twin.time
                 self._last_sim = twin.time
                 return lag
-            n = round(behind / twin.timestep)
+            # the last step at or before the present (1e-9: float sums of steps, a guess far
+            # below a step); readings carry the joints on to the present (joint_positions_now)
+            n = math.floor(behind / twin.timestep + 1e-9)
             if n > 0:
                 twin.step(n * twin.timestep)
             self._last_sim = twin.time

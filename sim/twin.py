@@ -46,6 +46,10 @@ class Pacer(Protocol):
         """Step the twin up to the current wall time; returns how far behind it was, s."""
         ...
 
+    def target_time(self, wall: float | None = None) -> float:
+        """The simulated time at wall time ``wall`` (default now), s."""
+        ...
+
 
 class TwinError(RuntimeError):
     """The twin's model could not be loaded or its state restored."""
@@ -177,12 +181,13 @@ class Twin:
     # ---- actuation -------------------------------------------------------------------------
     def set_targets(self, q: np.ndarray) -> None:
         """Position targets of the six actuators, shape (6,), rad; the actuators see them
-        ``servos.delay_s`` of simulated time later."""
+        ``servos.delay_s`` of simulated time after ``present()`` (from the first physics step
+        that starts then or later)."""
         with self.lock:
             if self.servos.delay_s <= 0.0:
                 self.data.ctrl[self._act_idx] = q
             else:
-                due = self.time + self.servos.delay_s
+                due = self.present() + self.servos.delay_s
                 self._pending.append((due, np.array(q, dtype=float).reshape(len(JOINTS))))
 
     def set_torque(self, enabled: bool) -> None:
@@ -235,11 +240,28 @@ class Twin:
             if n > 0:
                 mujoco.mj_step(self.model, self.data, nstep=n)
 
+    def present(self) -> float:
+        """Simulated time now, s: the pacer's (wall time mapped to simulated time, between this
+        physics step and the next once caught up), else the physics' own time."""
+        pacer = self.pacer
+        return self.time if pacer is None else max(self.time, pacer.target_time())
+
+    def joint_positions_now(self) -> np.ndarray:
+        """Joint angles at ``present()``, shape (6,), rad: the last physics step's, carried on
+        by their velocities to the present (less than one 5 ms step: a servo sampled between
+        two steps). Without a pacer, ``joint_positions()``."""
+        q = self.joint_positions()
+        # at most one step: a caller that did not catch up reads the last step's carried on
+        # no further than its own length
+        ahead = min(self.present() - self.time, self.timestep)
+        return q + self.joint_velocities() * ahead if ahead > 0 else q
+
     def catch_up(self) -> None:
-        """Bring the physics up to the present of the twin's pacer (its real-time loop, which
-        steps it to the current wall time), before a request reads or writes the state; does
-        nothing without a pacer (the caller's steps are the time). Emulators call it under
-        ``lock`` so that nothing steps between the catch-up and their reading."""
+        """Bring the physics up to the present of the twin's pacer (its real-time loop steps it
+        to the last physics step at or before the wall time; ``joint_positions_now`` reads the
+        joints at the present) before a request reads or writes the state; does nothing
+        without a pacer (the caller's steps are the time). Emulators call it under ``lock``
+        so that nothing steps between the catch-up and their reading."""
         pacer = self.pacer
         if pacer is not None:
             with self.lock:

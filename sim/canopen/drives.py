@@ -474,7 +474,7 @@ class EmulatedDrives:
         enabled, targets = plan
         with self.twin.lock:
             self.twin.catch_up()  # the physics at the wall time (a no-op without a real-time loop)
-            q = self.twin.joint_positions()
+            q = self.twin.joint_positions_now()
             self.twin.set_targets(np.where(enabled, targets, q))
             if self.twin.torque_enabled() != bool(enabled.all()):
                 self.twin.set_torque(bool(enabled.all()))

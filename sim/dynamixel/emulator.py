@@ -434,7 +434,7 @@ class DynamixelEmulator:
         if self.twin is not None:
             with self.twin.lock:
                 j = servo.joint
-                q = self.twin.joint_positions()[j]
+                q = self.twin.joint_positions_now()[j]  # sampled now, between physics steps
                 v = self.twin.joint_velocities()[j]
                 load = self.twin.joint_torques()[j] / self.twin.max_torques()[j]
             d = self.directions[j]

@@ -165,3 +165,35 @@ def test_a_reset_twin_follows_wall_time_from_its_new_time():
             trail = (time.monotonic() - t0) - twin.time
     assert -0.01 < trail < WORST_BOUND_S
     assert loop.overruns == 0
+
+
+class _FixedPacer:
+    """A pacer whose present is a fixed time past the twin's (no thread, no clock)."""
+
+    def __init__(self, twin: Twin, ahead_s: float) -> None:
+        self.twin, self.ahead_s = twin, ahead_s
+
+    def catch_up(self, request: bool = True) -> float:
+        return 0.0
+
+    def target_time(self, wall: float | None = None) -> float:
+        return self.twin.time + self.ahead_s
+
+
+def test_between_two_physics_steps_a_reading_is_carried_on_and_a_command_counts_from_now():
+    from sim.servo_model import NOMINAL
+
+    twin = Twin(render_size=(16, 16), servos=NOMINAL.replace(delay_s=0.012))
+    twin.set_torque(False)
+    twin.data.qvel[twin._qvel_idx] = np.linspace(-1.0, 1.0, 6)  # rad/s
+    twin.pacer = _FixedPacer(twin, 0.003)  # the present: 3 ms past the last step
+    assert twin.present() == pytest.approx(twin.time + 0.003)
+    moved = twin.joint_positions_now() - twin.joint_positions()
+    assert np.allclose(moved, 0.003 * np.linspace(-1.0, 1.0, 6), atol=1e-12)
+    twin.set_targets(np.zeros(6))
+    assert twin._pending[-1][0] == pytest.approx(twin.time + 0.015)  # its delay from now
+    twin.pacer = _FixedPacer(twin, 0.5)  # a caller that did not catch up: one step at most
+    moved = twin.joint_positions_now() - twin.joint_positions()
+    assert np.allclose(moved, twin.timestep * np.linspace(-1.0, 1.0, 6), atol=1e-12)
+    twin.pacer = None
+    assert np.array_equal(twin.joint_positions_now(), twin.joint_positions())
