@@ -50,6 +50,10 @@ class Pacer(Protocol):
         """The simulated time at wall time ``wall`` (default now), s."""
         ...
 
+    def restart(self) -> None:
+        """The twin's time was set back (a reset, a restored state): follow wall time from it."""
+        ...
+
 
 class TwinError(RuntimeError):
     """The twin's model could not be loaded or its state restored."""
@@ -130,6 +134,8 @@ class Twin:
             if ball_xy is not None:
                 self.data.qpos[self._ball_qpos : self._ball_qpos + 2] = ball_xy
             mujoco.mj_forward(self.model, self.data)
+            if self.pacer is not None:
+                self.pacer.restart()
 
     def place_ball(self, ball_xy: tuple[float, float] | None = None) -> None:
         """Put the ball at rest at ``ball_xy`` (m; default: its ``home`` keyframe position),
@@ -177,6 +183,8 @@ class Twin:
             self._pending.clear()
             mujoco.mj_setState(self.model, self.data, state, spec)
             mujoco.mj_forward(self.model, self.data)
+            if self.pacer is not None:
+                self.pacer.restart()
 
     # ---- actuation -------------------------------------------------------------------------
     def set_targets(self, q: np.ndarray) -> None:
