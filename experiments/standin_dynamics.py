@@ -8,7 +8,7 @@ for ``ergo calibrate joints`` driven by the stand-in's hands, which recovers the
 0.03 deg (docs/standin.md); the dynamics fit itself never reads the hidden file.
 
     python experiments/standin_dynamics.py [--seeds 0 1 2] [--buses dynamixel canopen] [--out FILE]
-        [--keep DIR] [--server-nice N]
+        [--keep DIR]
 
 With ``--keep DIR`` each rig's result is also written to ``DIR/result-BUS-SEED.json`` as soon
 as it is measured, and a rig whose result is there is not measured again (run the same command
@@ -87,11 +87,11 @@ def truth_floor(rec_path: Path, hidden_path: Path) -> dict:
     return {"held_out_rms_deg": best[0], "delay_s": best[1]}
 
 
-def one(bus: str, seed: int, work: Path, server_flags: tuple[str, ...] = ()) -> dict:
+def one(bus: str, seed: int, work: Path) -> dict:
     hidden_path = work / f"hidden-{bus}-{seed}.json"
     rig = f"s{seed}-{bus}"
     log = hidden_path.with_suffix(".server.log")
-    served = ServedRig(bus, seed, hidden_path, flags=["--no-camera", *server_flags], log=log)
+    served = ServedRig(bus, seed, hidden_path, flags=["--no-camera"], log=log)
     with served:
         joints_from_truth(hidden_path, rig, work)
         t0 = time.monotonic()
@@ -167,12 +167,7 @@ def main() -> int:
     p.add_argument("--buses", nargs="+", default=["dynamixel", "canopen"])
     p.add_argument("--out", type=Path, default=None, help="also write the JSON summary here")
     p.add_argument("--keep", type=Path, default=None, help="keep recordings and reports here")
-    p.add_argument(
-        "--server-nice", type=int, default=None, metavar="N",
-        help="ergo twin serve --nice N: the served twin's threads at this priority",
-    )  # fmt: skip
     args = p.parse_args()
-    server_flags = () if args.server_nice is None else ("--nice", str(args.server_nice))
     results = []
     with tempfile.TemporaryDirectory(prefix="standin-dynamics-") as scratch:
         tmp = args.keep or scratch
@@ -184,11 +179,11 @@ def main() -> int:
                     results.append(json.loads(kept.read_text()))
                     print(f"== {bus} seed {seed}: measured before ({kept})", flush=True)
                     continue
-                r = one(bus, seed, Path(tmp), server_flags)
+                r = one(bus, seed, Path(tmp))
                 if "cut short" in r.get("error", ""):  # the link lost on a loaded machine: again
                     print(f"== {bus} seed {seed}: {r['error'][:160]}... once more", flush=True)
                     first = r["error"]
-                    r = one(bus, seed, Path(tmp), server_flags)
+                    r = one(bus, seed, Path(tmp))
                     r["first_attempt_error"] = first
                 results.append(r)
                 if args.keep and "error" not in r:

@@ -52,12 +52,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     serve.add_argument("--seed", type=int, default=0, help="fault injection seed")
     serve.add_argument(
-        "--nice", type=int, default=None, metavar="N",
-        help="run the server's threads at this scheduling priority (-20..19; negative needs "
-        "root): a physical arm has its own CPU; opt-in, for measurements on a loaded machine "
-        "(docs/dynamics.md)",
-    )  # fmt: skip
-    serve.add_argument(
         "--stand-in", type=int, default=None, metavar="SEED",
         help="serve a rig the software has never seen: servo offsets and directions, the "
         "camera's pose and lens, the servos' dynamics and the ball drawn from SEED "

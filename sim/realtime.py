@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import logging
 import math
-import os
 import threading
 import time
 
@@ -39,32 +38,6 @@ log = logging.getLogger(__name__)
 REBASE_S = 5.0
 # The lags counted in the summary, s: one 5 ms physics step, and a 40 Hz control tick minus 5 ms.
 LATE_S = (0.005, 0.020)
-
-
-def set_nice(nice: int) -> None:
-    """Give every thread of this process the scheduling priority ``nice`` (-20..19; lower runs
-    first), and so the threads it starts later (they inherit their creator's): ``ergo twin
-    serve --nice N``, an opt-in standing for a physical arm's own CPU. Linux: the nice value of
-    each thread, within the process's autogroup (``/proc/self/autogroup``), which this leaves
-    as it is.
-
-    Raises:
-        ValueError: ``nice`` is out of range, or the system refuses it (a negative value needs
-            root or CAP_SYS_NICE); one line.
-    """
-    if not -20 <= nice <= 19:
-        raise ValueError(f"--nice {nice} is not in -20..19")
-    try:
-        tids = [int(t) for t in os.listdir("/proc/self/task")]
-    except OSError:
-        tids = [0]  # no /proc: the calling thread only
-    try:
-        for tid in tids:
-            os.setpriority(os.PRIO_PROCESS, tid, nice)
-    except PermissionError:
-        raise ValueError(
-            f"--nice {nice}: not permitted (a negative nice needs root or CAP_SYS_NICE)"
-        ) from None
 
 
 class RealtimeLoop:

@@ -198,15 +198,9 @@ def serve(args: argparse.Namespace) -> int:
     import can
 
     from sim.canopen.drives import EmulatedDrives
-    from sim.realtime import RealtimeLoop, set_nice
+    from sim.realtime import RealtimeLoop
     from sim.standin.served import StandinError, open_served_rig, serve_until_interrupted
 
-    nice = getattr(args, "nice", None)
-    if nice is not None:  # before any thread starts: they inherit it
-        try:
-            set_nice(int(nice))
-        except ValueError as exc:
-            return error(exc)
     drop_rate = float(getattr(args, "drop_rate", 0.0) or 0.0)
     delay_ms = float(getattr(args, "delay_ms", 0.0) or 0.0)
     overload = getattr(args, "overload_servo", None)
@@ -273,7 +267,6 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--overload-servo", type=int, default=None)
     p.add_argument("--overload-after-s", type=float, default=DEFAULT_OVERLOAD_AFTER_S)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--nice", type=int, default=None)
     p.add_argument("--link", default=None, help="keep a symbolic link to the pty at this path")
     p.add_argument("--camera-port", type=int, default=0)
     p.add_argument("--no-camera", action="store_true")

@@ -124,15 +124,9 @@ def faults_from_args(args: argparse.Namespace) -> FaultConfig:
 def serve(args: argparse.Namespace) -> int:
     """Serve until interrupted; returns the exit code. Prints the pty path and the camera URL
     (one line each, flushed) so that a parent process can read them."""
-    from sim.realtime import RealtimeLoop, set_nice
+    from sim.realtime import RealtimeLoop
     from sim.standin.served import StandinError, open_served_rig, serve_until_interrupted
 
-    nice = getattr(args, "nice", None)
-    if nice is not None:  # before any thread starts: they inherit it
-        try:
-            set_nice(int(nice))
-        except ValueError as exc:
-            return error(exc)
     try:
         faults = faults_from_args(args)
     except ValueError as exc:
