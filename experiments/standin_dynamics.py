@@ -8,6 +8,12 @@ for ``ergo calibrate joints`` driven by the stand-in's hands, which recovers the
 0.03 deg (docs/standin.md); the dynamics fit itself never reads the hidden file.
 
     python experiments/standin_dynamics.py [--seeds 0 1 2] [--buses dynamixel canopen] [--out FILE]
+        [--keep DIR]
+
+With ``--keep DIR`` each rig's result is also written to ``DIR/result-BUS-SEED.json`` as soon
+as it is measured, and a rig whose result is there is not measured again (run the same command
+again after a stop to finish the rest). Each result holds the served twin's real-time lines
+(``real-time loop: ...``, ``emulated drives: ...``) from the server's log.
 """
 
 from __future__ import annotations
@@ -107,6 +113,11 @@ def one(bus: str, seed: int, work: Path) -> dict:
         )
         wall = time.monotonic() - t0
     out = {"bus": bus, "seed": seed, "rc": done.returncode, "wall_s": round(wall, 1)}
+    out["server_lines"] = [
+        line.split(": ", 1)[1]
+        for line in log.read_text().splitlines()
+        if "real-time loop: " in line or "emulated drives: " in line
+    ]
     if done.returncode != 0:
         out["error"] = (done.stderr.strip().splitlines() or ["?"])[-1]
         out["server_log_tail"] = log.read_text()[-1500:]
@@ -163,6 +174,11 @@ def main() -> int:
         Path(tmp).mkdir(parents=True, exist_ok=True)
         for bus in args.buses:
             for seed in args.seeds:
+                kept = Path(tmp) / f"result-{bus}-{seed}.json"
+                if args.keep and kept.exists():
+                    results.append(json.loads(kept.read_text()))
+                    print(f"== {bus} seed {seed}: measured before ({kept})", flush=True)
+                    continue
                 r = one(bus, seed, Path(tmp))
                 if "cut short" in r.get("error", ""):  # the link lost on a loaded machine: again
                     print(f"== {bus} seed {seed}: {r['error'][:160]}... once more", flush=True)
@@ -170,7 +186,11 @@ def main() -> int:
                     r = one(bus, seed, Path(tmp))
                     r["first_attempt_error"] = first
                 results.append(r)
+                if args.keep and "error" not in r:
+                    kept.write_text(json.dumps(r, indent=2))
                 print(f"== {bus} seed {seed}: rc {r['rc']}, wall {r['wall_s']} s", flush=True)
+                for line in r["server_lines"]:
+                    print(f"   server: {line}", flush=True)
                 if "error" in r:
                     print(f"   error: {r['error']}")
                     print(f"   server (rc {r['server_rc']}): {r['server_log_tail']}")

@@ -15,6 +15,7 @@ import os
 import threading
 from collections import deque
 from pathlib import Path
+from typing import Protocol
 
 from robot.spec import ERGO_JR_JOINTS
 from sim.headless import ensure_fork_safe_software_gl, ensure_headless_gl
@@ -36,6 +37,22 @@ JOINTS = ERGO_JR_JOINTS  # the MJCF's joint and actuator names (sim/models/ergo_
 # driver state, so the child never draws with, frees or garbage-collects them (freeing one
 # calls into the driver, which can block in a child). Kept referenced until the child exits.
 _INHERITED_RENDERERS: list[mujoco.Renderer] = []
+
+
+class Pacer(Protocol):
+    """What keeps a twin's simulated time at wall time (``sim.realtime.RealtimeLoop``)."""
+
+    def catch_up(self, request: bool = True) -> float:
+        """Step the twin up to the current wall time; returns how far behind it was, s."""
+        ...
+
+    def target_time(self, wall: float | None = None) -> float:
+        """The simulated time at wall time ``wall`` (default now), s."""
+        ...
+
+    def restart(self) -> None:
+        """The twin's time was set back (a reset, a restored state): follow wall time from it."""
+        ...
 
 
 class TwinError(RuntimeError):
@@ -66,6 +83,9 @@ class Twin:
         self.data = mujoco.MjData(self.model)
         self._timestep = float(self.model.opt.timestep)
         self.lock = threading.RLock()
+        # Who keeps simulated time at wall time (a sim.realtime.RealtimeLoop sets itself here
+        # while it runs; None: whoever calls ``step`` decides the time): ``catch_up`` asks it.
+        self.pacer: Pacer | None = None
         m = self.model
         self._qpos_idx = np.array([m.joint(j).qposadr[0] for j in JOINTS])
         self._qvel_idx = np.array([m.joint(j).dofadr[0] for j in JOINTS])
@@ -114,6 +134,8 @@ class Twin:
             if ball_xy is not None:
                 self.data.qpos[self._ball_qpos : self._ball_qpos + 2] = ball_xy
             mujoco.mj_forward(self.model, self.data)
+            if self.pacer is not None:
+                self.pacer.restart()
 
     def place_ball(self, ball_xy: tuple[float, float] | None = None) -> None:
         """Put the ball at rest at ``ball_xy`` (m; default: its ``home`` keyframe position),
@@ -161,16 +183,19 @@ class Twin:
             self._pending.clear()
             mujoco.mj_setState(self.model, self.data, state, spec)
             mujoco.mj_forward(self.model, self.data)
+            if self.pacer is not None:
+                self.pacer.restart()
 
     # ---- actuation -------------------------------------------------------------------------
     def set_targets(self, q: np.ndarray) -> None:
         """Position targets of the six actuators, shape (6,), rad; the actuators see them
-        ``servos.delay_s`` of simulated time later."""
+        ``servos.delay_s`` of simulated time after ``present()`` (from the first physics step
+        that starts then or later)."""
         with self.lock:
             if self.servos.delay_s <= 0.0:
                 self.data.ctrl[self._act_idx] = q
             else:
-                due = self.time + self.servos.delay_s
+                due = self.present() + self.servos.delay_s
                 self._pending.append((due, np.array(q, dtype=float).reshape(len(JOINTS))))
 
     def set_torque(self, enabled: bool) -> None:
@@ -222,6 +247,33 @@ class Twin:
             self._apply_due()
             if n > 0:
                 mujoco.mj_step(self.model, self.data, nstep=n)
+
+    def present(self) -> float:
+        """Simulated time now, s: the pacer's (wall time mapped to simulated time, between this
+        physics step and the next once caught up), else the physics' own time."""
+        pacer = self.pacer
+        return self.time if pacer is None else max(self.time, pacer.target_time())
+
+    def joint_positions_now(self) -> np.ndarray:
+        """Joint angles at ``present()``, shape (6,), rad: the last physics step's, carried on
+        by their velocities to the present (less than one 5 ms step: a servo sampled between
+        two steps). Without a pacer, ``joint_positions()``."""
+        q = self.joint_positions()
+        # at most one step: a caller that did not catch up reads the last step's carried on
+        # no further than its own length
+        ahead = min(self.present() - self.time, self.timestep)
+        return q + self.joint_velocities() * ahead if ahead > 0 else q
+
+    def catch_up(self) -> None:
+        """Bring the physics up to the present of the twin's pacer (its real-time loop steps it
+        to the last physics step at or before the wall time; ``joint_positions_now`` reads the
+        joints at the present) before a request reads or writes the state; does nothing
+        without a pacer (the caller's steps are the time). Emulators call it under ``lock``
+        so that nothing steps between the catch-up and their reading."""
+        pacer = self.pacer
+        if pacer is not None:
+            with self.lock:
+                pacer.catch_up(request=True)
 
     def _apply_due(self) -> None:
         # 1e-9 s: simulated time is a sum of float steps (guess, far below one 5 ms step).

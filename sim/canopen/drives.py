@@ -14,10 +14,12 @@ its EMCY producer reports faults. This module adds what a servo drive does:
 
 Physics: either a ``sim.realtime.RealtimeLoop`` steps the twin in wall time (the server), or
 ``sync_step_s`` advances it by a fixed amount at every SYNC (tests: a fake clock that makes
-the loop deterministic and as fast as the CPU allows). In real-time mode a pump thread
-exchanges targets and positions with the twin (woken by each SYNC, and every 5 ms), so the
-SYNC handler never waits for the twin's lock, which a camera render may hold for tens of ms:
-the TPDOs then carry the pump's latest positions, as a drive reports its last sample.
+the loop deterministic and as fast as the CPU allows). In real-time mode each SYNC exchanges
+targets and positions with the twin at that moment (``Twin.catch_up`` first steps the physics
+up to the wall time, however late the loop's thread runs), as a drive latches its targets and
+samples its position at the SYNC; it waits at most ``SYNC_LOCK_WAIT_S`` for the twin's lock,
+else the TPDOs carry the latest positions of a pump thread, which exchanges with the twin
+between SYNCs (every 5 ms: for SDO reads and state changes between SYNCs).
 
 The twin has one torque switch for the whole arm: it is on only while all six drives are in
 OPERATION ENABLED (a drive out of it, e.g. in FAULT, leaves the whole arm limp). Joints whose
@@ -71,6 +73,10 @@ NMT_PRE_OPERATIONAL = 0x80
 # Real-time mode: longest interval between two exchanges with the twin, s (guess: a fifth of
 # the 40 Hz control period, so positions are at most this old when the twin's lock is free).
 PUMP_PERIOD_S = 0.005
+# Real-time mode: the longest a SYNC waits for the twin's lock before it sends the pump's
+# latest positions instead, s (guess: a fifth of the 40 Hz control period; the lock is held
+# for a physics catch-up, about 6 ms per simulated s, or a scene copy for a render).
+SYNC_LOCK_WAIT_S = 0.005
 
 
 def _is_pdo_or_sync(can_id: int) -> bool:
@@ -362,6 +368,7 @@ class EmulatedDrives:
         self.syncs = 0
         self._started = False
         self._q = np.zeros(6)  # latest joint positions read from the twin, rad
+        self.stale_syncs = 0  # real-time SYNCs answered with the pump's positions (lock busy)
         self._pump_wake = threading.Event()
         self._pump_stop = threading.Event()
         self._pump_thread: threading.Thread | None = None
@@ -395,6 +402,14 @@ class EmulatedDrives:
         if not self._started:
             return
         self._started = False
+        if not self.sync_step_s:
+            log.info(
+                "emulated drives: %d SYNCs, %d of them answered with the pump's positions (the "
+                "twin's lock busy for %.0f ms)",
+                self.syncs,
+                self.stale_syncs,
+                SYNC_LOCK_WAIT_S * 1e3,
+            )
         self._pump_stop.set()
         self._pump_wake.set()
         if self._pump_thread is not None:
@@ -458,7 +473,8 @@ class EmulatedDrives:
         the torque, step if asked; returns the joint positions, shape (6,), rad."""
         enabled, targets = plan
         with self.twin.lock:
-            q = self.twin.joint_positions()
+            self.twin.catch_up()  # the physics at the wall time (a no-op without a real-time loop)
+            q = self.twin.joint_positions_now()
             self.twin.set_targets(np.where(enabled, targets, q))
             if self.twin.torque_enabled() != bool(enabled.all()):
                 self.twin.set_torque(bool(enabled.all()))
@@ -474,17 +490,31 @@ class EmulatedDrives:
             d.actual = d.to_counts(float(q[d.joint]), d.counts_per_rev)
 
     def _pump(self) -> None:
-        """Real-time mode: exchange targets and positions with the twin, woken by each SYNC and
-        at least every ``PUMP_PERIOD_S``. It may wait for the twin's lock (a render holds it),
-        the SYNC handler never does."""
+        """Real-time mode: exchange targets and positions with the twin between SYNCs, at least
+        every ``PUMP_PERIOD_S`` (and when a SYNC found the twin's lock busy). It may wait for
+        the twin's lock; the SYNC handler waits at most ``SYNC_LOCK_WAIT_S``. The whole
+        exchange is under the drives' lock, so that a plan made before a SYNC never overwrites
+        the targets or positions of that SYNC."""
         while not self._pump_stop.is_set():
             self._pump_wake.wait(PUMP_PERIOD_S)
             self._pump_wake.clear()
             with self._lock:
-                plan = self._plan()
-            q = self._twin_io(plan, None)
-            with self._lock:
-                self._set_actuals(q)
+                self._set_actuals(self._twin_io(self._plan(), None))
+
+    def _exchange_at_sync(self) -> np.ndarray:
+        """Real-time mode, at a SYNC (under ``self._lock``): the targets to the twin and its
+        positions at this moment (the physics caught up to the wall time), as a drive latches
+        its targets and samples its position at the SYNC. If the twin's lock is not free within
+        ``SYNC_LOCK_WAIT_S``, the pump's latest positions instead (counted in ``stale_syncs``;
+        the pump is woken to hand the targets over)."""
+        if not self.twin.lock.acquire(timeout=SYNC_LOCK_WAIT_S):
+            self.stale_syncs += 1
+            self._pump_wake.set()
+            return self._q
+        try:
+            return self._twin_io(self._plan(), None)
+        finally:
+            self.twin.lock.release()
 
     def _on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
         try:
@@ -503,8 +533,7 @@ class EmulatedDrives:
             if self.sync_step_s:
                 self._set_actuals(self._twin_io(self._plan(), self.sync_step_s))
             else:
-                self._set_actuals(self._q)
-                self._pump_wake.set()
+                self._set_actuals(self._exchange_at_sync())
             now = time.monotonic()
             for d in self.drives:
                 self._check_faults(d, now)

@@ -23,10 +23,11 @@ its Hardware Error Status, raises the alert bit in every status and shuts its to
 
 from __future__ import annotations
 
+import contextlib
 import random
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -219,17 +220,34 @@ class DynamixelEmulator:
 
     # ---- entry points ------------------------------------------------------------------------
     def handle_bytes(self, data: bytes) -> list[Reply]:
-        """Feed received bytes; return the replies due, each with its delay after the request."""
+        """Feed received bytes; return the replies due, each with its delay after the request.
+        The packets are answered at the twin's present (``_at_present``)."""
         with self.lock:
+            items = self._decoder.feed(data)
+            if not items:
+                return []
             replies: list[Reply] = []
-            for item in self._decoder.feed(data):
-                replies += self._handle_item(item)
+            with self._at_present():
+                for item in items:
+                    replies += self._handle_item(item)
             return replies
 
     def handle(self, packet: proto.InstructionPacket) -> list[Reply]:
-        """Answer one instruction packet."""
-        with self.lock:
+        """Answer one instruction packet (at the twin's present)."""
+        with self.lock, self._at_present():
             return self._handle_item(packet)
+
+    @contextlib.contextmanager
+    def _at_present(self) -> Iterator[None]:
+        """Hold the twin's lock, its physics caught up to the wall time (``Twin.catch_up``:
+        a no-op unless a real-time loop paces it), as a servo answers with its state at the
+        moment the request arrives and acts on a goal at once."""
+        if self.twin is None:
+            yield
+            return
+        with self.twin.lock:
+            self.twin.catch_up()
+            yield
 
     def torque_states(self) -> dict[int, bool]:
         """id -> torque enabled (after any shutdown)."""
@@ -416,7 +434,7 @@ class DynamixelEmulator:
         if self.twin is not None:
             with self.twin.lock:
                 j = servo.joint
-                q = self.twin.joint_positions()[j]
+                q = self.twin.joint_positions_now()[j]  # sampled now, between physics steps
                 v = self.twin.joint_velocities()[j]
                 load = self.twin.joint_torques()[j] / self.twin.max_torques()[j]
             d = self.directions[j]
