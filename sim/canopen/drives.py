@@ -492,13 +492,16 @@ class EmulatedDrives:
     def _pump(self) -> None:
         """Real-time mode: exchange targets and positions with the twin between SYNCs, at least
         every ``PUMP_PERIOD_S`` (and when a SYNC found the twin's lock busy). It may wait for
-        the twin's lock; the SYNC handler waits at most ``SYNC_LOCK_WAIT_S``. The whole
-        exchange is under the drives' lock, so that a plan made before a SYNC never overwrites
-        the targets or positions of that SYNC."""
+        the twin's lock, and takes it before the drives' lock, so that a SYNC never waits on
+        the drives' lock while the pump waits for a render: the SYNC handler waits at most
+        ``SYNC_LOCK_WAIT_S`` (for the twin's lock). The whole exchange is under both locks, so
+        that a plan made before a SYNC never overwrites the targets or positions of that SYNC.
+        (No deadlock: the only other taker of both, the SYNC handler, takes the twin's lock
+        with a timeout.)"""
         while not self._pump_stop.is_set():
             self._pump_wake.wait(PUMP_PERIOD_S)
             self._pump_wake.clear()
-            with self._lock:
+            with self.twin.lock, self._lock:
                 self._set_actuals(self._twin_io(self._plan(), None))
 
     def _exchange_at_sync(self) -> np.ndarray:
