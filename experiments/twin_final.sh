@@ -1,0 +1,43 @@
+#!/usr/bin/env bash
+# The twin's final table of issue 31 (docs/results.md, "F9"): one command,
+# `make paper-final` or `bash experiments/twin_final.sh OUT [JOBS]`. Every step is an ordinary
+# ergo command, skipped or resumed when it is already done, so the script can be stopped and
+# rerun at any point.
+#
+# Seeds never used while developing: exploration seeds 700-707 and the outcome dataset's seed
+# 3000 (development on the twin used exploration seeds 0-7 and 100-107, the F campaign's, and
+# dataset seeds 1000/1001); the spatial autoencoder's training seeds are 700-707 too. The code's
+# defaults as they are now, stall_window 10 included (F8): unlike `make paper`, nothing is pinned.
+#
+# The ball left in place, 5000 episodes x 8 seeds: RGE-EFR and RGE-SAE first (the must-show
+# compares them at 1500 and 5000), then RPE. The cells at 1500 are read from the same runs'
+# metrics.csv. About 7 min of one core a run on this machine; the autoencoder's 8 trainings about
+# 25 min on the 2 cores.
+set -euo pipefail
+OUT=${1:-runs/twin_final}
+JOBS=${2:-2}
+ERGO=${ERGO:-.venv/bin/ergo}
+PY=${PY:-.venv/bin/python}
+SEEDS=700-707
+EPISODES=5000
+HERE=$(cd "$(dirname "$0")" && pwd)
+export MUJOCO_GL=${MUJOCO_GL:-egl}
+mkdir -p "$OUT/data" "$OUT/models"
+
+DATA="$OUT/data/outcomes-3000.npz"
+[ -f "$DATA" ] || "$ERGO" dataset outcomes --n 3000 --seed 3000 --out "$DATA" --no-progress
+[ -f "$OUT/models/sae/selection.json" ] || "$ERGO" sae train --data "$DATA" \
+    --out "$OUT/models/sae" --seeds "$SEEDS" --device cpu --no-progress
+
+campaign() {  # campaign STRATEGIES: runs or resumes, no report; wall time per call in wall.log
+    local t0=$SECONDS
+    "$ERGO" experiment --out "$OUT/stay" --episodes "$EPISODES" --strategies "$1" \
+        --seeds "$SEEDS" --sae "$OUT/models/sae" --jobs "$JOBS" --no-progress --no-report
+    echo "$(date -u +%FT%TZ) $1: $((SECONDS - t0)) s wall" >> "$OUT/wall.log"
+}
+campaign rge-efr,rge-sae
+campaign rpe
+"$ERGO" report "$OUT/stay"
+"$PY" "$HERE/twin_stalls.py" "$OUT"/stay/rge-efr/seed-* "$OUT"/stay/rge-sae/seed-* \
+    > "$OUT/stalls.md"
+cat "$OUT/stay/report/summary.md" "$OUT/stalls.md"
