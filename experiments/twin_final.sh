@@ -11,8 +11,8 @@
 #
 # The ball left in place, 5000 episodes x 8 seeds: RGE-EFR and RGE-SAE first (the must-show
 # compares them at 1500 and 5000), then RPE. The cells at 1500 are read from the same runs'
-# metrics.csv. About 7 min of one core a run on this machine; the autoencoder's 8 trainings about
-# 25 min on the 2 cores.
+# metrics.csv. Then RPE and RGE-EFR of F1 (seed 100) again, to compare. About 7 min of one core
+# a run on this machine; the autoencoder's 8 trainings about 25 min on the 2 cores.
 set -euo pipefail
 OUT=${1:-runs/twin_final}
 JOBS=${2:-2}
@@ -38,6 +38,11 @@ campaign() {  # campaign STRATEGIES: runs or resumes, no report; wall time per c
 campaign rge-efr,rge-sae
 campaign rpe
 "$ERGO" report "$OUT/stay"
+
+# Reruns: the engineered runs of F1 (seed 100, `make paper`'s settings: stall_window off), to
+# check that nothing of theirs changed since (F1: RPE 163 cells, RGE-EFR 365 at 5000).
+"$ERGO" experiment --out "$OUT/rerun_f1" --episodes "$EPISODES" --strategies rpe,rge-efr \
+    --seeds 100-100 --jobs "$JOBS" --option stall_window=0 --no-progress --no-report
 "$PY" "$HERE/twin_stalls.py" "$OUT"/stay/rge-efr/seed-* "$OUT"/stay/rge-sae/seed-* \
     > "$OUT/stalls.md"
 cat "$OUT/stay/report/summary.md" "$OUT/stalls.md"
