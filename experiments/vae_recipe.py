@@ -12,7 +12,8 @@ reported then).
 
 Recipe knobs: ``--lr`` and ``--lr-final`` (cosine decay from one to the other over
 ``--iterations``; equal: constant), ``--beta``, ``--capacity`` (nats) over
-``--capacity-iterations``, ``--batch``, ``--channels-last``.
+``--capacity-iterations``, ``--batch``, ``--channels-last``, ``--mean-image-offset``,
+``--kl-delay`` and ``--kl-warmup`` (``vision.vae.VaeConfig``).
 
     .venv/bin/python experiments/vae_recipe.py --data outcomes.npz --seeds 0,1 \
         --iterations 4000 --lr 1e-3 --lr-final 1e-4 --beta 10 --capacity 25 \
@@ -41,7 +42,7 @@ from torch.nn import functional as F
 from vision.cli import parse_seeds
 from vision.representation_quality import HELDOUT, explained_pixel_variance, heldout_split
 from vision.vae import Vae, VaeConfig, kl_per_latent, to_tensor
-from vision.vae_train import TrainConfig, fit
+from vision.vae_train import TrainConfig, fit, make_vae
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from script_helpers import linear_r2  # experiments/script_helpers.py
@@ -76,7 +77,9 @@ def train_one(seed: int, images, ball, args) -> list[dict[str, float]]:
     train, test = heldout_split(len(images), HELDOUT, seed)
     mean_image = images[train].astype(np.float64).mean(axis=0)
     settings = asdict(VaeConfig(beta=args.beta, capacity=args.capacity,
-                                capacity_iterations=args.capacity_iterations))  # fmt: skip
+                                capacity_iterations=args.capacity_iterations,
+                                mean_image_offset=args.mean_image_offset,
+                                kl_delay=args.kl_delay, kl_warmup=args.kl_warmup))  # fmt: skip
     config = TrainConfig(
         iterations=args.iterations, lr=args.lr, lr_final=args.lr_final, batch=args.batch,
         seed=seed, checkpoint_every=args.iterations, threads=args.threads,
@@ -109,7 +112,7 @@ def train_one(seed: int, images, ball, args) -> list[dict[str, float]]:
             return True
         return last
 
-    vae = fit(lambda s: Vae(VaeConfig(**s)), settings, images[train], folder, config,
+    vae = fit(lambda s: make_vae(s, images[train]), settings, images[train], folder, config,
               progress=False, after_step=after_step)  # fmt: skip
     if args.patience and best["row"] is not None:  # the model early stopping keeps
         rows.append({**best["row"], "kept": 1})
@@ -146,6 +149,18 @@ def main() -> None:
     ap.add_argument("--capacity", type=float, default=None)
     ap.add_argument("--capacity-iterations", type=int, default=2000)
     ap.add_argument("--channels-last", action="store_true")
+    ap.add_argument(
+        "--mean-image-offset",
+        action="store_true",
+        help="the decoder starts from the mean training image (vision/vae.py)",
+    )
+    ap.add_argument("--kl-delay", type=int, default=0, help="iterations without the KL term")
+    ap.add_argument(
+        "--kl-warmup",
+        type=int,
+        default=0,
+        help="iterations over which the KL weight then rises to 1",
+    )
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--figures", action="store_true", help="OUT/seed-S.png: reconstructions")
     args = ap.parse_args()

@@ -47,6 +47,18 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--channels-last", action="store_true",
         help="channels-last memory layout (about 8%% less CPU an iteration here; docs/results.md)",
     )  # fmt: skip
+    t.add_argument(
+        "--mean-image-offset", action="store_true",
+        help="the decoder adds the mean training image's logit to its own (docs/results.md F6)",
+    )  # fmt: skip
+    t.add_argument(
+        "--kl-delay", type=int, default=0, metavar="N",
+        help="train N iterations without the KL term first (default 0)",
+    )  # fmt: skip
+    t.add_argument(
+        "--kl-warmup", type=int, default=0, metavar="N",
+        help="then raise the KL weight linearly from 0 to 1 over N iterations (default 0)",
+    )  # fmt: skip
     _add_training_arguments(t)
     t.set_defaults(func=_vae_train)
 
@@ -156,7 +168,11 @@ def _vae_train(args: argparse.Namespace) -> int:
             beta=1.0 if args.beta is None else args.beta,
             capacity=args.capacity,
             capacity_iterations=args.capacity_iterations or VaeConfig().capacity_iterations,
+            mean_image_offset=args.mean_image_offset,
+            kl_delay=args.kl_delay,
+            kl_warmup=args.kl_warmup,
         )
+        model_cfg.validate()
         defaults = TrainConfig()
 
         def train_one(seed: int, out: Path) -> Any:

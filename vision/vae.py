@@ -7,6 +7,13 @@ Bernoulli logits over pixels. Loss per image: BCE-with-logits summed over pixels
 (summed over latents), or beta * |KL - C| with a capacity C rising linearly (the capacity
 variant).
 
+Two training aids, off by default (the paper has neither; docs/results.md F6 measured why they
+matter on 2 CPU cores): ``mean_image_offset`` adds a fixed per-pixel offset, the logit of the
+mean training image, to the decoder's logits, so that an untrained decoder already draws the
+static scene and training spends its steps on what moves; ``kl_delay``/``kl_warmup`` leave the KL
+term out for the first iterations and then raise its weight linearly to 1, so that the code is
+informative before the KL term presses on it.
+
 Images enter as BGR uint8 arrays (OpenCV order, as the rig and the run store keep them) of
 shape (n, 64, 64, 3); ``to_tensor`` converts them to RGB float tensors (n, 3, 64, 64) in [0, 1].
 A model is saved as a folder: ``vae.pt`` (the state dict, loaded with ``weights_only=True``) and
@@ -40,6 +47,10 @@ HIDDEN = 256  # paper: 2 dense layers of 256
 LATENT_DIM = 10  # paper: 10 Gaussian latents
 MAX_THREADS = 2  # the project's CPU budget (2 cores shared)
 MODEL_FILE, CONFIG_FILE = "vae.pt", "vae.json"
+# The mean image's pixel values are clipped to [eps, 1 - eps] before their logit (a pixel that is
+# 0 or 1 in every image would have an infinite one). A guess: any value that keeps the logits
+# finite and small next to the decoder's own range (|logit| <= 6.9) serves.
+OFFSET_EPS = 1e-3
 
 
 class VaeError(ValueError):
@@ -176,6 +187,11 @@ class VaeConfig:
             training data (filled after training; a goal space can z-score latents with them).
         heldout_explained_variance: the model-selection criterion on the images held out of
             training (``vision.representation_quality``; filled when some were held out).
+        mean_image_offset: the decoder's logits are added to the logit of the mean training
+            image (a buffer (3, 64, 64) set by ``Vae.set_mean_image`` before training, saved
+            with the weights).
+        kl_delay, kl_warmup: the KL term's weight is 0 for the first ``kl_delay`` iterations,
+            then rises linearly to 1 over ``kl_warmup`` iterations (both 0: always 1).
     """
 
     latent_dim: int = LATENT_DIM
@@ -188,6 +204,17 @@ class VaeConfig:
     latent_mean: list[float] | None = field(default=None)
     latent_std: list[float] | None = field(default=None)
     heldout_explained_variance: float | None = None
+    mean_image_offset: bool = False
+    kl_delay: int = 0
+    kl_warmup: int = 0
+
+    def kl_weight(self, iteration: int) -> float:
+        """The KL term's weight at 0-based ``iteration`` (``kl_delay``, ``kl_warmup``)."""
+        if iteration < self.kl_delay:
+            return 0.0
+        if self.kl_warmup == 0:
+            return 1.0
+        return min(1.0, (iteration - self.kl_delay) / self.kl_warmup)
 
     def validate(self) -> None:
         if self.latent_dim < 1 or self.channels < 1 or self.hidden < 1:
@@ -198,6 +225,10 @@ class VaeConfig:
             raise VaeError(f"capacity must be >= 0, got {self.capacity}")
         if self.capacity_iterations < 1:
             raise VaeError("capacity_iterations must be at least 1")
+        if self.kl_delay < 0 or self.kl_warmup < 0:
+            raise VaeError(
+                f"kl_delay and kl_warmup must be >= 0, got {self.kl_delay}, {self.kl_warmup}"
+            )
 
 
 def to_tensor(images: np.ndarray) -> torch.Tensor:
@@ -241,6 +272,21 @@ class Vae(nn.Module):
             nn.ConvTranspose2d(c, c, 4, 2, 1), nn.ReLU(),
             nn.ConvTranspose2d(c, 3, 4, 2, 1),
         )  # fmt: skip
+        if self.config.mean_image_offset:
+            self.register_buffer("pixel_offset", torch.zeros(3, IMAGE_SIZE, IMAGE_SIZE))
+
+    def set_mean_image(self, images: np.ndarray) -> None:
+        """Set the decoder's per-pixel offset to the logit of the mean of ``images`` (n, 64, 64,
+        3) BGR uint8, clipped to [OFFSET_EPS, 1 - OFFSET_EPS] (``mean_image_offset`` only)."""
+        if not self.config.mean_image_offset:
+            raise VaeError("this VAE has no mean-image offset (mean_image_offset is off)")
+        if len(images) == 0:
+            raise VaeError("no images to take the mean of")
+        total = torch.zeros(3, IMAGE_SIZE, IMAGE_SIZE, dtype=torch.float64)
+        for i in range(0, len(images), 512):
+            total += to_tensor(images[i : i + 512]).double().sum(dim=0)
+        p = (total / len(images)).clamp(OFFSET_EPS, 1.0 - OFFSET_EPS)
+        self.pixel_offset.copy_((p.log() - (-p).log1p()).float())
 
     # ---- the model ---------------------------------------------------------------------------
     def encode(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -251,7 +297,8 @@ class Vae(nn.Module):
     def decode(self, z: torch.Tensor) -> torch.Tensor:
         """z (n, latent_dim) -> pixel logits (n, 3, 64, 64)."""
         c = self.config.channels
-        return self.decoder_conv(self.decoder_fc(z).view(-1, c, 4, 4))
+        logits = self.decoder_conv(self.decoder_fc(z).view(-1, c, 4, 4))
+        return logits + self.pixel_offset if self.config.mean_image_offset else logits
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Returns (logits (n, 3, 64, 64), mu (n, z), logvar (n, z)); samples z in training."""
@@ -266,11 +313,12 @@ class Vae(nn.Module):
         recon = F.binary_cross_entropy_with_logits(logits, x, reduction="sum") / len(x)
         kl = kl_per_latent(mu, logvar).sum(dim=1).mean()
         cfg = self.config
+        beta = cfg.beta * cfg.kl_weight(iteration)
         if cfg.capacity is None:
-            total = recon + cfg.beta * kl
+            total = recon + beta * kl
         else:
             c = cfg.capacity * min(1.0, iteration / cfg.capacity_iterations)
-            total = recon + cfg.beta * (kl - c).abs()
+            total = recon + beta * (kl - c).abs()
         return {"loss": total, "recon": recon, "kl": kl}
 
     # ---- numpy API ---------------------------------------------------------------------------

@@ -165,7 +165,7 @@ def train_vae(
     train_idx, test_idx = heldout_split(len(images), heldout, config.seed)
     train = images[train_idx] if len(test_idx) else images
     vae = fit(
-        lambda settings: Vae(VaeConfig(**settings)), asdict(_without_statistics(model_config)),
+        lambda settings: make_vae(settings, train), asdict(_without_statistics(model_config)),
         train, out, config, progress, desc="vae",
     )  # fmt: skip
     sample = train[np.random.default_rng(config.seed).permutation(len(train))[:KL_SAMPLE]]
@@ -177,6 +177,16 @@ def train_vae(
             train.astype(np.float64).mean(axis=0),
         )  # fmt: skip
     vae.save(out)
+    return vae
+
+
+def make_vae(settings: dict[str, Any], images: np.ndarray) -> Vae:
+    """A fresh VAE of ``settings`` (``VaeConfig`` fields) for training on ``images`` (n, 64, 64,
+    3) BGR uint8: with ``mean_image_offset``, its offset is their mean image's logit (a resumed
+    training then loads the saved one, the same)."""
+    vae = Vae(VaeConfig(**settings))
+    if vae.config.mean_image_offset:
+        vae.set_mean_image(images)
     return vae
 
 
