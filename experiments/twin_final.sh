@@ -13,9 +13,16 @@
 # compares them at 1500 and 5000), then RPE. The cells at 1500 are read from the same runs'
 # metrics.csv. Then RPE and RGE-EFR of F1 (seed 100) again, to compare. About 7 min of one core
 # a run on this machine; the autoencoder's 8 trainings about 25 min on the 2 cores.
+#
+# With `all` as third argument, phase 2: the paper's VAE and beta-VAE trained with F6's recipe
+# (the decoder over the mean image, the KL term after 1000 iterations and weighed in over 1000
+# more, 3000 iterations, training seeds 700-703 each, chosen by held-out explained variance;
+# about 9 CPU min a training), then RGE-VAE, RGE-betaVAE, MGE-VAE and RGE-Online x 5000
+# episodes on the same seeds (hours).
 set -euo pipefail
 OUT=${1:-runs/twin_final}
 JOBS=${2:-2}
+PHASE=${3:-1}
 ERGO=${ERGO:-.venv/bin/ergo}
 PY=${PY:-.venv/bin/python}
 SEEDS=700-707
@@ -43,6 +50,21 @@ campaign rpe
 # check that nothing of theirs changed since (F1: RPE 163 cells, RGE-EFR 365 at 5000).
 "$ERGO" experiment --out "$OUT/rerun_f1" --episodes "$EPISODES" --strategies rpe,rge-efr \
     --seeds 100-100 --jobs "$JOBS" --option stall_window=0 --no-progress --no-report
+if [ "$PHASE" = all ]; then
+    AIDS=(--iterations 3000 --lr 1e-3 --lr-final 1e-5 --channels-last --mean-image-offset
+          --kl-delay 1000 --kl-warmup 1000)
+    [ -f "$OUT/models/vae/selection.json" ] || "$ERGO" vae train --data "$DATA" \
+        --out "$OUT/models/vae" --seeds 700-703 --beta 10 --capacity 10 \
+        --capacity-iterations 500 "${AIDS[@]}" --device cpu --no-progress
+    [ -f "$OUT/models/betavae/selection.json" ] || "$ERGO" vae train --data "$DATA" \
+        --out "$OUT/models/betavae" --seeds 700-703 --beta 4 --capacity 10 \
+        --capacity-iterations 500 "${AIDS[@]}" --device cpu --no-progress
+    "$ERGO" experiment --out "$OUT/stay" --episodes "$EPISODES" \
+        --strategies rge-vae,rge-betavae,mge-vae,rge-online --seeds "$SEEDS" \
+        --sae "$OUT/models/sae" --vae "$OUT/models/vae" --betavae "$OUT/models/betavae" \
+        --jobs "$JOBS" --no-progress --no-report
+    "$ERGO" report "$OUT/stay"
+fi
 "$PY" "$HERE/twin_stalls.py" "$OUT"/stay/rge-efr/seed-* "$OUT"/stay/rge-sae/seed-* \
     > "$OUT/stalls.md"
 cat "$OUT/stay/report/summary.md" "$OUT/stalls.md"
