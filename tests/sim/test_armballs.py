@@ -56,6 +56,26 @@ def test_hand_position_of_hand_made_poses(commands: np.ndarray, hand: tuple[floa
     np.testing.assert_allclose(hand_position(commands, LINKS), hand, atol=1e-12)
 
 
+def test_a_proximal_joint_at_pi_confines_the_hand():
+    # what confines the stalled MGE-EFR runs (docs/results_armballs.md, "Runs confined by a
+    # folded arm"): joint 0 at pi puts the first link's end at (-0.3, 0), so x <= 0.4;
+    # joint 1 or 2 at pi caps the distance from the base at 0.6; each bound is reached by
+    # folding the next joint too (the rest of the arm straight back)
+    rng = np.random.default_rng(2)
+    poses = rng.uniform(-1.0, 1.0, (20000, 7))
+    for joint in (0, 1, 2):
+        folded = poses.copy()
+        folded[:, joint] = rng.choice([-1.0, 1.0], len(poses))
+        hands = hand_position(folded, LINKS)
+        best = hand_position(pose(*([0.0] * joint), 1.0, 1.0), LINKS)
+        if joint == 0:
+            assert hands[:, 0].max() <= 0.4 + 1e-12
+            np.testing.assert_allclose(best, (0.4, 0.0), atol=1e-12)
+        else:
+            assert np.linalg.norm(hands, axis=1).max() <= 0.6 + 1e-12
+            assert np.linalg.norm(best) == pytest.approx(0.6)
+
+
 def test_link_points_end_at_the_hand_and_batch_like_single_poses():
     rng = np.random.default_rng(0)
     commands = rng.uniform(-1, 1, (4, 5, 7))
