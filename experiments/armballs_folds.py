@@ -9,13 +9,14 @@ small changes of its parameters change nothing while the sum stays beyond 1. Wit
 lengths 0.3, 0.2, 0.2, 0.1, 0.1, 0.05, 0.05 that confines where the hand, and a caught ball,
 can end: joint 0 at pi puts the first link's end at (-0.3, 0), so x <= -0.3 + 0.7 = 0.4;
 joint 1 or 2 at pi caps the distance from the base at |0.3 - 0.2| + 0.5 = |0.5 - 0.2| + 0.3 =
-0.6.
+0.6; joint 3 or 4 caps it at 0.8, joint 5 or 6 at 0.9 (the same sums further out).
 
 For every run of ``CAMPAIGN/mge-efr/seed-*``:
 - the bootstrap episodes that caught the ball, and how many of them ended with joint 0, 1 or 2
   folded;
 - the ball-moving episodes of 3000-9999: the largest final x of the ball and its largest
-  distance from the base, the share that ended with joint 0 folded and with joint 1 or 2;
+  distance from the base, the share that ended with joint 0 folded and with joint 1 or 2, and
+  the joint most often folded there with its share;
 - the exploration ratio at 9666 (the published last checkpoint).
 
 ``--original``: the original campaign's bootstrap parameters of seeds 0-14 rebuilt (its
@@ -82,6 +83,8 @@ class RunFolds:
     late_reach: float  # largest final distance of the ball from the base among them
     late_folded_0: float  # share of them ending with joint 0 folded
     late_folded_12: float  # share of them ending with joint 1 or 2 folded
+    late_top_joint: int  # the joint most often folded among them (-1: no late move)
+    late_top_share: float  # its share
     ratio_9666: float
 
 
@@ -101,6 +104,7 @@ def run_folds(run: Path) -> RunFolds:
     boot = mv & (e < BOOTSTRAP)
     late = mv & (e >= LATE)
     nan = float("nan")
+    per_joint = (np.abs(final_commands(th[late])) >= 1.0).mean(axis=0) if late.any() else None
     cells = read_metrics(run / METRICS_FILE)["ball_cells"]
     return RunFolds(
         seed=int(run.name.split("-")[1]),
@@ -111,6 +115,8 @@ def run_folds(run: Path) -> RunFolds:
         late_reach=float(np.linalg.norm(b[late], axis=1).max()) if late.any() else nan,
         late_folded_0=float(folded(th[late], (0,)).mean()) if late.any() else nan,
         late_folded_12=float(folded(th[late], (1, 2)).mean()) if late.any() else nan,
+        late_top_joint=-1 if per_joint is None else int(np.argmax(per_joint)),
+        late_top_share=nan if per_joint is None else float(per_joint.max()),
         ratio_9666=float(exploration_ratio(cells, np.array([9666]))[0]),
     )
 
@@ -118,14 +124,16 @@ def run_folds(run: Path) -> RunFolds:
 def runs_table(runs: list[RunFolds]) -> str:
     lines = [
         "| seed | bootstrap catches | of which folded | ball moves 3000-9999 | their largest x | "
-        "their largest distance | share with joint 0 folded | with joint 1 or 2 | at 9666 |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "their largest distance | share with joint 0 folded | with joint 1 or 2 | "
+        "joint most folded (share) | at 9666 |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in runs:
         lines.append(
             f"| {r.seed} | {r.bootstrap_catches} | {r.bootstrap_folded} | {r.late_moves} | "
             f"{r.late_x:.2f} | {r.late_reach:.2f} | {r.late_folded_0:.2f} | "
-            f"{r.late_folded_12:.2f} | {r.ratio_9666:.3f} |"
+            f"{r.late_folded_12:.2f} | {r.late_top_joint} ({r.late_top_share:.2f}) | "
+            f"{r.ratio_9666:.3f} |"
         )
     return "\n".join(lines)
 
