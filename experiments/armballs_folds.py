@@ -24,10 +24,11 @@ For every run of ``CAMPAIGN/mge-efr/seed-*``:
 uniform parameters, then the distractor's 50 steps draw 2 normals each), played through our
 environment, beside the published runs of those seeds (docs/armballs_published_runs.csv).
 ``--monte-carlo N``: N random bootstraps of 100 episodes, the share whose catches all ended
-folded.
+folded. ``--figure PNG --seeds 700,702,...``: the final ball positions of those runs' ball moves
+of 3000-9999 (the first campaign's runs), with the 0.6 circle and the line x = 0.4.
 
     .venv/bin/python experiments/armballs_folds.py CAMPAIGN [CAMPAIGN ...] [--original]
-        [--monte-carlo 2000]
+        [--monte-carlo 2000] [--figure PNG --seeds 700,701,702,704]
 """
 
 from __future__ import annotations
@@ -209,12 +210,46 @@ def monte_carlo(n: int, seed: int = 12345) -> str:
     )
 
 
+def figure(runs: list[Path], out: Path) -> None:
+    """Final ball positions of each run's ball moves of LATE-9999, one panel a run."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from script_helpers import save_figure  # experiments/script_helpers.py, beside this script
+
+    from explore.runs.store import iter_history
+
+    fig, axes = plt.subplots(1, len(runs), figsize=(3.2 * len(runs), 3.4), squeeze=False)
+    t = np.linspace(0, 2 * np.pi, 200)
+    for ax, run in zip(axes[0], runs, strict=True):
+        pts = np.array(
+            [r.ball[:2] for r in iter_history(run) if r.ball_moved and r.episode >= LATE]
+        )
+        fig_run = run_folds(run)
+        if len(pts):
+            ax.scatter(pts[:, 0], pts[:, 1], s=1, alpha=0.4)
+        ax.plot(np.cos(t), np.sin(t), "k-", lw=0.6)
+        ax.plot(0.6 * np.cos(t), 0.6 * np.sin(t), "r--", lw=0.8)
+        ax.axvline(0.4, color="tab:orange", ls=":", lw=0.8)
+        ax.plot([0.6], [0.6], "k+")
+        ax.set_xlim(-1, 1)
+        ax.set_ylim(-1, 1)
+        ax.set_aspect("equal")
+        ax.set_title(f"{run.name}: {fig_run.ratio_9666:.3f} at 9666", fontsize=8)
+        ax.tick_params(labelsize=6)
+    fig.tight_layout()
+    save_figure(fig, out)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("campaigns", nargs="*", type=Path, help="campaign folders (mge-efr runs)")
     ap.add_argument("--strategy", default="mge-efr")
     ap.add_argument("--original", action="store_true", help="the original's bootstraps, 0-14")
     ap.add_argument("--monte-carlo", type=int, default=0, metavar="N", help="random bootstraps")
+    ap.add_argument("--figure", type=Path, help="PNG of the late ball moves of --seeds")
+    ap.add_argument("--seeds", default="", help="comma-separated seeds of the first campaign")
     args = ap.parse_args(argv)
     for c in args.campaigns:
         folder = c / args.strategy
@@ -227,6 +262,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"## the original's bootstraps\n\n{original_table()}\n")
     if args.monte_carlo:
         print(monte_carlo(args.monte_carlo))
+    if args.figure:
+        if not args.campaigns or not args.seeds:
+            return error("--figure needs a campaign folder and --seeds")
+        folder = args.campaigns[0] / args.strategy
+        figure([folder / f"seed-{int(k)}" for k in args.seeds.split(",")], args.figure)
     return 0
 
 
