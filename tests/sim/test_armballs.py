@@ -56,6 +56,31 @@ def test_hand_position_of_hand_made_poses(commands: np.ndarray, hand: tuple[floa
     np.testing.assert_allclose(hand_position(commands, LINKS), hand, atol=1e-12)
 
 
+@pytest.mark.parametrize(
+    ("joint", "cap"), [(1, 0.6), (2, 0.6), (3, 0.8), (4, 0.8), (5, 0.9), (6, 0.9)]
+)
+def test_a_joint_at_pi_caps_the_hands_distance(joint: int, cap: float):
+    # what confines the stalled MGE-EFR runs (docs/results_armballs.md, "Runs confined by a
+    # folded arm"): a joint at pi folds its link back, capping the hand's distance from the
+    # base (links 0.3, 0.2, 0.2, 0.1, 0.1, 0.05, 0.05); the cap is reached with the next
+    # joint at pi too (the rest of the arm straight out again)
+    rng = np.random.default_rng(joint)
+    poses = rng.uniform(-1.0, 1.0, (20000, 7))
+    poses[:, joint] = rng.choice([-1.0, 1.0], len(poses))
+    assert np.linalg.norm(hand_position(poses, LINKS), axis=1).max() <= cap + 1e-12
+    best = pose(*([0.0] * joint), 1.0, *([1.0] if joint < 6 else []))
+    assert np.linalg.norm(hand_position(best, LINKS)) == pytest.approx(cap)
+
+
+def test_the_first_joint_at_pi_keeps_the_hand_left_of_x_04():
+    # joint 0 at pi puts the first link's end at (-0.3, 0): the other 0.7 reach x <= 0.4
+    rng = np.random.default_rng(0)
+    poses = rng.uniform(-1.0, 1.0, (20000, 7))
+    poses[:, 0] = rng.choice([-1.0, 1.0], len(poses))
+    assert hand_position(poses, LINKS)[:, 0].max() <= 0.4 + 1e-12
+    np.testing.assert_allclose(hand_position(pose(1.0, 1.0), LINKS), (0.4, 0.0), atol=1e-12)
+
+
 def test_link_points_end_at_the_hand_and_batch_like_single_poses():
     rng = np.random.default_rng(0)
     commands = rng.uniform(-1, 1, (4, 5, 7))
