@@ -30,7 +30,7 @@ from explore.runs.config import RunConfig
 from explore.runs.explorer import Explorer, Progress
 from explore.runs.inputs import check_inputs, record_inputs
 from explore.runs.layout import HISTORY_FILE, NEW_RUN_FILES, RUN_FILE
-from explore.runs.lock import LOCK_FILE, RunLock, remove_lock_if_free, run_lock
+from explore.runs.lock import LOCK_FILE, RunLock, RunLockedError, remove_lock_if_free, run_lock
 from explore.runs.metrics import recorded_episodes
 from explore.runs.record import EpisodeRecord
 from explore.runs.store import RunStore, RunStoreError, check_own_files, make_run_dir
@@ -224,7 +224,13 @@ def open_run(
         if store is None:
             made = not path.exists()
             make_run_dir(path)
-            lock = held.enter_context(run_lock(path))
+            try:
+                lock = held.enter_context(run_lock(path))
+            except RunLockedError:
+                # another writer holds it (both saw no folder): the folder is its new run,
+                # not ours to discard
+                made = False
+                raise
             if mode == "auto" and RunStore.is_run(path):
                 # another writer made the run between our look and our lock: resume it
                 held.close()

@@ -113,3 +113,28 @@ def test_a_reader_looking_never_blocks_nor_refuses_a_writer(tmp_path):
     finally:
         proc.kill()
         proc.wait()
+
+
+def test_a_writer_refused_at_the_lock_leaves_the_new_run_of_the_holder_alone(tmp_path, monkeypatch):
+    """Two ``auto`` writers that both saw no folder: the one refused at the lock must not
+    discard the run the other has just made (history still empty). The race, made certain:
+    the other writer makes its run and takes the lock between our look and our lock."""
+    import explore.runs.open_run as open_run_module
+    from explore.runs.store import RunStore
+
+    run = tmp_path / "run"
+    real_lock = open_run_module.run_lock
+    other = {}
+
+    def lock_taken_meanwhile(path):
+        other["lock"] = real_lock(path)
+        other["lock"].__enter__()  # the other writer holds it and makes its run
+        other["store"] = RunStore.create(path, RunConfig(episodes=2).to_dict())
+        return real_lock(path)  # ours: refused at once
+
+    monkeypatch.setattr(open_run_module, "run_lock", lock_taken_meanwhile)
+    with pytest.raises(RunLockedError, match="is being written by another process"):
+        open_run(run, RunConfig(episodes=2), mode="auto")
+    assert RunStore.is_run(run)  # the holder's run.json is still there
+    other["store"].close()
+    other["lock"].__exit__(None, None, None)
