@@ -91,7 +91,6 @@ class RunFolds:
 
 def run_folds(run: Path) -> RunFolds:
     """The figures of one run folder (its history and metrics.csv)."""
-    from explore.runs.metrics import exploration_ratio, read_metrics
     from explore.runs.store import iter_history
 
     episode, theta, ball, moved = [], [], [], []
@@ -106,7 +105,6 @@ def run_folds(run: Path) -> RunFolds:
     late = mv & (e >= LATE)
     nan = float("nan")
     per_joint = (np.abs(final_commands(th[late])) >= 1.0).mean(axis=0) if late.any() else None
-    cells = read_metrics(run / METRICS_FILE)["ball_cells"]
     return RunFolds(
         seed=int(run.name.split("-")[1]),
         bootstrap_catches=int(boot.sum()),
@@ -118,8 +116,16 @@ def run_folds(run: Path) -> RunFolds:
         late_folded_12=float(folded(th[late], (1, 2)).mean()) if late.any() else nan,
         late_top_joint=-1 if per_joint is None else int(np.argmax(per_joint)),
         late_top_share=nan if per_joint is None else float(per_joint.max()),
-        ratio_9666=float(exploration_ratio(cells, np.array([9666]))[0]),
+        ratio_9666=ratio_at_9666(run),
     )
+
+
+def ratio_at_9666(run: Path) -> float:
+    """The run's exploration ratio at 9666 iterations, from its metrics.csv alone."""
+    from explore.runs.metrics import exploration_ratio, read_metrics
+
+    cells = read_metrics(run / METRICS_FILE)["ball_cells"]
+    return float(exploration_ratio(cells, np.array([9666]))[0])
 
 
 def runs_table(runs: list[RunFolds]) -> str:
@@ -226,7 +232,6 @@ def figure(runs: list[Path], out: Path) -> None:
         pts = np.array(
             [r.ball[:2] for r in iter_history(run) if r.ball_moved and r.episode >= LATE]
         )
-        fig_run = run_folds(run)
         if len(pts):
             ax.scatter(pts[:, 0], pts[:, 1], s=1, alpha=0.4)
         ax.plot(np.cos(t), np.sin(t), "k-", lw=0.6)
@@ -236,7 +241,7 @@ def figure(runs: list[Path], out: Path) -> None:
         ax.set_xlim(-1, 1)
         ax.set_ylim(-1, 1)
         ax.set_aspect("equal")
-        ax.set_title(f"{run.name}: {fig_run.ratio_9666:.3f} at 9666", fontsize=8)
+        ax.set_title(f"{run.name}: {ratio_at_9666(run):.3f} at 9666", fontsize=8)
         ax.tick_params(labelsize=6)
     fig.tight_layout()
     save_figure(fig, out)

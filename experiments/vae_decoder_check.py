@@ -36,8 +36,9 @@ def main() -> None:
     torch.set_num_threads(1)
     torch.manual_seed(args.seed)
     with np.load(args.data) as d:
-        x = to_tensor(d["images"])  # (n, 3, 64, 64) in [0, 1]
+        images = d["images"]  # (n, 64, 64, 3) BGR uint8
         ball = np.asarray(d["ball"], dtype=np.float32)  # (n, 2) metres
+    x = to_tensor(images)  # (n, 3, 64, 64) in [0, 1]
     n = len(x)
     train, test = np.arange(n - n // 10), np.arange(n - n // 10, n)
     code = torch.zeros(n, VaeConfig().latent_dim)
@@ -45,8 +46,9 @@ def main() -> None:
     vae = Vae(VaeConfig())
     params = [*vae.decoder_fc.parameters(), *vae.decoder_conv.parameters()]
     optim = torch.optim.Adam(params, lr=args.lr)
-    mean = x[train].mean(dim=0).clamp(1e-3, 1 - 1e-3)
-    mean_logit = (mean.log() - (-mean).log1p()).expand(len(test), -1, -1, -1)
+    offset = Vae(VaeConfig(mean_image_offset=True))  # its offset: the mean image's logits
+    offset.set_mean_image(images[train])
+    mean_logit = offset.pixel_offset.expand(len(test), -1, -1, -1)
     with torch.no_grad():
         base = float(F.binary_cross_entropy_with_logits(mean_logit, x[test], reduction="sum"))
     base /= len(test)
