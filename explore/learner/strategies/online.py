@@ -42,7 +42,16 @@ class OnlineOptions(GoalExplorationOptions):
     """The goal-exploration options (``bootstrap`` 2000 by default), and the online VAE's:
     ``vae_iterations`` (700), ``vae_beta`` (10), ``vae_capacity`` (10 nats; null for a plain
     beta * KL loss), ``vae_capacity_iterations`` (500), ``vae_seed`` (0), ``latents`` ("raw" or
-    "zscore" over the bootstrap's own outcome images)."""
+    "zscore" over the bootstrap's own outcome images).
+
+    The training aids of docs/results.md F6 (``vision.vae.VaeConfig``,
+    ``vision.vae_train.TrainConfig``), all off by default so that runs made without them
+    (docs/results.md F5) resume and rerun unchanged: ``vae_lr`` (1e-3) and ``vae_lr_final``
+    (null: constant; else a half-cosine decay to it), ``vae_channels_last``,
+    ``vae_mean_image_offset`` (the decoder over the bootstrap images' mean), ``vae_kl_delay``
+    and ``vae_kl_warmup`` (iterations). F6's recipe: ``vae_iterations`` 3000, ``vae_lr_final``
+    1e-5, ``vae_channels_last`` and ``vae_mean_image_offset`` true, ``vae_kl_delay`` and
+    ``vae_kl_warmup`` 1000 (``experiments/twin_final.sh``)."""
 
     bootstrap: int = ONLINE_BOOTSTRAP
     vae_iterations: int = ONLINE_ITERATIONS
@@ -51,6 +60,12 @@ class OnlineOptions(GoalExplorationOptions):
     vae_capacity_iterations: int = ONLINE_CAPACITY_ITERATIONS
     vae_seed: int = 0
     latents: Literal["raw", "zscore"] = "raw"
+    vae_lr: float = 1e-3
+    vae_lr_final: float | None = None
+    vae_channels_last: bool = False
+    vae_mean_image_offset: bool = False
+    vae_kl_delay: int = 0
+    vae_kl_warmup: int = 0
 
 
 class OnlineLatentGoalExploration(GoalExploration):
@@ -98,8 +113,14 @@ class OnlineLatentGoalExploration(GoalExploration):
                 beta=s.vae_beta,
                 capacity=s.vae_capacity,
                 capacity_iterations=s.vae_capacity_iterations,
+                mean_image_offset=s.vae_mean_image_offset,
+                kl_delay=s.vae_kl_delay,
+                kl_warmup=s.vae_kl_warmup,
             )
-            train = TrainConfig(iterations=s.vae_iterations, seed=s.vae_seed)
+            train = TrainConfig(
+                iterations=s.vae_iterations, lr=s.vae_lr, lr_final=s.vae_lr_final,
+                seed=s.vae_seed, channels_last=s.vae_channels_last,
+            )  # fmt: skip
             model.validate()
             train.validate()
         except (TypeError, ValueError, VaeError) as exc:

@@ -86,3 +86,36 @@ def test_online_vae_options_are_checked_before_the_bootstrap():
     )._configs  # the pre-trained VAE's schedule
     assert (default.beta, default.capacity, default.capacity_iterations) == (10.0, 10.0, 500)
     assert train.iterations == 700
+
+
+def test_online_vae_takes_the_training_aids_of_the_recipe(tmp_path):
+    from explore.learner.strategies import make_strategy
+    from explore.learner.strategies.base import StrategyError
+
+    recipe = {
+        "vae_iterations": 3000, "vae_lr_final": 1e-5, "vae_channels_last": True,
+        "vae_mean_image_offset": True, "vae_kl_delay": 1000, "vae_kl_warmup": 1000,
+    }  # fmt: skip
+    model, train = make_strategy("rge-online", scene=TWIN_ARENA, **recipe)._configs
+    assert (model.mean_image_offset, model.kl_delay, model.kl_warmup) == (True, 1000, 1000)
+    assert (train.iterations, train.lr, train.lr_final, train.channels_last) == (
+        3000, 1e-3, 1e-5, True,
+    )  # fmt: skip
+    default_model, default_train = make_strategy("rge-online", scene=TWIN_ARENA)._configs
+    assert not default_model.mean_image_offset and default_model.kl_delay == 0
+    assert default_train.lr_final is None and not default_train.channels_last
+    for bad in ({"vae_lr_final": 1e-2}, {"vae_kl_delay": -1}, {"vae_lr": 0}):
+        with pytest.raises(StrategyError, match="rge-online: bad VAE option"):
+            make_strategy("rge-online", scene=TWIN_ARENA, **bad)
+    # a short run with every aid trains after its bootstrap and resumes identically
+    opts = {
+        "bootstrap": 12, "vae_iterations": 4, "random_episodes": 0, "stall_window": 0,
+        **{**recipe, "vae_iterations": 4, "vae_kl_delay": 2, "vae_kl_warmup": 1},
+    }  # fmt: skip
+    a, b = tmp_path / "a", tmp_path / "b"
+    run_one(str(a), "rge-online", opts, 2, 16, False)
+    run_one(str(b), "rge-online", opts, 2, 14, False)
+    run_one(str(b), "rge-online", opts, 2, 16, False)
+    ra, rb = RunStore.open(a).records, RunStore.open(b).records
+    assert [r.kind for r in ra[12:]] == ["explore"] * 4
+    assert all(x.equals(y) for x, y in zip(ra, rb, strict=True))
