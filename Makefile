@@ -57,11 +57,14 @@ PAPER ?= runs/paper
 paper: $(STAMP)
 	bash experiments/paper_campaign.sh $(PAPER) 2
 
-# Issue 31's final table on the twin (docs/results.md F9): seeds 700-707, dataset seed 3000,
-# today's defaults; about 2 hours on 2 cores, resumable.
+# Issue 31's final tables on the twin (docs/results.md F9-F11): seeds 700-707, dataset seeds 3000
+# (and 3001 with the distractor), today's defaults. PAPER_FINAL_PHASES=1: the engineered and
+# spatial-autoencoder table alone (about 2 hours on 2 cores); all (the default) adds the VAE
+# rows and the distractor condition (several more hours). Resumable.
 PAPER_FINAL ?= runs/twin_final
+PAPER_FINAL_PHASES ?= all
 paper-final: $(STAMP)
-	bash experiments/twin_final.sh $(PAPER_FINAL) 2
+	bash experiments/twin_final.sh $(PAPER_FINAL) 2 $(PAPER_FINAL_PHASES)
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache

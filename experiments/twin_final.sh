@@ -14,12 +14,18 @@
 # metrics.csv. Then RPE and RGE-EFR of F1 (seed 100) again, to compare. About 7 min of one core
 # a run on this machine; the autoencoder's 8 trainings about 25 min on the 2 cores.
 #
-# With `all` as third argument, phase 2: the paper's VAE and beta-VAE trained with F6's recipe
+# Third argument: `vae`, `distractor` or `all` (both) adds phases after phase 1.
+# `vae`: the paper's VAE and beta-VAE trained with F6's recipe
 # (the decoder over the mean image, the KL term after 1000 iterations and weighed in over 1000
 # more, 3000 iterations, training seeds 700-703 each, chosen by held-out explained variance;
 # about 9 CPU min a training), then RGE-VAE, RGE-betaVAE, MGE-VAE and RGE-Online x 5000
 # episodes on the same seeds (hours). RGE-Online trains its own VAE on its 2000 bootstrap images
 # with the same recipe (its options vae_*; about 9 CPU min inside each run).
+# `distractor` (issue 31, step 2; F3's condition): the walking red ball, outcome dataset seed
+# 3001 with it (never used: development used 1001), the spatial autoencoder trained on it with
+# training seeds 700-703, then RGE-EFR, MGE-EFR, RGE-SAE and MGE-SAE x 2000 episodes on seeds
+# 700-707, and MGE-EFR without its hand module (F3: hand goals took 38% of its episodes) in a
+# campaign of its own. RPE is not run: the distractor changes none of its cells (F3).
 set -euo pipefail
 OUT=${1:-runs/twin_final}
 JOBS=${2:-2}
@@ -51,7 +57,7 @@ campaign rpe
 # check that nothing of theirs changed since (F1: RPE 163 cells, RGE-EFR 365 at 5000).
 "$ERGO" experiment --out "$OUT/rerun_f1" --episodes "$EPISODES" --strategies rpe,rge-efr \
     --seeds 100-100 --jobs "$JOBS" --option stall_window=0 --no-progress --no-report
-if [ "$PHASE" = all ]; then
+if [ "$PHASE" = vae ] || [ "$PHASE" = all ]; then
     AIDS=(--iterations 3000 --lr 1e-3 --lr-final 1e-5 --channels-last --mean-image-offset
           --kl-delay 1000 --kl-warmup 1000)
     [ -f "$OUT/models/vae/selection.json" ] || "$ERGO" vae train --data "$DATA" \
@@ -68,6 +74,24 @@ if [ "$PHASE" = all ]; then
         --option rge-online:vae_kl_delay=1000 --option rge-online:vae_kl_warmup=1000 \
         --jobs "$JOBS" --no-progress --no-report
     "$ERGO" report "$OUT/stay"
+fi
+if [ "$PHASE" = distractor ] || [ "$PHASE" = all ]; then
+    DDATA="$OUT/data/outcomes_distractor-3001.npz"
+    [ -f "$DDATA" ] || "$ERGO" dataset outcomes --n 3000 --seed 3001 --out "$DDATA" --distractor \
+        --no-progress
+    [ -f "$OUT/models/sae_distractor/selection.json" ] || "$ERGO" sae train --data "$DDATA" \
+        --out "$OUT/models/sae_distractor" --seeds 700-703 --device cpu --no-progress
+    WALK=(--rig-option distractor=walk --option rge-efr:distractor=true
+          --option mge-efr:distractor=true --seeds "$SEEDS" --episodes 2000 --jobs "$JOBS"
+          --no-progress --no-report)
+    t0=$SECONDS
+    "$ERGO" experiment --out "$OUT/distractor" --strategies rge-efr,mge-efr,rge-sae,mge-sae \
+        --sae "$OUT/models/sae_distractor" "${WALK[@]}"
+    "$ERGO" experiment --out "$OUT/distractor_nohand" --strategies mge-efr \
+        --option mge-efr:hand_module=false "${WALK[@]}"
+    echo "$(date -u +%FT%TZ) distractor, 40 runs to 2000: $((SECONDS - t0)) s wall" >> "$OUT/wall.log"
+    "$ERGO" report "$OUT/distractor"
+    "$ERGO" report "$OUT/distractor_nohand"
 fi
 "$PY" "$HERE/twin_stalls.py" "$OUT"/stay/rge-efr/seed-* "$OUT"/stay/rge-sae/seed-* \
     > "$OUT/stalls.md"
