@@ -110,6 +110,9 @@ def campaign_id(out: Path) -> str:
     return new
 
 
+_UNSET = object()  # an option a run's config does not hold
+
+
 def plan_trials(
     out: Path,
     strategies: list[str],
@@ -120,7 +123,11 @@ def plan_trials(
     cid: str | None,
 ) -> list[Trial]:
     """The trials not finished yet. Raises CampaignError when a run folder holds another run
-    (strategy, seed or rig) than the campaign's."""
+    (strategy, seed or rig) than the campaign's, or a run made with another value of an
+    option given now (a run keeps the options it started with; the model paths are not
+    compared: the run checks its model's file itself)."""
+    from explore.learner.strategies import STRATEGIES
+    from explore.runs.config import RunConfig
     from explore.runs.store import RunStore, RunStoreError
 
     todo = []
@@ -137,6 +144,16 @@ def plan_trials(
                 if held != (s, seed, rig["name"], rig["rig_id"]):
                     raise CampaignError(f"{run_dir} holds another run ({held[0]}, seed {held[1]}, "
                                         f"rig {held[2]} {held[3]})")  # fmt: skip
+                model = STRATEGIES.entry(s).model
+                kept = RunConfig.of_run(cfg, run_dir).strategy.options
+                for key, value in options[s].items():
+                    if (model is None or key != model.option) and kept.get(key, _UNSET) != value:
+                        was = kept.get(key, "its default")
+                        raise CampaignError(
+                            f"{run_dir} was made with {key} = {was}, not {value}: a run keeps "
+                            "the options it started with (give them as they were, or another "
+                            "--out for new ones)"
+                        )
                 if final_cells(run_dir)[0] >= episodes:
                     continue  # finished
             todo.append(Trial.of(str(run_dir), s, seed, episodes, options[s], rig, cid,

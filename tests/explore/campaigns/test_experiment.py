@@ -211,3 +211,25 @@ def test_processes_starting_one_campaign_at_once_agree_on_its_id(tmp_path):
             t.join()
         assert set(ids) == {read_json(out / CAMPAIGN_FILE)["id"]}
         assert sorted(p.name for p in out.iterdir()) == [CAMPAIGN_FILE]  # no file left behind
+
+
+def test_extending_a_campaign_with_another_option_value_is_refused(tmp_path, capsys):
+    out = tmp_path / "campaign"
+    head = ["experiment", "--strategies", "rpe,rge-efr", "--seeds", "0-0", "--out", str(out),
+            "--no-progress", "--no-report", "--episodes"]  # fmt: skip
+    assert main([*head, "12", "--option", "bootstrap=10"]) == 0
+    hist = out / "rge-efr" / "seed-0" / HISTORY_FILE
+    stamp = hist.stat().st_mtime_ns, hist.stat().st_size
+    for options, said in (
+        (["--option", "bootstrap=8"], "bootstrap = 10, not 8"),
+        (["--option", "bootstrap=10", "--option", "sigma=0.1"], "sigma = its default, not 0.1"),
+    ):
+        assert main([*head, "15", *options]) == 2
+        err = capsys.readouterr().err
+        assert said in err and "a run keeps the options it started with" in err
+        assert len(err.strip().splitlines()) == 1
+        assert (hist.stat().st_mtime_ns, hist.stat().st_size) == stamp  # nothing ran
+    # the same options extend it, the option whose default changed (written out) included
+    assert main([*head, "15", "--option", "bootstrap=10"]) == 0
+    assert main([*head, "16", "--option", "bootstrap=10", "--option", "stall_window=10"]) == 0
+    assert hist.stat().st_size > stamp[1]
