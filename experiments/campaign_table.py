@@ -5,8 +5,10 @@ reference strategies (docs/results.md F9-F11): one Markdown row per strategy.
         --against rpe,rge-efr [--seeds 700-707]
 
 Reads each run's ``metrics.csv`` (the ball cells after each episode); a run that has not
-reached an episode shows "-" there and is left out of that column's statistics. Strategies
-with the same name in two campaigns are told apart by the campaign folder's name.
+reached an episode shows "-" there and is left out of that column's statistics. The last
+column: the share of the episodes (up to the last ``--at``) that moved the ball, over the
+runs. Strategies with the same name in two campaigns are told apart by the campaign folder's
+name.
 """
 
 from __future__ import annotations
@@ -22,12 +24,15 @@ from explore.runs.layout import METRICS_FILE
 from vision.cli import parse_seeds
 
 
-def cells_at(run: Path, episodes: list[int]) -> list[int | None]:
+def cells_at(run: Path, episodes: list[int]) -> tuple[list[int | None], float]:
     """The ball cells after each of ``episodes`` (1-based counts) of one run, None where the
-    run is shorter."""
+    run is shorter, and the share of its episodes up to the last of them that moved the
+    ball."""
     with open(run / METRICS_FILE, newline="") as f:
-        cells = [int(row["ball_cells"]) for row in csv.DictReader(f)]
-    return [cells[n - 1] if len(cells) >= n else None for n in episodes]
+        rows = list(csv.DictReader(f))
+    cells = [int(row["ball_cells"]) for row in rows]
+    moved = [int(row["ball_moved"]) for row in rows[: episodes[-1]]]
+    return [cells[n - 1] if len(cells) >= n else None for n in episodes], float(np.mean(moved))
 
 
 def main() -> None:
@@ -40,7 +45,7 @@ def main() -> None:
     at = [int(n) for n in args.at.split(",")]
     wanted = None if args.seeds is None else set(parse_seeds(args.seeds))
     table: dict[str, list[list[int | None]]] = {}
-    names = {}
+    names, moved = {}, {}
     for campaign in args.campaigns:
         for strat in sorted(p for p in campaign.iterdir() if p.is_dir() and p.name != "report"):
             runs = sorted(strat.glob("seed-*"), key=lambda p: int(p.name.split("-")[1]))
@@ -49,13 +54,15 @@ def main() -> None:
             if not runs:
                 continue
             label = strat.name if strat.name not in table else f"{strat.name} ({campaign.name})"
-            table[label] = [cells_at(r, at) for r in runs]
+            read = [cells_at(r, at) for r in runs]
+            table[label] = [cells for cells, _ in read]
+            moved[label] = float(np.mean([share for _, share in read]))
             names[label] = ", ".join(r.name.split("-")[1] for r in runs)
     refs = [r for r in args.against.split(",") if r]
     print("| strategy | seeds | " + " | ".join(
         f"cells at {n} | mean ± sd | " + " | ".join(f"vs {r} (ratio, Welch p)" for r in refs)
-        for n in at) + " |")  # fmt: skip
-    print("|---|---|" + "---|---|" * len(at) + "---|" * len(at) * len(refs))
+        for n in at) + " | episodes that moved the ball |")  # fmt: skip
+    print("|---|---|" + "---|---|" * len(at) + "---|" * len(at) * len(refs) + "---|")
     for label, rows in table.items():
         cells = [f"| {label} | {names[label]} |"]
         for k in range(len(at)):
@@ -70,6 +77,7 @@ def main() -> None:
                     continue
                 _, p = welch_vs_baseline(got, base)
                 cells.append(f" {got.mean() / base.mean():.2f}x, p {p:.2g} |")
+        cells.append(f" {100 * moved[label]:.1f}% |")
         print("".join(cells))
 
 
