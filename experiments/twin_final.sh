@@ -81,14 +81,14 @@ if [ "$PHASE" = distractor ] || [ "$PHASE" = all ]; then
         --no-progress
     [ -f "$OUT/models/sae_distractor/selection.json" ] || "$ERGO" sae train --data "$DDATA" \
         --out "$OUT/models/sae_distractor" --seeds 700-703 --device cpu --no-progress
-    WALK=(--rig-option distractor=walk --option rge-efr:distractor=true
-          --option mge-efr:distractor=true --seeds "$SEEDS" --episodes 2000 --jobs "$JOBS"
+    WALK=(--rig-option distractor=walk --seeds "$SEEDS" --episodes 2000 --jobs "$JOBS"
           --no-progress --no-report)
     t0=$SECONDS
     "$ERGO" experiment --out "$OUT/distractor" --strategies rge-efr,mge-efr,rge-sae,mge-sae \
-        --sae "$OUT/models/sae_distractor" "${WALK[@]}"
+        --sae "$OUT/models/sae_distractor" --option rge-efr:distractor=true \
+        --option mge-efr:distractor=true "${WALK[@]}"
     "$ERGO" experiment --out "$OUT/distractor_nohand" --strategies mge-efr \
-        --option mge-efr:hand_module=false "${WALK[@]}"
+        --option mge-efr:distractor=true --option mge-efr:hand_module=false "${WALK[@]}"
     echo "$(date -u +%FT%TZ) distractor, 40 runs to 2000: $((SECONDS - t0)) s wall" >> "$OUT/wall.log"
     "$ERGO" report "$OUT/distractor"
     "$ERGO" report "$OUT/distractor_nohand"
