@@ -160,11 +160,16 @@ class NearestNeighbourIndex:
             raise ValueError(f"query has shape {q.shape}, expected ({self.dim},)")
         dist = np.linalg.norm(self._points[: self._n] - q, axis=1)
         best = float(dist.min())
-        tied = np.flatnonzero(dist == best)
-        if len(tied) == 1:
-            return int(tied[0]), best
-        key = int.from_bytes(hashlib.blake2b(q.tobytes(), digest_size=8).digest(), "little")
-        return int(tied[key % len(tied)]), best
+        return spread_pick(q, np.flatnonzero(dist == best)), best
+
+
+def spread_pick(query: np.ndarray, tied: np.ndarray) -> int:
+    """The one of the equally near point indices ``tied`` (k,) that ties "spread" answers
+    ``query`` (float64, (dim,)) with: picked by a hash of the query's bytes."""
+    if len(tied) == 1:
+        return int(tied[0])
+    key = int.from_bytes(hashlib.blake2b(query.tobytes(), digest_size=8).digest(), "little")
+    return int(tied[key % len(tied)])
 
 
 class MetaPolicy:

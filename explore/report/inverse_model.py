@@ -2,8 +2,10 @@
 model in finished runs, engineered (rge-efr, mge-efr) or learned (rge-vae, mge-vae).
 
 For every goal-directed episode k of a run, the nearest stored episode j < k in (context,
-outcome) space to (context_k, goal_k) is found again: the 1-NN the meta-policy used, in the
-run's own goal space, rebuilt from its run.json (the ball's polar features in the run's form
+outcome) space to (context_k, goal_k) is found again: the 1-NN the meta-policy used (among
+equally near episodes, the one its ``ties`` option picks; in the goal cycle, the one found at
+the goal's first episode; no context on a scene reset before every episode), in the run's own
+goal space, rebuilt from its run.json (the ball's polar features in the run's form
 for the engineered strategies, plus the tool tip for mge-efr's second module; the VAE's latent
 means of the outcome image, raw or z-scored as the run had them, with the previous outcome's
 latent as context, for the learned ones). Prints:
@@ -29,10 +31,12 @@ folders.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from explore.learner.goal_spaces import LatentGoalSpace
+from explore.learner.meta_policy import spread_pick
 from explore.learner.strategies import STRATEGIES, StrategyError, make_strategy
 from explore.report.run_data import run_scene
 from explore.runs.metrics import CellCounter
@@ -79,13 +83,9 @@ def figure(results: dict[str, dict[str, np.ndarray]], path: Path) -> None:
     plt.close(fig)
 
 
-def goal_space_vectors(
-    run: Path, recs: list, vae_dir: Path | None
-) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
-    """The vectors the run's meta-policy stored, in the run's own goal space (its strategy
-    rebuilt from ``run.json``, as ``explore.learner.goal_outcomes.goal_outcome_of`` does):
-    contexts (n, c) (times the run's ``context_weight``, as its meta-policy stored them),
-    outcomes (n, d) (NaN where not seen), modules (coordinate index arrays of the outcome)."""
+def run_strategy(run: Path, vae_dir: Path | None = None) -> Any:
+    """The run's strategy made again from its ``run.json`` (``vae_dir``: another model folder
+    for a learned one); a DiagnosisError for a strategy without an inverse model."""
     config = RunStore.read_meta(run)["config"]
     strategy = config["strategy"]
     name, options = strategy["name"], dict(strategy.get("options", {}))
@@ -94,9 +94,21 @@ def goal_space_vectors(
     if vae_dir is not None and name in LEARNED:
         options[STRATEGIES[name].model.option] = str(vae_dir)  # type: ignore[union-attr]
     try:
-        made = make_strategy(name, scene=run_scene(config), **options)
+        return make_strategy(name, scene=run_scene(config), **options)
     except StrategyError as exc:
         raise DiagnosisError(f"{run}: {exc}") from None
+
+
+def goal_space_vectors(
+    run: Path, recs: list, vae_dir: Path | None, made: Any = None
+) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """The vectors the run's meta-policy stored, in the run's own goal space (its strategy
+    rebuilt from ``run.json``, as ``explore.learner.goal_outcomes.goal_outcome_of`` does):
+    contexts (n, c) (times the run's ``context_weight``, as its meta-policy stored them; c = 0
+    on a scene that resets before every episode, whose meta-policy stores none),
+    outcomes (n, d) (NaN where not seen), modules (coordinate index arrays of the outcome).
+    ``made``: the run's strategy when the caller made it already (``run_strategy``)."""
+    made = run_strategy(run, vae_dir) if made is None else made
     space = made.space
     weight = made.settings.context_weight
     if isinstance(space, LatentGoalSpace):
@@ -106,6 +118,8 @@ def goal_space_vectors(
         ctx = np.array([space.context(r) for r in recs])
         unseen = np.full(space.dim, np.nan)
         out = np.array([o if (o := space.outcome(r)) is not None else unseen for r in recs])
+    if made.scene.resets:  # every episode starts from the same scene: no context stored
+        ctx = np.zeros((len(recs), 0))
     return weight * ctx, out, list(space.modules)
 
 
@@ -119,7 +133,14 @@ def diagnose(
     one) and arena distance (m) of random pairs of outcomes.
     """
     recs = RunStore.read(run).records
-    ctx, out, modules = goal_space_vectors(run, recs, vae_dir)
+    made = run_strategy(run, vae_dir)
+    ctx, out, modules = goal_space_vectors(run, recs, vae_dir, made)
+    settings = made.settings
+    # the goal cycle (schedule "cycle"): a goal's noisy episodes all vary the neighbour found
+    # at its first episode; its exploit, the last, looks again
+    cycle = settings.schedule == "cycle"
+    cycle_length = settings.n_explore + 1
+    goal_episodes, cycle_j = 0, -1
     moved = np.array([r.ball_moved for r in recs])
     balls = np.array([np.asarray(r.ball, dtype=float)[:2] for r in recs])
     counter = CellCounter(run_scene(RunStore.read_meta(run)["config"]).ball_half_width)
@@ -135,10 +156,18 @@ def diagnose(
         m = modules[r.module]
         if r.goal.shape != (len(m),):
             raise DiagnosisError(f"{run}: goal of shape {r.goal.shape}, module of {len(m)}")
-        points = np.hstack([ctx[:k], out[:k, m]])
-        seen = np.all(np.isfinite(points), axis=1)
-        dist = np.linalg.norm(points - np.concatenate([ctx[k], r.goal]), axis=1)
-        j = int(np.argmin(np.where(seen, dist, np.inf)))
+        position = goal_episodes % cycle_length if cycle else 0
+        goal_episodes += 1
+        if 0 < position < cycle_length - 1:
+            j = cycle_j
+        else:
+            points = np.hstack([ctx[:k], out[:k, m]])
+            seen = np.flatnonzero(np.all(np.isfinite(points), axis=1))
+            query = np.concatenate([ctx[k], r.goal]).astype(float)
+            dist = np.linalg.norm(points[seen] - query, axis=1)
+            tied = seen[dist == dist.min()]  # the run's own choice among equally near ones
+            j = spread_pick(query, tied) if settings.ties == "spread" else int(tied[0])
+            cycle_j = j
         nn_moved.append(moved[j])
         k_moved.append(moved[k])
         k_new.append(new_cell[k])

@@ -44,3 +44,20 @@ def test_a_run_without_an_inverse_model_is_a_one_line_error(tmp_path):
     run_one(str(tmp_path / "rpe"), "rpe", {}, 0, 3, False)
     with pytest.raises(DiagnosisError, match="'rpe' has no inverse model"):
         diagnose(tmp_path / "rpe")
+
+
+def test_the_neighbour_is_found_again_among_tied_episodes_as_the_run_picked_it(tmp_path):
+    # Arm-2-Balls resets its scene: every episode that missed the ball has the same ball outcome, so
+    # goals meet many equally near episodes; with ties "spread" the run picks one of them by a
+    # hash of the query, and the diagnosis must pick the same (sigma 0: the same theta)
+    from explore.campaigns.trial import Trial, run_trial
+    from explore.learner.presets import preset_options
+
+    opts = {**preset_options("corl2018", "mge-efr"), "bootstrap": 10, "sigma": 0.0,
+            "one_outcome": "nearest"}  # fmt: skip
+    assert opts["ties"] == "spread"
+    rig = {"name": "arm2balls", "rig_id": "twin", "options": {}}
+    run_trial(Trial.of(str(tmp_path / "run"), "mge-efr", 0, 60, opts, rig))
+    d = diagnose(tmp_path / "run")
+    assert d["goal_episodes"] == 50
+    assert d["theta_gap"] == 0.0
