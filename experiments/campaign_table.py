@@ -14,13 +14,13 @@ name.
 from __future__ import annotations
 
 import argparse
-import csv
 from pathlib import Path
 
 import numpy as np
 
 from explore.campaigns.stats import welch_vs_baseline
 from explore.runs.layout import METRICS_FILE
+from explore.runs.metrics import read_metrics
 from vision.cli import parse_seeds
 
 
@@ -28,11 +28,10 @@ def cells_at(run: Path, episodes: list[int]) -> tuple[list[int | None], float]:
     """The ball cells after each of ``episodes`` (1-based counts) of one run, None where the
     run is shorter, and the share of its episodes up to the last of them that moved the
     ball."""
-    with open(run / METRICS_FILE, newline="") as f:
-        rows = list(csv.DictReader(f))
-    cells = [int(row["ball_cells"]) for row in rows]
-    moved = [int(row["ball_moved"]) for row in rows[: episodes[-1]]]
-    return [cells[n - 1] if len(cells) >= n else None for n in episodes], float(np.mean(moved))
+    m = read_metrics(run / METRICS_FILE)
+    cells = m["ball_cells"].astype(int)
+    moved = float(m["ball_moved"][: episodes[-1]].mean())
+    return [int(cells[n - 1]) if len(cells) >= n else None for n in episodes], moved
 
 
 def main() -> None:

@@ -86,12 +86,12 @@ def goal_angles(run: Path, recs: list, out: np.ndarray) -> tuple[np.ndarray, str
 def describe(run: Path, episodes: int, model: Path | None) -> tuple[str, np.ndarray, tuple]:
     all_recs = RunStore.read(run).records
     recs = all_recs[:episodes]
-    config = RunStore.read_meta(run)["config"]
+    scene = run_scene(RunStore.read_meta(run)["config"])
     _, out, _ = goal_space_vectors(run, recs, model)
     balls = np.array([np.asarray(r.ball, dtype=float)[:2] for r in recs])
     moved = np.array([bool(r.ball_moved) for r in recs])
     ang = angles_deg(balls)
-    counter = CellCounter(run_scene(config).ball_half_width)
+    counter = CellCounter(scene.ball_half_width)
     for b in balls:
         counter.add(b)
     sectors = len(set(np.floor(ang[moved] / SECTOR_DEG).astype(int)))
@@ -104,7 +104,7 @@ def describe(run: Path, episodes: int, model: Path | None) -> tuple[str, np.ndar
     aimed = has_goal & in_arc(np.nan_to_num(g_ang), start, width)
     off = np.minimum(np.mod(start - ang, 360.0), np.mod(ang - (start + width), 360.0))
     far_moves = aimed & moved
-    off_wall = np.hypot(*balls[moved].T) < run_scene(config).ring[1] - OFF_WALL_M
+    off_wall = np.hypot(*balls[moved].T) < scene.ring[1] - OFF_WALL_M
     hi_end = np.mod(start + width + 180.0, 360.0) - 180.0
     lo_end = np.mod(start + 180.0, 360.0) - 180.0
     row = (

@@ -25,7 +25,7 @@ import numpy as np
 import torch
 
 from vision.representation_quality import HELDOUT, explained_pixel_variance, heldout_split
-from vision.vae import kl_per_latent, load_state, to_tensor
+from vision.vae import load_state
 from vision.vae_train import CHECKPOINT, make_vae
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -55,9 +55,7 @@ def score(folder: Path, images: np.ndarray, ball: np.ndarray, seed: int) -> str:
     z_fit = vae.encode_bgr(images[train[:FIT]])
     lin = linear_r2(z_fit, ball[train[:FIT]], z_test, ball[test], pooled=False)
     knn = knn_r2(z_fit, ball[train[:FIT]], z_test, ball[test])
-    with torch.no_grad():
-        mu, logvar = vae.encode(to_tensor(images[test]))
-        kl = kl_per_latent(mu, logvar).mean(dim=0).numpy()
+    kl = vae.mean_kl_per_latent(images[test])
     kls = " ".join(f"{v:.1f}" for v in sorted(kl, reverse=True)[:5])
     return (f"| {folder} | {state['iteration']} | {ev:+.3f} | {lin:.2f} | {knn:.2f} | "
             f"{kls} |")  # fmt: skip
