@@ -13,6 +13,9 @@
 # (about 30 CPU min on this machine, the SAE's training included). With `all`, phase 2 adds the
 # VAE rows with the recipe of "The learned goal spaces" (6000 iterations, 25-30 min of one core
 # per training, three trainings) and RGE/MGE-VAE and RGE/MGE-betaVAE on the same seeds.
+# Every phase also runs MGE-EFR and MGE-SAE with the two departures from the published campaign
+# that stop its stalls (docs/results_armballs.md, "Stalls, stopped: two departures"), in their own
+# campaign `$OUT/departures`: `--option random_episodes=0.1 --option interest_start=0.01`.
 set -euo pipefail
 OUT=${1:-runs/armballs/final700}
 JOBS=${2:-2}
@@ -35,6 +38,10 @@ DATA="$OUT/data/arm2balls-3000.npz"
     --strategies rpe,rge-efr,mge-efr,rge-sae,mge-sae --sae "$OUT/models/sae" \
     --out "$OUT/campaign" --jobs "$JOBS" --no-progress --no-report
 
+"$ERGO" experiment --rig arm2balls --preset corl2018 --seeds "$SEEDS" --episodes 10000 \
+    --strategies mge-efr,mge-sae --sae "$OUT/models/sae" --option random_episodes=0.1 \
+    --option interest_start=0.01 --out "$OUT/departures" --jobs "$JOBS" --no-progress --no-report
+
 if [ "$PHASE" = all ]; then
     [ -f "$OUT/models/vae/selection.json" ] || "$ERGO" vae train --data "$DATA" \
         --out "$OUT/models/vae" --seeds 0-1 --iterations 6000 --beta 1 --lr 5e-4 --device cpu \
@@ -50,5 +57,5 @@ fi
 
 "$PY" "$HERE/armballs_results.py" "$OUT/campaign" --out "$OUT/figures" --prefix armballs_final \
     > "$OUT/table.md"
-"$PY" "$HERE/armballs_stalls.py" "$OUT/campaign" > "$OUT/stalls.md"
+"$PY" "$HERE/armballs_stalls.py" "$OUT/campaign" "$OUT/departures" > "$OUT/stalls.md"
 cat "$OUT/table.md" "$OUT/stalls.md"

@@ -10,7 +10,8 @@ Per module k (the paper's modular goal exploration, docs/facts.md):
   the previous goal of module k nearest to g (0 for the first goal);
 - interest: ``"window"`` (the default) |mean of the last ``window`` progresses|; or
   ``"exponential"`` |p| with p += (progress - p) / window after each exploit episode, p starting
-  at 1e-5 (the original's ``update_interest``; its ``win_size`` is this window);
+  at ``start`` (default 1e-5, the original's ``update_interest``; its ``win_size`` is this
+  window);
 - module choice: with probability ``random_choice`` uniformly, else in proportion to interest
   (uniformly while every interest is 0): the distribution of explauto's ``prop_choice``.
 Only noise-free "exploit" episodes update interests; which goal-directed episodes enter the
@@ -48,6 +49,8 @@ class ModuleInterest:
         random_choice: share of module choices made uniformly.
         average: ``"window"`` or ``"exponential"`` (module doc).
         competence: ``"scaled"`` or ``"distance"`` (module doc).
+        start: the exponential average's starting value, every module's (default
+            ``START_PROGRESS``, the original's).
     """
 
     def __init__(
@@ -57,6 +60,7 @@ class ModuleInterest:
         random_choice: float = RANDOM_CHOICE,
         average: str = "window",
         competence: str = "scaled",
+        start: float = START_PROGRESS,
     ) -> None:
         if not 0.0 <= random_choice <= 1.0:
             raise ValueError(f"random_choice must be in [0, 1], got {random_choice}")
@@ -66,13 +70,15 @@ class ModuleInterest:
             raise ValueError(f"interest average must be one of {', '.join(AVERAGES)}")
         if competence not in COMPETENCES:
             raise ValueError(f"competence must be one of {', '.join(COMPETENCES)}")
+        if not start >= 0.0:
+            raise ValueError(f"interest start must be >= 0, got {start}")
         self.dims = tuple(dims)
         self.window = window
         self.random_choice = random_choice
         self.average = average
         self.competence_kind = competence
         self.progress = [deque(maxlen=window) for _ in self.dims]
-        self.smoothed = [START_PROGRESS] * len(self.dims)  # the exponential average
+        self.smoothed = [float(start)] * len(self.dims)  # the exponential average
         self.goals: list[list[np.ndarray]] = [[] for _ in self.dims]
         self.reached: list[list[np.ndarray | None]] = [[] for _ in self.dims]
 

@@ -39,7 +39,7 @@ from explore.learner.goal_spaces import (
     LatentGoalSpace,
     spatial_goal_space,
 )
-from explore.learner.interest import RANDOM_CHOICE, WINDOW, ModuleInterest
+from explore.learner.interest import RANDOM_CHOICE, START_PROGRESS, WINDOW, ModuleInterest
 from explore.learner.meta_policy import MetaPolicy
 from explore.learner.scene import Scene
 from explore.learner.strategies.base import (
@@ -103,6 +103,11 @@ class GoalExplorationOptions:
             episodes per goal (default 4).
         interest: "window" (default: the mean of the last ``window`` progresses) or
             "exponential" (the original's average, time constant ``window``).
+        interest_start: the exponential average's starting value (default 1e-5, the
+            original's). Larger, every module keeps a share of the choices until its own
+            progress has been measured: a start of 0.01 is worth about 400 exploits of a
+            module whose progress is noise of sd 0.5 (Arm-2-Balls' distractor), against a
+            few at 1e-5 (docs/results_armballs.md, "The early interest race").
         competence: "scaled" (default: distance over the module's outcome diagonal, capped at
             1) or "distance" (the original's: the distance capped at 2).
         ties: which of several equally near past episodes the inverse model replays: "first"
@@ -135,6 +140,7 @@ class GoalExplorationOptions:
     schedule: Literal["random", "cycle"] = "random"
     n_explore: int = N_EXPLORE
     interest: Literal["window", "exponential"] = "window"
+    interest_start: float = START_PROGRESS
     competence: Literal["scaled", "distance"] = "scaled"
     ties: Literal["first", "spread"] = "first"
     one_outcome: Literal["nearest", "random"] = "nearest"
@@ -143,6 +149,10 @@ class GoalExplorationOptions:
     stall_random: float = 1.0
 
     def __post_init__(self) -> None:
+        if not self.interest_start >= 0:
+            raise BadOption("interest_start", f"must be >= 0, got {self.interest_start}")
+        if self.interest_start != START_PROGRESS and self.interest != "exponential":
+            raise BadOption("interest_start", 'acts only with interest="exponential"')
         if not self.context_weight > 0:
             raise BadOption("context_weight", f"must be > 0, got {self.context_weight}")
         for key in ("bootstrap", "sigma", "stall_window"):
@@ -265,7 +275,12 @@ class GoalExploration(Strategy):
         self._still_low = np.full(context_dim, np.inf)
         self._still_high = np.full(context_dim, -np.inf)
         self.interest = ModuleInterest(
-            dims, self.window, self.random_choice, average=s.interest, competence=s.competence
+            dims,
+            self.window,
+            self.random_choice,
+            average=s.interest,
+            competence=s.competence,
+            start=s.interest_start,
         )
         if isinstance(space, LatentGoalSpace):
             self._last_latent = np.zeros(space.dim)

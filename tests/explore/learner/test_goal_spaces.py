@@ -134,6 +134,43 @@ def test_the_original_interest_is_an_exponential_average_of_distance_progress():
     assert mi.competence(g, None, 1.0) == -2.0
 
 
+def _share_of_the_silent_module(start: float, exploits: int, seed: int) -> float:
+    """Module 0's progress is noise (its outcome a random walk, Arm-2-Balls' distractor),
+    module 1 earns none (its outcome never moves); each exploit goes to the module chosen.
+    Returns module 1's choice probability after ``exploits`` exploits."""
+    mi = ModuleInterest([2, 2], window=1000, average="exponential", competence="distance",
+                        start=start)  # fmt: skip
+    rng = np.random.default_rng(seed)
+    walk = np.zeros(2)
+    for _ in range(exploits):
+        k = mi.choose(rng)
+        goal = rng.uniform(-1, 1, 2)
+        if k == 0:
+            walk = np.clip(walk + rng.normal(0, 0.3, 2), -1, 1)
+            mi.update(0, goal, walk.copy(), exploit=True, scale=1.0)
+        else:
+            mi.update(1, goal, np.array([0.6, 0.6]), exploit=True, scale=1.0)
+    return float(mi.probabilities()[1])
+
+
+def test_a_larger_interest_start_keeps_a_silent_module_in_the_race_longer():
+    # from the original's 1e-5, a module whose progress is noise takes nearly every choice
+    # within 200 exploits; from 0.01, the silent module keeps a large share for as long
+    early = [_share_of_the_silent_module(1e-5, 200, seed) for seed in range(8)]
+    kept = [_share_of_the_silent_module(0.01, 200, seed) for seed in range(8)]
+    assert np.median(early) < 0.15, early
+    assert min(kept) > 0.25, kept
+    with pytest.raises(ValueError, match="interest start"):
+        ModuleInterest([2], start=-1.0)
+    from explore.learner.strategies import make_strategy
+
+    s = make_strategy("mge-efr", n_params=49, scene=ARM_2_BALLS_SQUARE, interest="exponential",
+                      interest_start=0.01, distractor=None)  # fmt: skip
+    assert s.interest.interests().tolist() == [0.01, 0.01, 0.01]  # ball, distractor, hand
+    with pytest.raises(ValueError, match='interest_start acts only with interest="exponential"'):
+        make_strategy("mge-efr", n_params=49, scene=ARM_2_BALLS_SQUARE, interest_start=0.01)
+
+
 def test_goal_sampling_in_the_fixed_box_and_the_latent_prior():
     from explore.learner.strategies import make_strategy
 
