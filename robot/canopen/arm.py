@@ -359,7 +359,9 @@ class CanArm(Arm):
                 return
             self._tripping.set()
         try:
-            log.error("%s", reason)
+            # the reason reaches the user once, as the SafetyStop the next call raises (the
+            # CLI's one ``ergo: error:`` line); the moment of the trip only with --verbose
+            log.debug("tripped: %s", reason)
             self._emergency_torque_off()
             if self.torque_off_report is not None and reason.endswith("; torque off"):
                 reason += f" {self.torque_off_report}"

@@ -418,8 +418,11 @@ class DriveNetwork:
         code, register = int(err.code), int(err.register)
         with self.cond:
             self.emcy_active[i] = None if code & 0xFF00 == 0 else (code, register)
-        log.warning("%s: %s", self.who(i), emcy.describe(code, register))
-        if code & 0xFF00 and self.on_alarm is not None:
+        stops = bool(code & 0xFF00) and self.on_alarm is not None
+        # an EMCY that stops the arm is told once, by its safety stop; others as a warning
+        log.log(logging.DEBUG if stops else logging.WARNING, "%s: %s", self.who(i),
+                emcy.describe(code, register))  # fmt: skip
+        if stops:
             self.on_alarm()
 
     # ---- the control cycle -----------------------------------------------------------------

@@ -13,6 +13,7 @@ Nothing here asserts on durations; waits are bounded only against hangs.
 from __future__ import annotations
 
 import dataclasses
+import logging
 import threading
 import time
 import uuid
@@ -82,8 +83,11 @@ def test_late_tpdos_are_counted_and_the_arm_goes_on(rig) -> None:
     ("code", "words"),
     [(0x2310, "continuous over-current"), (0x4310, "excess temperature of the drive")],
 )
-def test_an_overload_or_overheat_emcy_stops_the_arm_with_torque_off(rig, code, words) -> None:
+def test_an_overload_or_overheat_emcy_stops_the_arm_with_torque_off(
+    rig, code, words, caplog
+) -> None:
     _twin, drives, can = rig
+    caplog.set_level(logging.INFO, logger="robot")  # what the CLI shows
     with make_arm(can) as arm:
         arm.set_torque(True)
         for _ in range(5):
@@ -98,6 +102,15 @@ def test_an_overload_or_overheat_emcy_stops_the_arm_with_torque_off(rig, code, w
         assert "\n" not in message
         assert enabled(drives) == []  # every drive, not only the faulty one
         assert arm.fault_counts()["reconnects"] == 0  # a fault is a stop, never a reconnect
+    # the reason is said once, by the SafetyStop (the CLI's one error line), not logged too
+    repeated = [
+        r.getMessage()
+        for r in caplog.records
+        if r.name.startswith("robot")
+        and r.levelno >= logging.INFO
+        and f"0x{code:04X}" in r.getMessage()
+    ]
+    assert repeated == [], repeated
 
 
 # python-can's notifier thread dies with the adapter (a closed bus raises in ``recv``), as it
