@@ -220,6 +220,17 @@ def _await_opening_answers(bus: Any) -> None:
 _TOLERANT_SLCAN: Any = None
 
 
+def garbled_words(lines: int) -> str:
+    """``"; N garbled line(s) from the adapter dropped: ..."`` for ``lines`` > 0, else ``""``:
+    what a message about silent nodes adds when the serial line itself is the likely cause."""
+    if lines <= 0:
+        return ""
+    return (
+        f"; {lines} garbled line(s) from the adapter dropped: noise on the serial line, a wrong "
+        f"baud rate, or not an SLCAN adapter?"
+    )
+
+
 def tolerant_slcan_bus() -> Any:
     """python-can's SLCAN bus class, made to drop a garbled line instead of dying.
 

@@ -43,7 +43,7 @@ import numpy as np
 
 from robot.bus_guard import BusGuard
 from robot.canopen import cia402, emcy
-from robot.canopen.bus import SLCAN_BITRATES, CanBusError, CanBusSpec, open_bus
+from robot.canopen.bus import SLCAN_BITRATES, CanBusError, CanBusSpec, garbled_words, open_bus
 from robot.canopen.cia402 import State
 from robot.errors import BusError, LinkLost
 from robot.torque_guardian import EmergencyPayload
@@ -275,10 +275,7 @@ class DriveNetwork:
         at = self.garbled_at
         if not at or time.monotonic() - at > GARBLED_RECENT_S:
             return ""
-        return (
-            f"; {self.garbled_lines} garbled line(s) from the adapter dropped: noise on the "
-            f"serial line, a wrong baud rate, or not an SLCAN adapter?"
-        )
+        return garbled_words(self.garbled_lines)
 
     def _require_open(self, what: str) -> None:
         if self.network is None or not self.nodes:

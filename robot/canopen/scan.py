@@ -15,7 +15,13 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from robot.canopen.bus import DEFAULT_BITRATE, CanBusError, open_bus, parse_can_spec
+from robot.canopen.bus import (
+    DEFAULT_BITRATE,
+    CanBusError,
+    garbled_words,
+    open_bus,
+    parse_can_spec,
+)
 from robot.cli_errors import error
 
 # How long to listen for answers and heartbeats, s (guess: covers heartbeat times up to 1 s,
@@ -48,6 +54,15 @@ class NodeInfo:
         return PROFILES.get(number, f"CiA {number}")
 
 
+@dataclass
+class ScanResult:
+    """The nodes found (by id) and the lines an SLCAN adapter sent that were dropped as
+    garbage meanwhile (0 on other adapters)."""
+
+    nodes: list[NodeInfo]
+    garbled_lines: int = 0
+
+
 def _hex(value: int | None) -> str:
     return "?" if value is None else f"0x{value:08X}"
 
@@ -57,7 +72,7 @@ def scan(
     bitrate: int | None = DEFAULT_BITRATE,
     ids: Sequence[int] | None = None,
     listen_s: float = LISTEN_S,
-) -> list[NodeInfo]:
+) -> ScanResult:
     """Find the nodes among ``ids`` (default 1..127) on the bus ``spec``.
 
     Raises:
@@ -110,7 +125,7 @@ def scan(
             if state is not None:
                 info.nmt_state = "BOOT-UP" if state == 0 else NMT_STATES.get(state, str(state))
             infos.append(info)
-        return infos
+        return ScanResult(infos, int(getattr(bus, "garbled_lines", 0)))
     finally:
         network.disconnect()
 
@@ -139,7 +154,7 @@ def scan_cli(args: argparse.Namespace) -> int:
     node answered, 1 if none, 2 on a bus error."""
     ids = getattr(args, "ids", None) or None
     try:
-        infos = scan(
+        result = scan(
             args.can,
             getattr(args, "bitrate", None) or DEFAULT_BITRATE,
             ids,
@@ -147,9 +162,12 @@ def scan_cli(args: argparse.Namespace) -> int:
         )
     except CanBusError as exc:
         return error(exc)
-    if not infos:
+    note = garbled_words(result.garbled_lines)
+    if not result.nodes:
         which = "ids " + " ".join(map(str, ids)) if ids else "ids 1..127"
-        print(f"no CANopen node answered on {args.can} ({which})", file=sys.stderr)
+        print(f"no CANopen node answered on {args.can} ({which}){note}", file=sys.stderr)
         return 1
-    print(format_table(infos))
+    print(format_table(result.nodes))
+    if note:
+        print(f"ergo: warning: {note[2:]}", file=sys.stderr)
     return 0

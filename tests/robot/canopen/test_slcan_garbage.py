@@ -92,3 +92,33 @@ def test_a_port_sending_only_garbage_fails_the_connect_in_one_line(pty, caplog) 
     assert not arm.is_connected
     # nor a second line from the canopen library ("Transfer aborted by client ...")
     assert not [r for r in caplog.records if r.levelno >= logging.WARNING], caplog.text
+
+
+@NO_THREAD_TRACEBACK
+def test_a_scan_of_a_port_sending_only_garbage_names_the_garbled_lines(pty, capsys) -> None:
+    import argparse
+
+    from robot.canopen.scan import scan_cli
+
+    master, path = pty
+    stop = threading.Event()
+
+    def noise() -> None:
+        rng = random.Random(1)
+        while not stop.is_set():
+            with contextlib.suppress(BlockingIOError):
+                os.write(master, rng.randbytes(64))
+            time.sleep(0.005)
+
+    os.set_blocking(master, False)
+    thread = threading.Thread(target=noise, daemon=True)
+    thread.start()
+    try:
+        args = argparse.Namespace(can=f"slcan:{path}", bitrate=None, ids=[1, 2], listen_s=0.3)
+        rc = scan_cli(args)
+    finally:
+        stop.set()
+        thread.join()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 1 and len(err) == 1, err
+    assert "no CANopen node answered" in err[0] and "garbled line(s)" in err[0], err
