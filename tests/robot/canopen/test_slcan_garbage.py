@@ -39,6 +39,28 @@ def pty() -> Iterator[tuple[int, str]]:
         os.close(slave)
 
 
+@contextlib.contextmanager
+def noise_on(master: int, seed: int) -> Iterator[None]:
+    """Random bytes written to the adapter's side of the pty every 5 ms while in the block."""
+    stop = threading.Event()
+
+    def noise() -> None:
+        rng = random.Random(seed)
+        while not stop.is_set():
+            with contextlib.suppress(BlockingIOError):
+                os.write(master, rng.randbytes(64))
+            time.sleep(0.005)
+
+    os.set_blocking(master, False)  # never blocks once nobody reads
+    thread = threading.Thread(target=noise, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join()
+
+
 def test_garbled_lines_are_dropped_and_counted_and_good_frames_still_come(pty) -> None:
     master, path = pty
     bus = open_bus(f"slcan:{path}")
@@ -67,25 +89,10 @@ def test_garbled_lines_are_dropped_and_counted_and_good_frames_still_come(pty) -
 @NO_THREAD_TRACEBACK
 def test_a_port_sending_only_garbage_fails_the_connect_in_one_line(pty, caplog) -> None:
     master, path = pty
-    stop = threading.Event()
-
-    def noise() -> None:
-        rng = random.Random(0)
-        while not stop.is_set():
-            with contextlib.suppress(BlockingIOError):
-                os.write(master, rng.randbytes(64))
-            time.sleep(0.005)
-
-    os.set_blocking(master, False)  # never blocks once nobody reads
-    thread = threading.Thread(target=noise, daemon=True)
-    thread.start()
-    try:
+    with noise_on(master, seed=0):
         arm = CanArm(f"slcan:{path}", config=CanArmConfig(sdo_timeout_s=0.2))
         with pytest.raises(BusError) as info:
             arm.connect()
-    finally:
-        stop.set()
-        thread.join()
     message = str(info.value)
     assert "\n" not in message
     assert "does not answer SDO 0x1000" in message and "garbled line(s)" in message, message
@@ -101,24 +108,9 @@ def test_a_scan_of_a_port_sending_only_garbage_names_the_garbled_lines(pty, caps
     from robot.canopen.scan import scan_cli
 
     master, path = pty
-    stop = threading.Event()
-
-    def noise() -> None:
-        rng = random.Random(1)
-        while not stop.is_set():
-            with contextlib.suppress(BlockingIOError):
-                os.write(master, rng.randbytes(64))
-            time.sleep(0.005)
-
-    os.set_blocking(master, False)
-    thread = threading.Thread(target=noise, daemon=True)
-    thread.start()
-    try:
+    with noise_on(master, seed=1):
         args = argparse.Namespace(can=f"slcan:{path}", bitrate=None, ids=[1, 2], listen_s=0.3)
         rc = scan_cli(args)
-    finally:
-        stop.set()
-        thread.join()
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 1 and len(err) == 1, err
     assert "no CANopen node answered" in err[0] and "garbled line(s)" in err[0], err
