@@ -107,7 +107,7 @@ class GoalExplorationOptions:
             original's). Larger, every module keeps a share of the choices until its own
             progress has been measured: a start of 0.01 is worth about 400 exploits of a
             module whose progress is noise of sd 0.5 (Arm-2-Balls' distractor), against a
-            few at 1e-5 (docs/results_armballs.md, "The early interest race").
+            few at 1e-5 (docs/results_armballs.md, "Stalls, stopped in the long run").
         competence: "scaled" (default: distance over the module's outcome diagonal, capped at
             1) or "distance" (the original's: the distance capped at 2).
         ties: which of several equally near past episodes the inverse model replays: "first"
