@@ -14,7 +14,7 @@
 # VAE rows with the recipe of "The learned goal spaces" (6000 iterations, 25-30 min of one core
 # per training, three trainings) and RGE/MGE-VAE and RGE/MGE-betaVAE on the same seeds.
 # Every phase also runs MGE-EFR and MGE-SAE with the two departures from the published campaign
-# that stop its stalls (docs/results_armballs.md, "Stalls, stopped: two departures"), in their own
+# that stop its stalls (docs/results_armballs.md, "Stalls, stopped in the long run"), in their own
 # campaign `$OUT/departures`: `--option random_episodes=0.1 --option interest_start=0.01`.
 set -euo pipefail
 OUT=${1:-runs/armballs/final700}
