@@ -15,7 +15,8 @@
 # per training, three trainings) and RGE/MGE-VAE and RGE/MGE-betaVAE on the same seeds.
 # Every phase also runs MGE-EFR and MGE-SAE with the two departures from the published campaign
 # that stop its stalls (docs/results_armballs.md, "Stalls, stopped in the long run"), in their own
-# campaign `$OUT/departures`: `--option random_episodes=0.1 --option interest_start=0.01`.
+# campaign `$OUT/departures`: `--option random_episodes=0.1 --option interest_start=0.01`, and
+# with `--option sigma=0.1` as well in `$OUT/departures_noise`.
 set -euo pipefail
 OUT=${1:-runs/armballs/final700}
 JOBS=${2:-2}
@@ -38,15 +39,13 @@ DATA="$OUT/data/arm2balls-3000.npz"
     --strategies rpe,rge-efr,mge-efr,rge-sae,mge-sae --sae "$OUT/models/sae" \
     --out "$OUT/campaign" --jobs "$JOBS" --no-progress --no-report
 
-"$ERGO" experiment --rig arm2balls --preset corl2018 --seeds "$SEEDS" --episodes 10000 \
-    --strategies mge-efr,mge-sae --sae "$OUT/models/sae" --option random_episodes=0.1 \
-    --option interest_start=0.01 --out "$OUT/departures" --jobs "$JOBS" --no-progress --no-report
+DEPARTURES=(--rig arm2balls --preset corl2018 --seeds "$SEEDS" --episodes 10000
+            --strategies mge-efr,mge-sae --sae "$OUT/models/sae" --option random_episodes=0.1
+            --option interest_start=0.01 --jobs "$JOBS" --no-progress --no-report)
+"$ERGO" experiment "${DEPARTURES[@]}" --out "$OUT/departures"
 # and the same with the scripts' other noise, 0.1 (chosen after the departures' final runs, on
-# development seeds 520-551; same section): `$OUT/departures_noise`
-"$ERGO" experiment --rig arm2balls --preset corl2018 --seeds "$SEEDS" --episodes 10000 \
-    --strategies mge-efr,mge-sae --sae "$OUT/models/sae" --option random_episodes=0.1 \
-    --option interest_start=0.01 --option sigma=0.1 --out "$OUT/departures_noise" --jobs "$JOBS" \
-    --no-progress --no-report
+# development seeds 520-551; same section)
+"$ERGO" experiment "${DEPARTURES[@]}" --option sigma=0.1 --out "$OUT/departures_noise"
 
 if [ "$PHASE" = all ]; then
     [ -f "$OUT/models/vae/selection.json" ] || "$ERGO" vae train --data "$DATA" \
