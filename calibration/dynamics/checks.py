@@ -1,6 +1,6 @@
 """What makes a recording unfit for the fit, each found before fitting and said in one line
-with its fix: a recording cut short, a joint that did not move, a joint that was blocked or
-held at a limit, a servo held at its torque ceiling.
+with its fix: a recording cut short, commands sent unevenly by a host too busy, a joint that
+did not move, a joint that was blocked or held at a limit, a servo held at its torque ceiling.
 
 Thresholds (guesses, checked against the twin and the stand-in rigs, whose good recordings are
 far inside them; docs/dynamics.md):
@@ -34,6 +34,15 @@ CEILING_S = 0.6
 # Readings further apart than this (four control ticks) leave a hole: a host that stalled (a
 # loaded machine: 1.04 s measured over the pty at load 12) says nothing of the time between.
 MAX_GAP_S = 0.1
+# The 95th percentile of the spacing between a recording's commands may be at most this many
+# control periods. Measured (docs/dynamics.md, "Bad input"): the stand-in rigs' good recordings
+# over the pty at load 3-11, 27-45 ms at 40 Hz (1.1-1.8 periods); the short recording of
+# tests/calibration/dynamics/test_standin.py beside 6 busy processes (load 6-11, five runs,
+# tests/stress/load.py), 35-39 ms; one
+# made while a burst of some 200 processes raised the load to 8, 76 ms (3.0 periods, 25 gaps
+# over 0.1 s), and even the hidden servos' own model was 1.5 deg off it. 2.4 lies between (a
+# guess from that one bad recording).
+MAX_SPACING_P95_PERIODS = 2.4
 STILL_RAD_S = 0.2  # a tenth of the excitation's peak speeds (guess)
 LIMIT_MARGIN_RAD = math.radians(2.0)  # a reading this far past a calibrated limit: at a stop
 
@@ -61,9 +70,10 @@ def check_recording(rec: Recording) -> None:
         )
     if excitation.HELD_OUT_NAME not in rec.segment_names:
         raise RecordingError(f"the recording has no held-out segment: record again ({again})")
+    rate = float(rec.meta.get("control_rate_hz", 40.0))
+    _check_pace(rec.command_t, rate, again)
     lower = np.asarray(rec.meta.get("lower", [-np.inf] * len(rec.joint_names)))
     upper = np.asarray(rec.meta.get("upper", [np.inf] * len(rec.joint_names)))
-    rate = float(rec.meta.get("control_rate_hz", 40.0))
     for j, name in enumerate(rec.joint_names):
         if name not in rec.segment_names:
             continue
@@ -110,6 +120,28 @@ def check_recording(rec: Recording) -> None:
                     f"blocked (the floor, the ball, a cable), at a limit or at its torque "
                     f"ceiling; free it and record again ({again})"
                 )
+
+
+def _check_pace(command_t: np.ndarray, rate_hz: float, again: str) -> None:
+    """Refuse a recording whose commands (times ``command_t``, s, shape (C,)) were sent
+    unevenly: the 95th percentile of their spacing over ``MAX_SPACING_P95_PERIODS`` control
+    periods of ``rate_hz``. The host fell behind the control loop in bursts, and the jitter
+    that comes with it leaves no model close to the readings."""
+    if len(command_t) < 3:
+        return
+    spacing = np.diff(command_t)
+    p95 = float(np.percentile(spacing, 95))
+    if p95 > MAX_SPACING_P95_PERIODS / rate_hz:
+        took = float(command_t[-1] - command_t[0])
+        scheduled = (len(command_t) - 1) / rate_hz
+        gaps = int(np.count_nonzero(spacing > MAX_GAP_S))
+        raise RecordingError(
+            f"the host fell behind the control rate: 5% of the commands came over "
+            f"{p95 * 1e3:.0f} ms apart (the rate is {rate_hz:g} Hz: {1e3 / rate_hz:.0f} ms; "
+            f"{gaps} gap(s) over {MAX_GAP_S * 1e3:.0f} ms; {took:.1f} s where {scheduled:.1f} s "
+            f"were scheduled), too uneven a timing to fit; record again with less else running "
+            f"on the machine ({again})"
+        )
 
 
 def _longest_run(mask: np.ndarray, t: np.ndarray, gap_s: float = MAX_GAP_S) -> float:

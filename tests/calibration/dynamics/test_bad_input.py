@@ -99,3 +99,26 @@ def test_a_hole_in_the_readings_ends_a_run_at_the_ceiling():
     assert _longest_run(held, stalled) == pytest.approx(0.2)
     steady = np.array([0.0, 0.05, 0.1, 0.15, 0.2, 0.25])
     assert _longest_run(held, steady) == pytest.approx(0.25)
+
+
+def test_a_recording_made_while_the_host_fell_behind_is_refused(truth_recording):
+    # a load burst: every tenth tick the loop stalls 80 ms, then catches up 20 ms a tick (the
+    # next ticks 5 ms apart); the readings then say little of when each command reached the
+    # servos
+    late = copy.deepcopy(truth_recording)
+    behind = np.array([0.08, 0.06, 0.04, 0.02, 0, 0, 0, 0, 0, 0])
+    late.command_t = late.command_t + np.resize(behind, len(late.command_t))
+    with pytest.raises(
+        RecordingError,
+        match=r"^the host fell behind the control rate: 5% of the commands came over 105 ms "
+        r"apart \(the rate is 40 Hz: 25 ms; 67 gap\(s\) over 100 ms; 16\.8 s where 16\.8 s were "
+        r"scheduled\), too uneven a timing to fit; record again with less else running on the "
+        r"machine \(ergo calibrate dynamics --rig-id t\)$",
+    ):
+        check_recording(late)
+    # uniformly slower, as a loaded host (load 6-10: 11 % late, no spacing over 2 periods):
+    # kept; the jitter, not the pace, spoils a fit
+    slow = copy.deepcopy(truth_recording)
+    slow.command_t = slow.command_t * 1.15
+    slow.measured_t = slow.measured_t * 1.15
+    check_recording(slow)
