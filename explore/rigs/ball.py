@@ -19,6 +19,7 @@ seconds.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 from typing import Any, Protocol
 
@@ -27,6 +28,8 @@ import numpy as np
 from explore.learner.experience import Observation
 from vision.camera import Camera
 from vision.observation import square_observation
+
+log = logging.getLogger(__name__)
 
 BallLocator = Callable[[np.ndarray], np.ndarray]
 UNKNOWN = np.full(2, np.nan)  # a position not seen, (2,)
@@ -76,14 +79,24 @@ class BallSensor(Protocol):
 
 
 def tracker_locator(arena: Any, tracker_config: Any = None) -> BallLocator:
-    """A locator backed by ``vision.tracker.BallTracker`` with an ``ArenaModel``."""
+    """A locator backed by ``vision.tracker.BallTracker`` with an ``ArenaModel``. Why the
+    tracker did not see the ball is logged (INFO, logger ``explore.rigs.ball``) each time the
+    reason changes: a run's log says why its ball positions are unknown, once per spell."""
     from vision.tracker import BallTracker
 
     tracker = BallTracker(tracker_config, arena)
+    last_reason: list[str | None] = [None]
 
     def locate(frame: np.ndarray) -> np.ndarray:
         obs = tracker.track(frame)
-        if not obs.seen or obs.xy is None:
+        reason = None if obs.seen and obs.xy is not None else obs.reason or "not on the arena"
+        if reason is not None and reason != last_reason[0]:
+            blobs = ", ".join(
+                f"{b.area:.0f} px circularity {b.circularity:.2f}" for b in obs.blobs[:2]
+            )
+            log.info("ball not seen: %s%s", reason, f" (blobs: {blobs})" if blobs else "")
+        last_reason[0] = reason
+        if reason is not None:
             return np.full(2, np.nan)
         return np.asarray(obs.xy, dtype=float)
 

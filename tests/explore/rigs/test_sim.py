@@ -60,3 +60,26 @@ def test_the_twin_s_watchdog_lets_a_passing_wedge_through_and_stops_a_stuck_arm(
                 rig.clock.advance(0.1)
                 rig.arm.read()
         assert not rig.sensor.twin.torque_enabled()
+
+
+def test_the_tracker_says_why_the_ball_is_unseen_once_per_spell(caplog):
+    """A run's log says why its ball positions are unknown: one INFO line when the tracker
+    stops seeing the ball (or its reason changes), none while the reason stays the same."""
+    import logging
+
+    from explore.rigs.ball import tracker_locator
+    from explore.rigs.sim import twin_arena_model
+    from sim.camera import SimCamera
+
+    twin = Twin()
+    with SimCamera(twin) as camera:
+        locate = tracker_locator(twin_arena_model(camera))
+        seen = camera.read().image
+    blank = np.zeros_like(seen)  # nothing ball-coloured: the ball gone from view
+    with caplog.at_level(logging.INFO, logger="explore.rigs.ball"):
+        assert np.all(np.isfinite(locate(seen)))
+        assert np.all(np.isnan(locate(blank))) and np.all(np.isnan(locate(blank)))
+        assert np.all(np.isfinite(locate(seen)))
+        assert np.all(np.isnan(locate(blank)))
+    lines = [r.getMessage() for r in caplog.records if r.name == "explore.rigs.ball"]
+    assert lines == ["ball not seen: no ball-coloured blob"] * 2
