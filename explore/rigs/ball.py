@@ -81,7 +81,8 @@ class BallSensor(Protocol):
 def tracker_locator(arena: Any, tracker_config: Any = None) -> BallLocator:
     """A locator backed by ``vision.tracker.BallTracker`` with an ``ArenaModel``. Why the
     tracker did not see the ball is logged (INFO, logger ``explore.rigs.ball``) each time the
-    reason changes: a run's log says why its ball positions are unknown, once per spell."""
+    reason changes (its words, not its figures): a run's log says why its ball positions are
+    unknown, once per spell."""
     from vision.tracker import BallTracker
 
     tracker = BallTracker(tracker_config, arena)
@@ -90,12 +91,13 @@ def tracker_locator(arena: Any, tracker_config: Any = None) -> BallLocator:
     def locate(frame: np.ndarray) -> np.ndarray:
         obs = tracker.track(frame)
         reason = None if obs.seen and obs.xy is not None else obs.reason or "not on the arena"
-        if reason is not None and reason != last_reason[0]:
+        kind = None if reason is None else reason.split("(")[0].strip()
+        if kind is not None and kind != last_reason[0]:
             blobs = ", ".join(
                 f"{b.area:.0f} px circularity {b.circularity:.2f}" for b in obs.blobs[:2]
             )
             log.info("ball not seen: %s%s", reason, f" (blobs: {blobs})" if blobs else "")
-        last_reason[0] = reason
+        last_reason[0] = kind
         if reason is not None:
             return np.full(2, np.nan)
         return np.asarray(obs.xy, dtype=float)

@@ -64,7 +64,8 @@ def test_the_twin_s_watchdog_lets_a_passing_wedge_through_and_stops_a_stuck_arm(
 
 def test_the_tracker_says_why_the_ball_is_unseen_once_per_spell(caplog):
     """A run's log says why its ball positions are unknown: one INFO line when the tracker
-    stops seeing the ball (or its reason changes), none while the reason stays the same."""
+    stops seeing the ball (or its reason changes), none while the reason stays the same, even
+    when its figures change from frame to frame."""
     import logging
 
     from explore.rigs.ball import tracker_locator
@@ -72,14 +73,26 @@ def test_the_tracker_says_why_the_ball_is_unseen_once_per_spell(caplog):
     from sim.camera import SimCamera
 
     twin = Twin()
+    from vision.tracker import BallTracker
+
     with SimCamera(twin) as camera:
         locate = tracker_locator(twin_arena_model(camera))
         seen = camera.read().image
     blank = np.zeros_like(seen)  # nothing ball-coloured: the ball gone from view
+    u = BallTracker().track(seen).pixel[0]
+    halves = []  # the ball's left part hidden, two amounts: "not round", other figures
+    for cut in (0.0, 2.0):
+        half = seen.copy()
+        half[:, : int(u - cut)] = 0
+        halves.append(half)
     with caplog.at_level(logging.INFO, logger="explore.rigs.ball"):
         assert np.all(np.isfinite(locate(seen)))
         assert np.all(np.isnan(locate(blank))) and np.all(np.isnan(locate(blank)))
         assert np.all(np.isfinite(locate(seen)))
         assert np.all(np.isnan(locate(blank)))
+        assert np.all(np.isnan(locate(halves[0]))) and np.all(np.isnan(locate(halves[1])))
     lines = [r.getMessage() for r in caplog.records if r.name == "explore.rigs.ball"]
-    assert lines == ["ball not seen: no ball-coloured blob"] * 2
+    assert lines[:2] == ["ball not seen: no ball-coloured blob"] * 2
+    assert len(lines) == 3 and lines[2].startswith("ball not seen: ball-coloured blob not round")
+    first, second = (BallTracker().track(h).reason for h in halves)
+    assert first != second  # the figures changed, the line was not repeated
