@@ -38,10 +38,9 @@ MAX_GAP_S = 0.1
 # control periods. Measured (docs/dynamics.md, "Bad input"): the stand-in rigs' good recordings
 # over the pty at load 3-11, 27-45 ms at 40 Hz (1.1-1.8 periods); the short recording of
 # tests/calibration/dynamics/test_standin.py beside 6 busy processes (load 6-11, five runs,
-# tests/stress/load.py), 35-39 ms; one
-# made while a burst of some 200 processes raised the load to 8, 76 ms (3.0 periods, 25 gaps
-# over 0.1 s), and even the hidden servos' own model was 1.5 deg off it. 2.4 lies between (a
-# guess from that one bad recording).
+# tests/stress/load.py), 35-39 ms; one made while a burst of some 200 processes raised the load
+# to 8, 76 ms (3.0 periods, 25 gaps over 0.1 s), and even the hidden servos' own model was 1.5
+# deg off it. 2.4 lies between (a guess from that one bad recording).
 MAX_SPACING_P95_PERIODS = 2.4
 STILL_RAD_S = 0.2  # a tenth of the excitation's peak speeds (guess)
 LIMIT_MARGIN_RAD = math.radians(2.0)  # a reading this far past a calibrated limit: at a stop

@@ -86,18 +86,18 @@ def tracker_locator(arena: Any, tracker_config: Any = None) -> BallLocator:
     from vision.tracker import BallTracker
 
     tracker = BallTracker(tracker_config, arena)
-    last_reason: list[str | None] = [None]
+    last_kind: list[str | None] = [None]  # the words of the last reason, None: seen
 
     def locate(frame: np.ndarray) -> np.ndarray:
         obs = tracker.track(frame)
         reason = None if obs.seen and obs.xy is not None else obs.reason or "not on the arena"
         kind = None if reason is None else reason.split("(")[0].strip()
-        if kind is not None and kind != last_reason[0]:
+        if kind is not None and kind != last_kind[0]:
             blobs = ", ".join(
                 f"{b.area:.0f} px circularity {b.circularity:.2f}" for b in obs.blobs[:2]
             )
             log.info("ball not seen: %s%s", reason, f" (blobs: {blobs})" if blobs else "")
-        last_reason[0] = kind
+        last_kind[0] = kind
         if reason is not None:
             return np.full(2, np.nan)
         return np.asarray(obs.xy, dtype=float)

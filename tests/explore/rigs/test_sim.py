@@ -71,10 +71,9 @@ def test_the_tracker_says_why_the_ball_is_unseen_once_per_spell(caplog):
     from explore.rigs.ball import tracker_locator
     from explore.rigs.sim import twin_arena_model
     from sim.camera import SimCamera
-
-    twin = Twin()
     from vision.tracker import BallTracker
 
+    twin = Twin()
     with SimCamera(twin) as camera:
         locate = tracker_locator(twin_arena_model(camera))
         seen = camera.read().image
