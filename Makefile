@@ -50,15 +50,15 @@ bench-all: bench
 	    --capacity-iterations 500 --iterations 700 --every 100
 	$(BIN)/python experiments/goal_space.py --data $(BENCH_VAE)/dataset.npz --vae $(BENCH_VAE)
 
-# The paper's experiment on the twin (docs/results.md): datasets, representations chosen by a
-# label-free criterion, both conditions x 8 seeds x 5000 episodes. Hours on 2 cores;
+# The paper's experiment on the twin (docs/results_seeds100.md): datasets, representations
+# chosen by a label-free criterion, both conditions x 8 seeds x 5000 episodes. Hours on 2 cores;
 # resumable: run it again after anything stopped it.
 PAPER ?= runs/paper
 paper: $(STAMP)
 	bash experiments/paper_campaign.sh $(PAPER) 2
 
-# Issue 31's final tables on the twin (docs/results.md F9-F11): seeds 700-707, dataset seeds 3000
-# (and 3001 with the distractor), today's defaults. PAPER_FINAL_PHASES=1: the engineered and
+# The final tables on the twin (docs/results.md, results_vae.md, results_distractor.md):
+# seeds 700-707, dataset seeds 3000 (and 3001 with the distractor), today's defaults. PAPER_FINAL_PHASES=1: the engineered and
 # spatial-autoencoder table alone (about 2 hours on 2 cores); all (the default) adds the VAE
 # rows and the distractor condition (several more hours). Resumable.
 PAPER_FINAL ?= runs/twin_final

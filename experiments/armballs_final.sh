@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
-# The Arm-2-Balls final table of issue 31 (docs/results_armballs.md, "Final table"): one command,
+# The Arm-2-Balls final table of issue 31 (docs/results_armballs_learned.md, "Final table"): one command,
 # `bash experiments/armballs_final.sh OUT [JOBS] [all]`. Every step is an ordinary ergo command,
 # skipped or resumed when it is already done, so the script can be stopped and rerun at any point.
 #
 # Seeds never used while developing: exploration seeds 700-707, the outcome dataset's seed 3000
 # (development used exploration seeds 0-39, 300-307, 500-515 and dataset seed 0). The learned
-# representation is the spatial autoencoder of docs/results.md F2 (4 training seeds, chosen by
+# representation is the spatial autoencoder of docs/results_seeds100.md F2 (4 training seeds, chosen by
 # held-out explained pixel variance, which never looks at the balls' positions); the learner
 # settings are the published campaign's (`--preset corl2018`).
 #
@@ -14,7 +14,7 @@
 # VAE rows with the recipe of "The learned goal spaces" (6000 iterations, 25-30 min of one core
 # per training, three trainings) and RGE/MGE-VAE and RGE/MGE-betaVAE on the same seeds.
 # Every phase also runs MGE-EFR and MGE-SAE with the two departures from the published campaign
-# that stop its stalls (docs/results_armballs.md, "Stalls, stopped in the long run"), in their own
+# that stop its stalls (docs/results_armballs_departures.md), in their own
 # campaign `$OUT/departures`: `--option random_episodes=0.1 --option interest_start=0.01`, and
 # with `--option sigma=0.1` as well in `$OUT/departures_noise`.
 set -euo pipefail

@@ -1,6 +1,6 @@
 """Arm-2-Balls MGE-EFR runs confined by a folded arm: per-run figures of campaign folders, the
 original campaign's bootstraps rebuilt, and how often a bootstrap starts folded
-(docs/results_armballs.md, "Runs confined by a folded arm").
+(docs/results_armballs_stalls.md, "Runs confined by a folded arm").
 
 The joint command is clip(sum_k basis_k(t) p_jk, -1, 1) and the angle pi x the command
 (docs/armballs.md, "Motor primitive"), so a joint whose unclipped final command is at least 1

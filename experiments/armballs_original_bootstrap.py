@@ -1,5 +1,5 @@
 """One Arm-2-Balls run whose bootstrap is the original campaign's for a published seed, the rest
-ours (docs/results_armballs.md, "Runs confined by a folded arm").
+ours (docs/results_armballs_stalls.md, "Runs confined by a folded arm").
 
 The original's 100 bootstrap parameter vectors of seed ORIGINAL_SEED are rebuilt
 (``armballs_folds.original_bootstrap``: numpy's legacy generator, as its ``mge_efr.py``) and

@@ -1,5 +1,5 @@
 """Stalled MGE-EFR runs on Arm-2-Balls: per-run figures of one or more campaign folders, side by
-side (docs/results_armballs.md, "Stalls: cause and fix").
+side (docs/results_armballs_stalls.md, "Stalls: cause and fix").
 
 For every run of ``CAMPAIGN/STRATEGY/seed-*`` (default strategy ``mge-efr``):
 - the exploration ratio at 1000, 3000, 5000 and 9666 iterations (the published checkpoints),

@@ -1,5 +1,5 @@
 """Ball cells of a campaign's runs at given episodes, per strategy, with Welch's t-test against
-reference strategies (docs/results.md F9-F11): one Markdown row per strategy.
+reference strategies (docs/results.md F9, docs/results_vae.md F11): one Markdown row per strategy.
 
     .venv/bin/python experiments/campaign_table.py CAMPAIGN [CAMPAIGN ...] --at 1500,5000 \
         --against rpe,rge-efr [--seeds 700-707]

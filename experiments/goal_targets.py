@@ -1,4 +1,4 @@
-"""Where a run's goals point in the arena (docs/results.md F11): for each goal episode, the
+"""Where a run's goals point in the arena (docs/results_vae.md F11): for each goal episode, the
 stored outcome nearest to its goal in the run's own goal space (outcome only, no context),
 and where that outcome left the ball.
 

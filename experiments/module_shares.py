@@ -1,6 +1,6 @@
-"""How MGE runs share their goal episodes among modules (docs/results.md F12): per campaign
-folder of MGE runs, the share of the goal episodes (explore and exploit) given to each module
-and how often those episodes moved the ball, means over the runs.
+"""How MGE runs share their goal episodes among modules (docs/results_distractor.md F12): per
+campaign folder of MGE runs, the share of the goal episodes (explore and exploit) given to each
+module and how often those episodes moved the ball, means over the runs.
 
     .venv/bin/python experiments/module_shares.py RUNS_PARENT [RUNS_PARENT ...] [--episodes 2000]
 

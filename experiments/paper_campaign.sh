@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The paper's experiment on the twin, as docs/results.md reports it: `make paper` (or
+# The paper's experiment on the twin, as docs/results_seeds100.md reports it: `make paper` (or
 # `bash experiments/paper_campaign.sh OUT [JOBS]`). Every step is an ordinary ergo command, skipped
 # or resumed when it is already done, so the script can be stopped and rerun at any point.
 #
@@ -35,7 +35,7 @@ model() {  # model KIND FOLDER DATA SEEDS [recipe...]: trains and selects, unles
     [ -f "$2/selection.json" ] || "$ERGO" "$1" train --data "$3" --out "$2" --seeds "$4" \
         "${@:5}" --no-progress --device cpu
 }
-# The campaign of docs/results.md F1-F5 ran before goal exploration's stall_window (F8) existed:
+# The campaign of docs/results_seeds100.md F1-F5 ran before goal exploration's stall_window (F8) existed:
 # it is pinned off here so that this script reproduces those tables.
 campaign() {  # campaign FOLDER EPISODES STRATEGIES [options...]: runs or resumes, no report
     "$ERGO" experiment --out "$1" --episodes "$2" --strategies "$3" --seeds "$SEEDS" \

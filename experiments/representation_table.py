@@ -1,4 +1,4 @@
-"""The representation table of docs/results.md: per training seed of each model of a paper
+"""The representation table of docs/results_seeds100.md: per training seed of each model of a paper
 campaign folder (``make paper``), how well it locates the ball (a diagnostic only: held-out
 linear R^2 of the ball's, and the distractor's, position from the code), its KL per latent (the
 VAEs), the selection criterion (held-out explained pixel variance, which never sees a label),

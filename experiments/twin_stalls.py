@@ -6,7 +6,7 @@ angle, degrees), and how many of the stalled episodes of each kind (goal "explor
 
     .venv/bin/python experiments/twin_stalls.py RUN [RUN ...] [--window 100] [--moves 2]
 
-Reads the runs' histories only; prints one Markdown row per run (docs/results.md, F7).
+Reads the runs' histories only; prints one Markdown row per run (docs/results_stalls.md, F7).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Can the paper's VAE decoder draw the ball at all? (docs/results.md F6, continued)
+"""Can the paper's VAE decoder draw the ball at all? (docs/results_vae.md F6, continued)
 
 A supervised check: the decoder of ``vision.vae.Vae`` alone, no encoder, trained with Adam on
 the twin's outcome images with the ball's true position as its code (latent 0 and 1: the

@@ -1,4 +1,4 @@
-"""Does a trained VAE locate the ball, linearly or not? (issue 31, step 3; docs/results.md F11)
+"""Does a trained VAE locate the ball, linearly or not? (issue 31, step 3; docs/results_vae.md F11)
 
 For training checkpoints of ``experiments/vae_recipe.py`` or ``ergo vae train`` (a folder's
 ``checkpoint.pt``), on the images held out of that training (10%, split by the training seed):
