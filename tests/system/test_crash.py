@@ -6,9 +6,10 @@ gets its kills before the run ends: about 1 in 4 kills land a random 0.3-1.5 s a
 at the child's first new append if that comes sooner (interpreter start, imports, run-folder
 creation, replay of the history, twin restore); the others land after the child's first or
 second new append plus a random share of the fastest episode's measured duration (inside
-episodes, during the next append's write/fsync). A few of those kill the instant ``history.bin`` grows,
-which is during or just after an append's write, before or during its fsync. A kill thus
-lets at most 3 episodes pass, so 20 kills fit in the 70 episodes at any speed.
+episodes, during the next append's write/fsync). A few of those kill the instant
+``history.bin`` grows, which is during or just after an append's write, before or during its
+fsync. A kill thus lets at most 3 episodes pass, so 20 kills fit in the 70 episodes at any
+speed.
 
 Between kills the history on disk is checked without touching it: every complete record has a
 valid checksum, episodes are 0..k-1 (none missing, none duplicated) and k never goes down.
