@@ -62,7 +62,7 @@ def _run_markdown(run: RunData, figures: list[Path], out_dir: Path) -> str:
     cfg = run.config
     kinds = ", ".join(f"{k} {int((run.kind == k).sum())}" for k in sorted(set(run.kind.tolist())))
     rows = [
-        ["episodes", f"{f['episodes']:.0f} (planned {cfg.get('episodes', '?')})"],
+        ["episodes", f"{f['episodes']:.0f} (planned {run.planned_episodes})"],
         ["ball cells reached", f"{f['ball_cells']:.0f} of {N_CELLS}"],
         ["end-effector cells reached", f"{f['ee_cells']:.0f} of {N_CELLS}"],
         [
