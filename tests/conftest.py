@@ -27,27 +27,10 @@ from hypothesis import HealthCheck, settings
 from explore.runs.layout import HISTORY_FILE
 from sim.twin import Twin
 
+if os.environ.get("ERGO_TEST_NUDGE_ULP") == "1":  # the twin nudged: tests/nudge_twin.py
+    import runpy
 
-def _nudge_twin_physics() -> None:
-    """``ERGO_TEST_NUDGE_ULP=1``: every twin built in this process has its bodies' masses one
-    ulp heavier (``numpy.nextafter``), a stand-in for another CPU or MuJoCo build, whose floating
-    point differs in the last bit and whose trajectories then part. A test that passes only
-    unnudged depends on the twin's exact trajectory (the suite runs on other machines too)."""
-    import numpy as np
-
-    init = Twin.__init__
-
-    def nudged(self: Twin, *args, **kwargs) -> None:
-        init(self, *args, **kwargs)
-        mass = self.model.body_mass
-        mass[1:] = np.nextafter(mass[1:], np.inf)
-        self.reset()
-
-    Twin.__init__ = nudged
-
-
-if os.environ.get("ERGO_TEST_NUDGE_ULP") == "1":
-    _nudge_twin_physics()
+    runpy.run_path(str(Path(__file__).parent / "nudge_site" / "sitecustomize.py"))
 
 # 20,000 examples per property by default (a choice: a few minutes on one core).
 settings.register_profile(
