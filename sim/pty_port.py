@@ -76,6 +76,14 @@ class PtyPort:
         with self._lock:
             return self.master, self.slave
 
+    def flush_input(self) -> None:
+        """Drop what the client side has not read (bytes the server wrote that no client took:
+        a start-up check's late answers), as a client's own flush on opening would."""
+        with self._lock:
+            if self.slave is not None:
+                with contextlib.suppress(termios.error):
+                    termios.tcflush(self.slave, termios.TCIFLUSH)
+
     def _open(self) -> None:
         master, slave = os.openpty()
         tty.setraw(slave, termios.TCSANOW)

@@ -27,6 +27,11 @@ from hypothesis import HealthCheck, settings
 from explore.runs.layout import HISTORY_FILE
 from sim.twin import Twin
 
+if os.environ.get("ERGO_TEST_NUDGE_ULP") == "1":  # the twin nudged: tests/nudge_twin.py
+    import runpy
+
+    runpy.run_path(str(Path(__file__).parent / "nudge_site" / "sitecustomize.py"))
+
 # 20,000 examples per property by default (a choice: a few minutes on one core).
 settings.register_profile(
     "fuzz",

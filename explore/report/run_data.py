@@ -21,7 +21,7 @@ from explore.learner.goal_outcomes import goal_outcome_of
 from explore.learner.scene import Scene
 from explore.report.recorder import recording_paths
 from explore.runs.config import RunConfig
-from explore.runs.layout import METRICS_FILE, RUN_FILE
+from explore.runs.layout import METRICS_FILE, PLANNED_KEY, RUN_FILE
 from explore.runs.metrics import MetricsLog, read_metrics
 from explore.runs.store import RunStore, iter_history
 
@@ -66,6 +66,12 @@ class RunData:
     @property
     def config(self) -> dict[str, Any]:
         return self.meta["config"]
+
+    @property
+    def planned_episodes(self) -> int | str:
+        """The episode count planned: the config's, or the last resume's ``--episodes`` that
+        changed it (``run.json``'s ``PLANNED_KEY``); ``"?"`` for a config without one."""
+        return self.meta.get(PLANNED_KEY, self.config.get("episodes", "?"))
 
     @property
     def has_records(self) -> bool:

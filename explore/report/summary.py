@@ -21,6 +21,7 @@ from __future__ import annotations
 import base64
 import html
 import json
+import logging
 import os
 import shutil
 from collections.abc import Iterator
@@ -41,8 +42,10 @@ from explore.report.figures import (
     scatter_figure,
 )
 from explore.report.run_data import RunData, find_campaign_runs, load_run
-from explore.runs.layout import COVERAGE_FILE
+from explore.runs.layout import COVERAGE_FILE, INPUTS_KEY
 from explore.runs.store import RunStore
+
+log = logging.getLogger(__name__)
 
 INCOMPLETE = "REPORT_INCOMPLETE"  # in an output folder whose report stopped being moved in
 # every file a report may write: those this report did not write are stale, removed
@@ -57,12 +60,55 @@ def _md_table(header: list[str], rows: list[list[str]]) -> str:
     return "\n".join(lines)
 
 
+def empty_cells_notes(run: RunData) -> list[str]:
+    """Why a run's ball or end-effector cells were never counted, and what to run, one
+    sentence each (none when both were counted in some episode, or nothing was read).
+
+    The ball: a physical rig locates it with the tracker of its arena calibration; without one
+    (``run.json``'s inputs hold no ``arena``) every ball position is unknown. The end
+    effector: a physical rig's camera tracks the ball only, so its tool tip is never known
+    (``explore.rigs.ball.CameraSensor.tool_tip``); the twin's is."""
+    if not run.n or not run.has_records:
+        return []
+    from explore.rigs.rig import RigError, is_physical
+
+    rig = run.config.get("rig", {})
+    name, rig_id = rig.get("name", "sim"), rig.get("rig_id", "?")
+    try:
+        physical = is_physical(name)
+    except RigError:  # a rig this version does not know
+        physical = False
+    notes = []
+    if not np.isfinite(run.ball).all(axis=1).any():
+        kinds = {i.get("kind") for i in run.meta.get(INPUTS_KEY) or [] if isinstance(i, dict)}
+        if physical and "arena" not in kinds:
+            notes.append(
+                f"No ball position was recorded: rig {name!r} (rig id {rig_id}) had no arena "
+                "calibration, so the camera could not locate the ball and the ball cells "
+                f"cannot be counted. Run `ergo calibrate arena --rig-id {rig_id} --camera ...` "
+                "(docs/calibration.md), then explore again."
+            )
+        else:
+            notes.append(
+                f"No ball position was recorded: the ball was not seen in any of the {run.n} "
+                "episodes, so the ball cells cannot be counted. Check the camera's view of the "
+                "ball with `ergo track --camera ... --arena FILE` (the arena calibration)."
+            )
+    if physical and not np.isfinite(run.ee_final).all(axis=1).any():
+        notes.append(
+            f"No end-effector position was recorded: rig {name!r}'s camera tracks the ball "
+            "only, so the tool tip's cells are not counted on a physical rig (the twin, "
+            "`--rig sim`, counts them)."
+        )
+    return notes
+
+
 def _run_markdown(run: RunData, figures: list[Path], out_dir: Path) -> str:
     f = run.final()
     cfg = run.config
     kinds = ", ".join(f"{k} {int((run.kind == k).sum())}" for k in sorted(set(run.kind.tolist())))
     rows = [
-        ["episodes", f"{f['episodes']:.0f} (planned {cfg.get('episodes', '?')})"],
+        ["episodes", f"{f['episodes']:.0f} (planned {run.planned_episodes})"],
         ["ball cells reached", f"{f['ball_cells']:.0f} of {N_CELLS}"],
         ["end-effector cells reached", f"{f['ee_cells']:.0f} of {N_CELLS}"],
         [
@@ -82,6 +128,10 @@ def _run_markdown(run: RunData, figures: list[Path], out_dir: Path) -> str:
         "",
         _md_table(["measure", "value"], rows),
         "",
+    ]
+    for note in empty_cells_notes(run):
+        parts += [note, ""]
+    parts += [
         "## Figures",
         "",
     ]
@@ -282,6 +332,8 @@ def report_run(run_path: Path, out_dir: Path | None = None) -> list[Path]:
         if goals is not None:
             figures.append(goals)
         written += figures + _write_summaries(_run_markdown(run, figures, tmp), tmp)
+    for note in empty_cells_notes(run):
+        log.warning("%s: %s", run.path, note)
     return written
 
 

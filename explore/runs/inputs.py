@@ -18,15 +18,12 @@ before; the files it uses from then on are recorded then.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
-from typing import Any
 
 from explore.learner.strategies.registry import MODELS
 from explore.runs.config import RunConfig
-from explore.runs.layout import INPUTS_KEY, RUN_FILE
+from explore.runs.layout import INPUTS_KEY
 from explore.runs.store import RunStore, RunStoreError
-from robot.files import atomic_write
 
 BEFORE = "inputs_before"  # run.json's key of the records replaced by an allowed change
 ALLOW_FLAG = "--allow-changed-inputs"  # ergo explore's override
@@ -97,7 +94,7 @@ def describe_changes(before: list[dict[str, str]], now: list[dict[str, str]]) ->
 def record_inputs(store: RunStore, config: RunConfig) -> None:
     """Write the inputs ``config`` reads now into the run's ``run.json`` (a new run, or a run
     recorded before the record existed)."""
-    _write(store, {**store.meta, INPUTS_KEY: current_inputs(config)})
+    store.replace_meta({**store.meta, INPUTS_KEY: current_inputs(config)})
 
 
 def check_inputs(store: RunStore, config: RunConfig, allow_changed: bool = False) -> str | None:
@@ -113,7 +110,7 @@ def check_inputs(store: RunStore, config: RunConfig, allow_changed: bool = False
     now = current_inputs(config)
     recorded = store.meta.get(INPUTS_KEY)
     if not isinstance(recorded, list):
-        _write(store, {**store.meta, INPUTS_KEY: now})
+        store.replace_meta({**store.meta, INPUTS_KEY: now})
         return (
             f"{store.path}: run.json had no record of its input files (an older run): "
             f"recorded the {len(now)} it uses now"
@@ -130,11 +127,5 @@ def check_inputs(store: RunStore, config: RunConfig, allow_changed: bool = False
         )
     history = list(store.meta.get(BEFORE) or [])
     history.append({"until_episode": len(store), INPUTS_KEY: recorded})
-    _write(store, {**store.meta, INPUTS_KEY: now, BEFORE: history})
+    store.replace_meta({**store.meta, INPUTS_KEY: now, BEFORE: history})
     return f"{store.path}: resumed with changed input files ({what}); run.json keeps the old record"
-
-
-def _write(store: RunStore, meta: dict[str, Any]) -> None:
-    """Replace ``run.json`` atomically (as ``RunStore.create`` writes it) and the store's copy."""
-    atomic_write(store.path / RUN_FILE, json.dumps(meta, indent=2, sort_keys=True))
-    store.meta = meta

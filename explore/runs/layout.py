@@ -40,6 +40,9 @@ DAMAGED_FILE = "damaged.bin"  # in salvage/N/: the damaged bytes, one span after
 KEPT_FILE = "kept.bin"  # in salvage/N/: good records after the damage, framed as the history
 SALVAGE_REPORT = "salvage.json"  # in salvage/N/: every piece of the old history, where it went
 INPUTS_KEY = "inputs"  # run.json's key of the input files a run depends on
+# run.json's key of the episode count a resume's ``--episodes`` changed the plan to (the last
+# one): the config keeps the count the run was made with
+PLANNED_KEY = "planned_episodes"
 
 # Files a writer of the run opens for writing (besides writer.lock, checked by the lock), and
 # the folders whose files it writes: ``store.check_own_files`` refuses a link among them.

@@ -29,7 +29,7 @@ from explore.rigs.rig import Rig, RigError, is_physical, make_rig
 from explore.runs.config import RunConfig
 from explore.runs.explorer import Explorer, Progress
 from explore.runs.inputs import check_inputs, record_inputs
-from explore.runs.layout import HISTORY_FILE, NEW_RUN_FILES, RUN_FILE
+from explore.runs.layout import HISTORY_FILE, NEW_RUN_FILES, PLANNED_KEY, RUN_FILE
 from explore.runs.lock import LOCK_FILE, RunLock, RunLockedError, remove_lock_if_free, run_lock
 from explore.runs.metrics import recorded_episodes
 from explore.runs.record import EpisodeRecord
@@ -210,6 +210,9 @@ def open_run(
             # the same calibrations and model as when it started, unless allowed: before
             # anything is built (explore/runs/inputs.py)
             note = check_inputs(store, run_config, allow_changed_inputs)
+            planned = store.meta.get(PLANNED_KEY, store.config.get("episodes"))
+            if episodes is not None and run_config.episodes != planned:
+                store.replace_meta({**store.meta, PLANNED_KEY: run_config.episodes})
         else:
             if config is None:
                 raise RunStoreError(f"{path} holds no run and no config was given for a new one")

@@ -286,6 +286,11 @@ class RunStore:
             raise RunStoreError(f"{meta_path} has no 'config' object")
         return meta
 
+    def replace_meta(self, meta: dict[str, Any]) -> None:
+        """Replace ``run.json`` atomically (as ``create`` writes it) and this store's copy."""
+        atomic_write(self.path / RUN_FILE, json.dumps(meta, indent=2, sort_keys=True))
+        self.meta = meta
+
     # ---- history ---------------------------------------------------------------------------
     @property
     def history_path(self) -> Path:

@@ -31,6 +31,7 @@ import sys
 import termios
 import threading
 import time
+from collections.abc import Sequence
 from typing import Any
 
 from robot.cli_errors import error
@@ -190,6 +191,44 @@ class SlcanPtyBridge(OnPty):
                 self.frames_dropped += 1
 
 
+# How long the start-up check waits for each node's SDO answer, s: a sixth of the python
+# canopen library's SDO timeout (0.3 s, ``canopen.sdo.SdoClient.RESPONSE_TIMEOUT``), so that a
+# client's first SDO right after the bus's line is answered well within its own. Guess.
+READY_SDO_S = 0.05
+# SDO upload request (CiA 301: command 0x40) of the device type, object 0x1000 sub 0
+SDO_READ_DEVICE_TYPE = bytes([0x40, 0x00, 0x10, 0x00, 0, 0, 0, 0])
+
+
+def unanswered_nodes(bridge: SlcanPtyBridge, ids: Sequence[int]) -> list[int]:
+    """The node ids whose drive did not answer one SDO read of its device type each (no retry,
+    ``READY_SDO_S``) through ``bridge``'s pty, opened as a client opens it (``slcan:PATH``)."""
+    import can
+
+    from robot.canopen.bus import CanBusError, open_bus
+
+    try:
+        bus = open_bus(f"slcan:{bridge.path}")
+    except CanBusError:
+        return list(ids)
+    silent = []
+    try:
+        for i in ids:
+            bus.send(can.Message(arbitration_id=0x600 + i, data=SDO_READ_DEVICE_TYPE,
+                                 is_extended_id=False))  # fmt: skip
+            deadline = time.monotonic() + READY_SDO_S
+            while (left := deadline - time.monotonic()) > 0:
+                msg = bus.recv(timeout=left)
+                if msg is not None and msg.arbitration_id == 0x580 + i:
+                    break
+            else:
+                silent.append(i)
+    except can.CanError:
+        return list(ids)
+    finally:
+        bus.shutdown()
+    return silent
+
+
 def serve(args: argparse.Namespace) -> int:
     """Serve until interrupted (SIGINT/SIGTERM); returns the exit code. Prints the pty path and
     the camera URL, one line each, flushed, so that a parent process can read them."""
@@ -199,7 +238,12 @@ def serve(args: argparse.Namespace) -> int:
 
     from sim.canopen.drives import EmulatedDrives
     from sim.realtime import RealtimeLoop
-    from sim.standin.served import StandinError, open_served_rig, serve_until_interrupted
+    from sim.standin.served import (
+        SERVED_IDS,
+        StandinError,
+        open_served_rig,
+        serve_until_interrupted,
+    )
 
     drop_rate = float(getattr(args, "drop_rate", 0.0) or 0.0)
     delay_ms = float(getattr(args, "delay_ms", 0.0) or 0.0)
@@ -251,7 +295,9 @@ def serve(args: argparse.Namespace) -> int:
             announce = [f"canopen bus (slcan) on {bridge.path}"]
             if bridge.link:
                 announce.append(f"canopen bus link {bridge.link}")
-            return serve_until_interrupted(rig, args, announce)
+            return serve_until_interrupted(
+                rig, args, announce, lambda: unanswered_nodes(bridge, SERVED_IDS)
+            )
     finally:
         bridge_bus.shutdown()
         signal.signal(signal.SIGTERM, previous)

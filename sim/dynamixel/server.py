@@ -21,6 +21,7 @@ import os
 import select
 import threading
 import time
+from collections.abc import Sequence
 
 from robot.cli_errors import error
 from sim.dynamixel.emulator import DEFAULT_OVERLOAD_AFTER_S, DynamixelEmulator, FaultConfig
@@ -107,6 +108,35 @@ class PtyBusServer(OnPty):
         self.close()
 
 
+# How long the start-up check waits for each ping's answer, s: below the ROBOTIS SDK's ping
+# timeout at 1 Mbps (34 ms, measured: the SDK gave up on ids 1-4 pinged right after the bus's
+# line while the camera started).
+READY_PING_S = 0.02
+
+
+def unanswered_ids(server: PtyBusServer, ids: Sequence[int]) -> list[int]:
+    """The ids that did not answer one ping each (no retry, ``READY_PING_S``) through
+    ``server``'s pty, opened as a client opens it; what the client left unread is flushed."""
+    from robot.dynamixel.bus import BusError, DynamixelBus
+
+    bus = DynamixelBus(server.path, retries=0, latency_s=READY_PING_S, max_latency_s=READY_PING_S)
+    silent = []
+    try:
+        bus.open()
+        for i in ids:
+            try:
+                bus.ping(i)
+            except BusError:
+                silent.append(i)
+    except BusError:  # the port itself would not open (not yet): every id is silent
+        return list(ids)
+    finally:
+        bus.close()
+        time.sleep(READY_PING_S)  # a late answer lands, then is flushed with the rest
+        server.pty.flush_input()
+    return silent
+
+
 def faults_from_args(args: argparse.Namespace) -> FaultConfig:
     """The ``--drop-rate --corrupt-rate --delay-ms --overload-servo --seed`` flags (and
     ``--late-rate`` where the command line has it)."""
@@ -125,7 +155,12 @@ def serve(args: argparse.Namespace) -> int:
     """Serve until interrupted; returns the exit code. Prints the pty path and the camera URL
     (one line each, flushed) so that a parent process can read them."""
     from sim.realtime import RealtimeLoop
-    from sim.standin.served import StandinError, open_served_rig, serve_until_interrupted
+    from sim.standin.served import (
+        SERVED_IDS,
+        StandinError,
+        open_served_rig,
+        serve_until_interrupted,
+    )
 
     try:
         faults = faults_from_args(args)
@@ -147,4 +182,6 @@ def serve(args: argparse.Namespace) -> int:
         announce = [f"dynamixel bus on {server.path}"]
         if server.link:
             announce.append(f"dynamixel bus link {server.link}")
-        return serve_until_interrupted(rig, args, announce)
+        return serve_until_interrupted(
+            rig, args, announce, lambda: unanswered_ids(server, SERVED_IDS)
+        )

@@ -19,15 +19,18 @@ from __future__ import annotations
 import argparse
 import shutil
 import signal
+import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from robot.cli_errors import error
+from robot.spec import ergo_jr_spec
 from sim.mjpeg_server import MjpegServer
 from sim.servo_model import ServoModel, fitted_servos
 from sim.standin.hands import HOST, Hands, HandsServer
@@ -141,14 +144,45 @@ def served_twin(rig: HiddenRig, servos: ServoModel | None = None) -> tuple[Twin,
     return twin, plan
 
 
-def serve_until_interrupted(rig: ServedRig, args: Any, announce: list[str]) -> int:
-    """The tail of ``ergo twin serve`` for every bus: print ``announce`` (the bus's lines),
-    serve the camera (unless ``--no-camera``; ``--camera-port``) and the hands
-    (``--hands-port``), print their addresses and the rig's own lines (one each, flushed, for
-    a parent process to read), then block until Ctrl-C or SIGTERM (both end it cleanly: exit
-    code 0). Returns the exit code (2 when a port cannot be bound)."""
-    for line in announce:
-        print(line, flush=True)
+# Servo ids (Dynamixel) and node ids (CANopen) of the served arm's six joints: 1..6.
+SERVED_IDS = tuple(ergo_jr_spec().ids)
+# How long the start-up check keeps asking for every id to answer before it announces the bus
+# all the same (with a warning naming the silent ones), s. Guess: a start-up at load 10 on 2
+# cores answers within a few seconds.
+READY_DEADLINE_S = 30.0
+
+
+def wait_until_answering(unanswered: Callable[[], list[int]], bus: str) -> None:
+    """Ask ``unanswered()`` (the ids among ``SERVED_IDS`` that did not answer one request each,
+    through the bus's own port as a client would) until it returns none, or
+    ``READY_DEADLINE_S`` passed (then one warning on stderr naming them)."""
+    deadline = time.monotonic() + READY_DEADLINE_S
+    silent = unanswered()
+    while silent and time.monotonic() < deadline:
+        silent = unanswered()
+    if silent:
+        print(
+            f"ergo: warning: {bus} bus: ids {silent} did not answer within "
+            f"{READY_DEADLINE_S:.0f} s of start-up",
+            file=sys.stderr,
+            flush=True,
+        )
+
+
+def serve_until_interrupted(
+    rig: ServedRig,
+    args: Any,
+    announce: list[str],
+    unanswered: Callable[[], list[int]] | None = None,
+) -> int:
+    """The tail of ``ergo twin serve`` for every bus: serve the camera (unless ``--no-camera``;
+    ``--camera-port``) and the hands (``--hands-port``); once every id answers on the bus
+    (``unanswered``, see ``wait_until_answering``: a client that pings the ids right after the
+    bus's line gets every answer, as it would not while the camera starts), print
+    ``announce`` (the bus's lines), the camera's and the hands' addresses and the rig's own
+    lines (one each, flushed, for a parent process to read), then block until Ctrl-C or
+    SIGTERM (both end it cleanly: exit code 0). Returns the exit code (2 when a port cannot
+    be bound)."""
     frames = ServedFrames(rig.twin, rig.plan)
     hands = Hands(rig.twin, textures_changed=frames.textures_changed.set)
     camera = None
@@ -157,7 +191,6 @@ def serve_until_interrupted(rig: ServedRig, args: Any, announce: list[str]) -> i
         if not getattr(args, "no_camera", False):
             camera = MjpegServer(frames, port=int(getattr(args, "camera_port", 0) or 0))
             camera.start()
-            print(f"camera on {camera.url}", flush=True)
         hands_server.start()
     except OSError as exc:
         code = error(exc)
@@ -169,8 +202,14 @@ def serve_until_interrupted(rig: ServedRig, args: Any, announce: list[str]) -> i
     if threading.current_thread() is threading.main_thread():  # SIGTERM stops as Ctrl-C does
         previous = signal.signal(signal.SIGTERM, _interrupt)
     try:
-        # the hands' line and the rig's own last, once SIGTERM is handled: a parent that stops
-        # the server as soon as it has read them gets the clean exit (code 0)
+        if unanswered is not None:
+            wait_until_answering(unanswered, announce[0].split(" ", 1)[0])
+        # every line once SIGTERM is handled: a parent that stops the server as soon as it
+        # has read them gets the clean exit (code 0)
+        for line in announce:
+            print(line, flush=True)
+        if camera is not None:
+            print(f"camera on {camera.url}", flush=True)
         print(f"hands on {HOST}:{hands_server.port}", flush=True)
         for line in rig.lines:
             print(line, flush=True)

@@ -228,3 +228,37 @@ def test_no_hint_for_a_name_close_to_nothing(capsys):
     assert did_you_mean("zzz", ["rpe", "rge-efr"]) == ""
     code, _, err = _cli(["explore", "--rig", "qqqq"], capsys)
     assert code == 2 and "did you mean" not in err
+
+
+def test_the_emulated_bus_demo_report_says_why_its_cells_are_empty(tmp_path):
+    """The README's hardware-in-the-loop demo without an arena calibration: its report counts
+    0 ball and 0 end-effector cells, and says why and what to run (summary and stderr)."""
+    serve = subprocess.Popen(
+        [*ERGO, "twin", "serve", "--bus", "dynamixel"],
+        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+    )  # fmt: skip
+    try:
+        port = serve.stdout.readline().split()[-1]
+        camera = serve.stdout.readline().split()[-1]
+        run = tmp_path / "hil"
+        explore = subprocess.run(
+            [*ERGO, "explore", "--rig", "dynamixel", "--rig-id", "hil", "--port", port,
+             "--camera", camera, "--episodes", "1", "--out", str(run), "--no-progress",
+             "--rerun", "off"],
+            capture_output=True, text=True, timeout=180,
+        )  # fmt: skip
+        assert explore.returncode == 0, explore.stderr[-2000:]
+    finally:
+        serve.terminate()
+        serve.wait(timeout=30)
+    report = subprocess.run(
+        [*ERGO, "report", str(run)], capture_output=True, text=True, timeout=120
+    )
+    assert report.returncode == 0, report.stderr
+    md = (run / "report" / "summary.md").read_text()
+    assert "| ball cells reached | 0 of 900 |" in md
+    assert "| end-effector cells reached | 0 of 900 |" in md
+    for text in (md, report.stderr):
+        assert "had no arena calibration" in text
+        assert "`ergo calibrate arena --rig-id hil --camera ...`" in text
+        assert "camera tracks the ball only" in text

@@ -61,6 +61,27 @@ def dataset(runs, tmp_path_factory) -> Path:
     return out
 
 
+def test_the_docs_headless_snippet_reads_the_export(dataset, tmp_path):
+    """docs/ecosystem.md's snippet, as written but for the dataset's path, run without a
+    display."""
+    doc = (Path(__file__).parents[3] / "docs" / "ecosystem.md").read_text()
+    section = doc.split("### Reading it back without a display", 1)[1]
+    snippet = section.split("```python\n", 1)[1].split("```", 1)[0]
+    assert 'Path("datasets/A")' in snippet
+    script = tmp_path / "read_back.py"
+    script.write_text(snippet.replace('Path("datasets/A")', f"Path({str(dataset)!r})"))
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    done = subprocess.run(
+        [sys.executable, str(script)], capture_output=True, text=True, timeout=120, env=env
+    )
+    assert done.returncode == 0, done.stderr
+    frames = pq.read_table(dataset / "data/chunk-000/file-000.parquet").num_rows
+    lines = done.stdout.splitlines()
+    assert lines[0] == f"{2 * EPISODES} episodes, {frames} frames at {RATE} fps"
+    assert lines[1].startswith("episode 0 (motor babbling, run goals): 40 frames, first action [")
+    assert lines[2] == f"first video frame ({SIDE}, {SIDE}, 3)"
+
+
 def _info(ds: Path) -> dict:
     return json.loads((ds / "meta/info.json").read_text())
 

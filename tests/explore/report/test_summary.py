@@ -55,6 +55,18 @@ def test_report_of_a_run_writes_figures_and_summaries(runs, tmp_path, capsys):
     assert page.count("data:image/png;base64,") == 2 and "<table>" in page
 
 
+def test_summary_after_a_resume_says_the_new_plan(tmp_path):
+    run = tmp_path / "run"
+    args = ["explore", "--seed", "3", "--out", str(run), "--resume-or-new", "--no-progress"]
+    assert main([*args, "--episodes", "3", "--rerun", "off"]) == 0
+    assert main([*args, "--episodes", "5", "--rerun", "off"]) == 0
+    assert main(["report", str(run)]) == 0
+    assert "| episodes | 5 (planned 5) |" in (run / "report" / "summary.md").read_text()
+    assert main([*args, "--rerun", "off"]) == 0  # no count asked: the last plan stays
+    assert main(["report", str(run)]) == 0
+    assert "| episodes | 5 (planned 5) |" in (run / "report" / "summary.md").read_text()
+
+
 def test_report_default_folder_is_inside_the_run(runs):
     assert main(["report", str(runs[1])]) == 0
     assert (runs[1] / "report" / "summary.html").is_file()
