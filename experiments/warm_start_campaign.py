@@ -9,13 +9,16 @@ asked by ``--arms``:
   strategy and episodes), then the same bus run with ``--warm-start`` it;
 - ``fitted``: ``ergo calibrate dynamics`` over the bus first (docs/dynamics.md), a twin run on
   the fitted twin (``--rig sim --rig-id sSEED``), then the bus run warmed by it.
-Every part's wall time is kept, with each run's ball cells, the share of episodes that moved
-the ball and, for the warmed runs, the reality gap's line (``ergo report``).
+``--buses hidden`` instead: the "arm" is the twin in one process given the stand-in's hidden
+servos (bench only; its ball starts where the twin's does), scratch against nominal-warm, in
+seconds. Every part's wall time is kept, with each run's ball cells, the share of episodes
+that moved the ball and, for the warmed runs, the reality gap's line (``ergo report``).
 
 Resumable: everything is kept under ``--out``; a bus or a stand-in whose calibrations exist
 keeps them, a finished run is not run again, and an unfinished one is resumed
 (``--resume-or-new``); a served stand-in is served again from its seed (the same rig). Each
-row is written to ``OUT/rows/BUS-SEED.json`` as it ends, and the table to ``OUT/table.md``.
+row is written to ``OUT/rows/BUS-SEED-eEXPLORE_SEED.json`` as it ends, and the table to
+``OUT/table.md``.
 
     # development (stand-ins 300-399, exploration seeds 0-99)
     .venv/bin/python experiments/warm_start_campaign.py --buses dynamixel --seeds 301 \\
@@ -79,7 +82,51 @@ def gap_line(run: Path) -> str:
     return next((x for x in done.stdout.splitlines() if x.startswith("reality gap:")), "")
 
 
+def in_process(seed: int, args: argparse.Namespace, work: Path) -> dict[str, object]:
+    """``--buses hidden``: the "arm" is the twin in one process given the stand-in's hidden
+    servos (written as rig sSEED-hidden's dynamics.json: bench only), its ball where the twin's
+    is; the nominal arm only (a fit needs a bus)."""
+    from calibration import store
+    from sim.standin.hidden import draw_hidden
+
+    row: dict[str, object] = {"bus": "hidden", "stand-in": seed}
+    rig_id, cal = f"s{seed}-hidden", work / f"cal-hidden-{seed}"
+    if not (cal / rig_id / "dynamics.json").is_file():
+        payload = {
+            "servos": draw_hidden(seed).servos.to_dict(),
+            "recording": {"path": "hidden", "sha256": "0" * 64},
+            "held_out_rms_rad": {"nominal": 0.0, "fitted": 0.0},
+        }
+        store.save("dynamics", rig_id, payload, cal)
+    env = {**os.environ, "ERGO_CALIBRATION_DIR": str(cal)}
+    for arm in args.arms:
+        if arm == "fitted":
+            continue
+        extra = []
+        if arm == "nominal":
+            twin = work / f"twin-nominal-hidden-{seed}"
+            row["nominal twin s"] = round(twin_run(twin, args, None, cal), 1)
+            extra = ["--warm-start", str(twin)]
+        run = work / f"run-{arm}-hidden-{seed}-e{args.explore_seed}"
+        t = time.monotonic()
+        if not finished(run, args.episodes):
+            subprocess.run(
+                [*ERGO, "explore", "--rig", "sim", "--rig-id", rig_id, "--strategy",
+                 args.strategy, "--episodes", str(args.episodes), "--seed",
+                 str(args.explore_seed), "--out", str(run), "--resume-or-new", "--no-progress",
+                 *extra], check=True, capture_output=True, text=True, env=env,
+            )  # fmt: skip
+        row[f"{arm} s"] = round(time.monotonic() - t, 1)
+        n, cells, moved = cells_of(run)
+        row[f"{arm} cells"], row[f"{arm} moved"], row[f"{arm} episodes"] = cells, round(moved, 3), n
+        if arm != "scratch":
+            row[f"{arm} gap"] = gap_line(run)
+    return row
+
+
 def one_rig(bus: str, seed: int, args: argparse.Namespace, work: Path) -> dict[str, object]:
+    if bus == "hidden":
+        return in_process(seed, args, work)
     row: dict[str, object] = {"bus": bus, "stand-in": seed}
     rig_id = f"s{seed}"
     cal = work / f"cal-{bus}-{seed}"
@@ -106,7 +153,7 @@ def one_rig(bus: str, seed: int, args: argparse.Namespace, work: Path) -> dict[s
                     twin_run(twin, args, rig_id if arm == "fitted" else None, cal), 1
                 )
                 extra += ["--warm-start", str(twin)]
-            run = work / f"run-{arm}-{bus}-{seed}"
+            run = work / f"run-{arm}-{bus}-{seed}-e{args.explore_seed}"
             t = time.monotonic()
             if not finished(run, args.episodes):
                 owner.explore(run, args.episodes, args.explore_seed, args.strategy, extra,
@@ -132,7 +179,11 @@ def table(rows: list[dict[str, object]], arms: list[str]) -> str:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--buses", nargs="+", default=["dynamixel", "canopen"])
+    p.add_argument(
+        "--buses", nargs="+", choices=("dynamixel", "canopen", "hidden"),
+        default=["dynamixel", "canopen"],
+        help="hidden: the twin in one process given the stand-in's hidden servos (no bus)",
+    )  # fmt: skip
     p.add_argument("--seeds", nargs="+", type=int, required=True, help="stand-in seeds")
     p.add_argument("--arms", nargs="+", choices=ARMS, default=list(ARMS))
     p.add_argument("--episodes", type=int, default=300, help="episodes of each bus run")
@@ -149,7 +200,8 @@ def main() -> None:
         for seed in args.seeds:
             row = one_rig(bus, seed, args, args.out)
             rows.append(row)
-            (args.out / "rows" / f"{bus}-{seed}.json").write_text(json.dumps(row, indent=2))
+            name = f"{bus}-{seed}-e{args.explore_seed}.json"
+            (args.out / "rows" / name).write_text(json.dumps(row, indent=2))
             print(json.dumps(row), flush=True)
     (args.out / "table.md").write_text(table(rows, args.arms) + "\n")
     print(table(rows, args.arms))
