@@ -254,3 +254,18 @@ def test_the_report_shows_the_reality_gap(warmed, tmp_path, capsys):
     assert f"{n} episodes played the prior's parameters" in line and "median distance" in line
     assert (out / "reality_gap.png").stat().st_size > 10_000
     assert "reality gap (the prior's outcome against the arm's)" in (out / "summary.md").read_text()
+
+
+def test_a_campaign_warms_each_trial(prior, tmp_path):
+    out = tmp_path / "campaign"
+    args = ["experiment", "--strategies", "rge-efr", "--seeds", "2", "--episodes", "6",
+            "--out", str(out), "--warm-start", str(prior), "--rig", "sim", "--rig-id", ARM_ID,
+            "--option", f"bootstrap={BOOT}", "--rig-option", "render_size=[64,64]",
+            "--no-progress", "--no-report"]  # fmt: skip
+    assert main(args) == 0
+    for seed in (0, 1):
+        run = out / "rge-efr" / f"seed-{seed}"
+        meta = json.loads((run / "run.json").read_text())
+        assert meta["config"]["warm_start"] == str(prior.resolve())
+        assert meta[PRIOR_KEY]["episodes"] == PRIOR_EPISODES
+        assert read_history(run).records[0].kind == "explore"  # no bootstrap: the prior's
