@@ -121,6 +121,7 @@ def plan_trials(
     options: dict[str, dict[str, Any]],
     rig: dict[str, Any],
     cid: str | None,
+    warm_start: Path | None = None,
 ) -> list[Trial]:
     """The trials not finished yet. Raises CampaignError when a run folder holds another run
     (strategy, seed or rig) than the campaign's, or a run made with another value of an
@@ -128,6 +129,7 @@ def plan_trials(
     compared: the run checks its model's file itself)."""
     from explore.learner.strategies import STRATEGIES
     from explore.runs.config import RunConfig
+    from explore.runs.prior import prior_folder
     from explore.runs.store import RunStore, RunStoreError
 
     todo = []
@@ -156,8 +158,9 @@ def plan_trials(
                         )
                 if final_cells(run_dir)[0] >= episodes:
                     continue  # finished
+            prior = None if warm_start is None else str(prior_folder(warm_start, s, seed))
             todo.append(Trial.of(str(run_dir), s, seed, episodes, options[s], rig, cid,
-                                 trial_resources(rig)))  # fmt: skip
+                                 trial_resources(rig), prior))  # fmt: skip
     return todo
 
 
@@ -175,12 +178,14 @@ def run_campaign(
     rig: dict[str, Any] | None = None,
     retries: int = DEFAULT_RETRIES,
     preset: str | None = None,
+    warm_start: Path | None = None,
 ) -> list[dict[str, Any]]:
     """Run every (strategy, seed) not finished yet on ``backend``; returns the summary rows
     (and writes ``out/summary.csv``). ``models``: representation flag ("vae", "betavae",
     "sae") -> model path, for the strategies that need one; ``preset``: a named preset of
-    strategy options (``explore.learner.presets``), under ``options``. Raises
-    ``CampaignError``."""
+    strategy options (``explore.learner.presets``), under ``options``; ``warm_start``: a twin
+    run or campaign whose episodes warm each trial (``explore.runs.prior.prior_folder``).
+    Raises ``CampaignError``."""
     from explore.learner.strategies import STRATEGIES
     from explore.rigs.hardware import check_rig_id
     from explore.rigs.rig import RigError
@@ -214,7 +219,7 @@ def run_campaign(
     run = load_backend(backend)
     opts = {s: strategy_options(s, models or {}, options or {}, preset) for s in strategies}
     out = out.resolve()  # workers elsewhere see the same absolute path
-    todo = plan_trials(out, strategies, seeds, episodes, opts, rig, campaign_id(out))
+    todo = plan_trials(out, strategies, seeds, episodes, opts, rig, campaign_id(out), warm_start)
     if todo:
         run(todo, BackendSettings(jobs, progress, ray_address, retries))
     return write_summary(out, strategies, seeds)

@@ -82,9 +82,11 @@ class Trial:
         rig: dict[str, Any] | None = None,
         campaign_id: str | None = None,
         resources: dict[str, float] | None = None,
+        warm_start: str | None = None,
     ) -> Trial:
         """The trial of ``strategy`` with ``options`` and ``seed`` on ``rig`` (a ``RigConfig``
-        as a dict; the default rig when None) until ``episodes``."""
+        as a dict; the default rig when None) until ``episodes``, warmed by the prior run
+        ``warm_start`` (``explore/runs/prior.py``) when given."""
         from explore.runs.config import RunConfig, StrategyConfig
 
         r = rig or {}
@@ -94,7 +96,7 @@ class Trial:
         )
         config = RunConfig(
             rig=rig_config, strategy=StrategyConfig(strategy, dict(options or {})), seed=seed,
-            episodes=episodes,
+            episodes=episodes, warm_start=warm_start,
         )  # fmt: skip
         return cls(str(run_dir), config, campaign_id, dict(resources or {}))
 

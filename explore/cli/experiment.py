@@ -76,6 +76,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument(
+        "--warm-start", type=Path, default=None, metavar="TWIN_RUN",
+        help="a twin run (every trial warmed by it) or a twin campaign (each trial by its "
+        "STRATEGY/seed-S run) whose episodes seed the trials' learners (docs/warm_start.md)",
+    )  # fmt: skip
+    p.add_argument(
         "--no-report", action="store_true",
         help="skip CAMPAIGN/report (coverage curves, summary.md with the Welch test, from the "
         "runs' metrics.csv: seconds), written at the end by default; `ergo report CAMPAIGN "
@@ -150,7 +155,7 @@ def run_experiment(args: argparse.Namespace) -> int:
             {model.flag: getattr(args, model.flag) for model in MODELS},
             parse_key_values(args.option, "--option"), progress=not args.no_progress,
             backend=args.backend, ray_address=args.ray_address, rig=rig, retries=args.retries,
-            preset=args.preset,
+            preset=args.preset, warm_start=args.warm_start,
         )  # fmt: skip
     except CampaignError as exc:
         raise CliError(str(exc)) from exc

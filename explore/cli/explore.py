@@ -102,6 +102,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="resume even though the run's calibration files or goal-space model changed "
         "since it started (run.json keeps the old record)",
     )  # fmt: skip
+    p.add_argument(
+        "--warm-start", type=Path, default=None, metavar="TWIN_RUN",
+        help="a run of the same strategy made on the twin (--rig sim, with or without --rig-id) "
+        "whose episodes seed this run's learner, kept apart from its own (docs/warm_start.md)",
+    )  # fmt: skip
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_rerun_arguments(p)
     p.set_defaults(func=run_explore)
@@ -132,6 +137,7 @@ def _new_config(args: argparse.Namespace) -> Any:
         strategy=StrategyConfig(name, _strategy_options(args, name)),
         seed=DEFAULT_SEED if args.seed is None else args.seed,
         episodes=DEFAULT_EPISODES if args.episodes is None else args.episodes,
+        warm_start=None if args.warm_start is None else str(args.warm_start.resolve()),
     )
 
 
@@ -148,6 +154,12 @@ def _refuse_changes(args: argparse.Namespace) -> Any:
                 raise CliError(
                     f"{flag} {value} differs from the run's {held!r}: a run keeps its config"
                 )
+        given_prior = getattr(args, "warm_start", None)
+        if given_prior is not None and str(given_prior.resolve()) != config.warm_start:
+            raise CliError(
+                f"--warm-start {given_prior} differs from the run's prior "
+                f"({config.warm_start or 'none'}): a run keeps its prior"
+            )
         given = _strategy_options(args, config.strategy.name)
         # each option given as the run holds it (a new run's run.json also holds the options
         # whose default changed, written out: runs.config.CHANGED_STRATEGY_DEFAULTS)
@@ -246,6 +258,8 @@ def run_explore(args: argparse.Namespace) -> int:
     # the figure first: it needs only metrics.csv, and closing a viewer's stream can take time
     for line in _coverage_curve(store.path, len(store)) + closer.close():
         print(f"not written: {line}", file=sys.stderr)
+    if run.warm is not None:
+        print(run.warm.summary(), file=sys.stderr)
     last = explorer.metrics.rows[-1] if explorer.metrics.rows else None
     cells = last["ball_cells"] if last else 0
     print(f"{store.path}: {len(store)} episodes, {cells} ball cells reached")

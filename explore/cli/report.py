@@ -54,7 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run_report(args: argparse.Namespace) -> int:
     from explore.report.summary import report
-    from explore.runs.store import RunStoreError
+    from explore.runs.store import RunStore, RunStoreError
 
     if not args.path.is_dir():
         raise CliError(f"{args.path} is not a folder")
@@ -64,6 +64,13 @@ def run_report(args: argparse.Namespace) -> int:
         raise CliError(str(exc)) from exc
     for p in written:
         print(p)
+    from explore.report.reality_gap import gap_line
+    from explore.report.run_data import run_scene
+
+    if RunStore.is_run(args.path):  # a run warmed by a prior: its reality gap in one line
+        line = gap_line(args.path, run_scene(RunStore.read_meta(args.path)["config"]).unit)
+        if line is not None:
+            print(f"reality gap: {line}")
     return 0
 
 

@@ -41,6 +41,7 @@ from explore.report.figures import (
     sample_std,
     scatter_figure,
 )
+from explore.report.reality_gap import gap_figure, gap_line
 from explore.report.run_data import RunData, find_campaign_runs, load_run
 from explore.runs.layout import COVERAGE_FILE, INPUTS_KEY
 from explore.runs.store import RunStore
@@ -118,6 +119,9 @@ def _run_markdown(run: RunData, figures: list[Path], out_dir: Path) -> str:
         ["kinds", kinds or "-"],
         ["mean settle time", f"{run.settle_s.mean() if run.n else 0:.2f} s"],
     ]
+    gap = gap_line(run.path, run.scene.unit)  # a run warmed by a prior (docs/warm_start.md)
+    if gap is not None:
+        rows.append(["reality gap (the prior's outcome against the arm's)", gap])
     parts = [
         f"# Run report: {run.path.name}",
         "",
@@ -331,6 +335,10 @@ def report_run(run_path: Path, out_dir: Path | None = None) -> list[Path]:
         goals = goals_figure(run, tmp / "goals.png")
         if goals is not None:
             figures.append(goals)
+        scene = run.scene
+        gap = gap_figure(run.path, tmp / "reality_gap.png", scene.ball_half_width, scene.unit)
+        if gap is not None:
+            figures.append(gap)
         written += figures + _write_summaries(_run_markdown(run, figures, tmp), tmp)
     for note in empty_cells_notes(run):
         log.warning("%s: %s", run.path, note)

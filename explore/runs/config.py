@@ -43,7 +43,7 @@ EPISODE_BOUNDS: dict[str, tuple[float, float]] = {
     "settle_check_s": (0.001, 60.0),
     "obs_size": (8, 1024),
 }
-TOP_LEVEL = ("rig", "strategy", "seed", "episodes", "episode")
+TOP_LEVEL = ("rig", "strategy", "seed", "episodes", "episode", "warm_start")
 # Strategy options whose default changed after runs had been made without the key in their
 # run.json: option -> the value those runs were made with.
 CHANGED_STRATEGY_DEFAULTS: dict[str, Any] = {
@@ -84,6 +84,9 @@ class RunConfig:
         seed: the run's seed (each episode draws from ``default_rng([seed, episode])``).
         episodes: episodes the run must hold when it ends.
         episode: episode timing.
+        warm_start: the folder of a run made elsewhere (the twin) whose episodes seed this
+            run's learner, absolute (``explore/runs/prior.py``); None: none. Written into
+            ``run.json`` only when given.
     """
 
     rig: RigConfig = field(default_factory=RigConfig)
@@ -91,16 +94,20 @@ class RunConfig:
     seed: int = DEFAULT_SEED
     episodes: int = DEFAULT_EPISODES
     episode: EpisodeConfig = field(default_factory=EpisodeConfig)
+    warm_start: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The ``run.json`` form: names, options as given, every episode setting."""
-        return {
+        out = {
             "rig": self.rig.to_dict(),
             "strategy": self.strategy.to_dict(),
             "seed": self.seed,
             "episodes": self.episodes,
             "episode": dataclasses.asdict(self.episode),
         }
+        if self.warm_start is not None:
+            out["warm_start"] = self.warm_start
+        return out
 
     def with_overrides(
         self, episodes: int | None = None, rig_options: dict[str, Any] | None = None
@@ -180,12 +187,16 @@ class RunConfig:
         if not is_int(episodes) or episodes < 1:
             top.fail("episodes", f"must be an integer >= 1, got {episodes!r}")
         episode = _episode(top.sub("episode")) if "episode" in config else EpisodeConfig()
+        warm_start = top.data.get("warm_start")
+        if warm_start is not None and (not isinstance(warm_start, str) or not warm_start):
+            top.fail("warm_start", f"must be a run folder's path, got {warm_start!r}")
         return cls(
             rig=RigConfig(rig_name, rig_id, rig_opts),
             strategy=StrategyConfig(name, s_opts),
             seed=seed,
             episodes=episodes,
             episode=episode,
+            warm_start=warm_start,
         )
 
 

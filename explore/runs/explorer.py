@@ -17,6 +17,7 @@ from explore.rigs.episodes import EpisodeConfig, EpisodePlayer
 from explore.rigs.rig import Rig
 from explore.runs.layout import FAULTS_FILE
 from explore.runs.metrics import METRICS_FILE, MetricsLog
+from explore.runs.prior import WarmStart
 from explore.runs.record import EpisodeRecord
 from explore.runs.store import RunStore, RunStoreError
 from robot.files import atomic_write
@@ -81,6 +82,8 @@ class Explorer:
         episode_config: episode timing.
         on_episode: called with a ``Progress`` after every stored episode.
         on_record: called with each new ``EpisodeRecord`` (recorders, viewers).
+        warm: the prior attached to ``strategy`` (``explore/runs/prior.py``), shown each
+            record just before the strategy learns it; None: none.
     """
 
     def __init__(
@@ -92,8 +95,10 @@ class Explorer:
         episode_config: EpisodeConfig | None = None,
         on_episode: Callable[[Progress], None] | None = None,
         on_record: Callable[[EpisodeRecord], None] | None = None,
+        warm: WarmStart | None = None,
     ) -> None:
         self.rig = rig
+        self.warm = warm
         self.strategy = strategy
         self.store = store
         self.seed = seed
@@ -106,12 +111,17 @@ class Explorer:
     def _replay(self) -> None:
         """Rebuild strategy and metrics from the stored history (after a resume)."""
         for rec in self.store:
+            if self.warm is not None:
+                self.warm.before_update(rec, replay=True)
             self.strategy.update(rec)
             self.metrics.update(rec)
         try:
             self.metrics.rewrite()
+            if self.warm is not None:
+                self.warm.rewrite()
         except OSError as exc:
-            raise RunStoreError(f"cannot write {self.metrics.path}: {exc.strerror or exc}") from exc
+            where = exc.filename or self.metrics.path
+            raise RunStoreError(f"cannot write {where}: {exc.strerror or exc}") from exc
 
     def run(self, n_episodes: int) -> None:
         """Explore until the store holds ``n_episodes`` episodes."""
@@ -171,6 +181,8 @@ class Explorer:
         count it. Returns the episode's metrics row."""
         rec = self.episode(k)
         self.store.append(rec)
+        if self.warm is not None:
+            self.warm.before_update(rec)
         self.strategy.update(rec)
         row = self.metrics.update(rec)
         try:

@@ -5,12 +5,15 @@ their names from here. What each file holds and when it is written: ``explore/ru
 
 ``RUN/``:
 - ``run.json`` (``RUN_FILE``): format, config, creation time, the input files it depends on
-  (under ``INPUTS_KEY``, ``explore/runs/inputs.py``);
+  (under ``INPUTS_KEY``, ``explore/runs/inputs.py``) and the prior it is warmed by (under
+  ``PRIOR_KEY``, ``explore/runs/prior.py``);
 - ``history.bin`` (``HISTORY_FILE``): the episodes, each framed (``frame``) as
   ``b"EREC" | u32 length | u32 CRC-32 of the payload | payload``, little endian;
 - ``history.synced`` (``SYNCED_FILE``): a length of the history known to be on disk;
 - ``frames/episode-NNNNNN.npz`` (``FRAMES_DIR``, ``frames_path``): camera frames;
 - ``writer.lock`` (``WRITER_LOCK_FILE``): the writer's lock (``explore/runs/lock.py``);
+- ``reality_gap.csv`` (``REALITY_GAP_FILE``): a run warmed by a prior, its episodes answered
+  by the prior, with the prior's outcome beside the arm's (``explore/runs/prior.py``);
 - ``metrics.csv`` (``METRICS_FILE``), ``faults.json`` (``FAULTS_FILE``), ``trial.json``
   (``TRIAL_FILE``, a campaign's trial), ``coverage.png`` (``COVERAGE_FILE``), ``recording.rrd``
   (``RECORDING_FILE``, the rerun recording);
@@ -43,19 +46,22 @@ INPUTS_KEY = "inputs"  # run.json's key of the input files a run depends on
 # run.json's key of the episode count a resume's ``--episodes`` changed the plan to (the last
 # one): the config keeps the count the run was made with
 PLANNED_KEY = "planned_episodes"
+PRIOR_KEY = "prior"  # run.json's key of the prior a run is warmed by (explore/runs/prior.py)
+REALITY_GAP_FILE = "reality_gap.csv"  # the prior's outcomes beside the arm's (runs/prior.py)
 
 # Files a writer of the run opens for writing (besides writer.lock, checked by the lock), and
 # the folders whose files it writes: ``store.check_own_files`` refuses a link among them.
 WRITER_FILES = (
     RUN_FILE, f"{RUN_FILE}.tmp", HISTORY_FILE, SYNCED_FILE, METRICS_FILE, f"{METRICS_FILE}.tmp",
     FAULTS_FILE, f"{FAULTS_FILE}.tmp", f"{FAULTS_FILE}.bad", TRIAL_FILE, COVERAGE_FILE,
+    REALITY_GAP_FILE, f"{REALITY_GAP_FILE}.tmp",
 )  # fmt: skip
 WRITER_DIRS = (FRAMES_DIR, SALVAGE_DIR)
 # What a new run writes before its first episode is stored (``open_run.discard_empty_run``
 # removes only these, and only from a run that holds no episode).
 NEW_RUN_FILES = (
     HISTORY_FILE, METRICS_FILE, FAULTS_FILE, TRIAL_FILE, RECORDING_FILE, RUN_FILE,
-    f"{RUN_FILE}.tmp",
+    f"{RUN_FILE}.tmp", REALITY_GAP_FILE,
 )  # fmt: skip
 
 

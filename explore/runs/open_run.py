@@ -32,6 +32,7 @@ from explore.runs.inputs import check_inputs, record_inputs
 from explore.runs.layout import HISTORY_FILE, NEW_RUN_FILES, PLANNED_KEY, RUN_FILE
 from explore.runs.lock import LOCK_FILE, RunLock, RunLockedError, remove_lock_if_free, run_lock
 from explore.runs.metrics import recorded_episodes
+from explore.runs.prior import WarmStart, attach_prior, check_prior, record_prior
 from explore.runs.record import EpisodeRecord
 from explore.runs.store import RunStore, RunStoreError, check_own_files, make_run_dir
 
@@ -55,6 +56,8 @@ class OpenRun:
         missing: episodes the run had stored (``metrics.csv`` says) that its history no
             longer holds (cut short, emptied or deleted): they will be run again.
         inputs_note: what checking the run's input files found worth saying on resume.
+        warm: the prior the run is warmed by, attached to ``strategy`` (None: none;
+            ``explore/runs/prior.py``).
     """
 
     config: RunConfig
@@ -67,7 +70,8 @@ class OpenRun:
     missing: int = 0
     _held: ExitStack = field(default_factory=ExitStack, repr=False)
     #: what the check of the input files found worth saying on resume (``explore.runs.inputs``)
-    inputs_note: str | None = None
+    inputs_note: list[str] | None = None
+    warm: WarmStart | None = None
 
     @property
     def path(self) -> Path:
@@ -82,6 +86,7 @@ class OpenRun:
         return Explorer(
             self.rig, self.strategy, self.store, seed=self.config.seed,
             episode_config=self.config.episode, on_episode=on_episode, on_record=on_record,
+            warm=self.warm,
         )  # fmt: skip
 
     def explore(
@@ -114,8 +119,7 @@ class OpenRun:
         takeover = self.lock.describe_takeover() if self.lock is not None else None
         if takeover:
             out.append(takeover)
-        if self.inputs_note:
-            out.append(self.inputs_note)
+        out += [note for note in self.inputs_note or []]
         return out
 
     def close(self) -> None:
@@ -210,6 +214,9 @@ def open_run(
             # the same calibrations and model as when it started, unless allowed: before
             # anything is built (explore/runs/inputs.py)
             note = check_inputs(store, run_config, allow_changed_inputs)
+            # the same prior as when it started, unless allowed (explore/runs/prior.py)
+            warmed, prior_note = check_prior(store, run_config, allow_changed_inputs)
+            notes = [n for n in (note, prior_note) if n]
             planned = store.meta.get(PLANNED_KEY, store.config.get("episodes"))
             if episodes is not None and run_config.episodes != planned:
                 store.replace_meta({**store.meta, PLANNED_KEY: run_config.episodes})
@@ -219,11 +226,15 @@ def open_run(
             run_config = config.with_overrides(episodes, rig_options).checked()
             run_config = run_config.with_defaults_pinned()
             store = None
-            note = None
+            notes = []
+            warmed = run_config.warm_start is not None
         # rig and strategy before a new run folder exists: a bad name leaves nothing
         the_rig = rig if rig is not None else make_rig(run_config.rig)
         the_strategy = strategy if strategy is not None else strategy_for(run_config, the_rig)
         _check_sees_ball(run_config, the_rig, the_strategy)
+        # the prior read and attached before a new run folder exists: a bad one leaves nothing
+        warm, prior_run = attach_prior(path, run_config, the_rig, the_strategy) if warmed else (
+            None, None)  # fmt: skip
         if store is None:
             made = not path.exists()
             make_run_dir(path)
@@ -247,13 +258,15 @@ def open_run(
                 ) from exc
             held.callback(store.close)
             record_inputs(store, run_config)
+        if prior_run is not None:
+            record_prior(store, prior_run)
         store.sync_interval_s = the_rig.sync_interval_s
         missing = 0
         if resume:
             missing = max(0, (recorded_episodes(path) or 0) - len(store))
         return OpenRun(
             run_config, store, the_rig, the_strategy, len(store), lock, not resume, missing, held,
-            inputs_note=note,
+            inputs_note=notes, warm=warm,
         )  # fmt: skip
     except BaseException:
         held.close()
