@@ -35,7 +35,7 @@ import numpy as np
 
 from explore.learner.dmp import N_PARAMS
 from explore.learner.experience import Experience, Observation
-from explore.learner.goal_sampling import make_sampler
+from explore.learner.goal_sampling import N_DRAWS, make_sampler
 from explore.learner.goal_spaces import (
     EngineeredGoalSpace,
     GoalSpace,
@@ -161,7 +161,7 @@ class GoalExploration(Strategy):
             competence=s.competence,
             start=s.interest_start,
         )
-        self.sampler = make_sampler(s.goal_sampling, dims, s.goal_misses)
+        self.sampler = make_sampler(s.goal_sampling, dims, s.goal_misses, context_dim)
         if isinstance(space, LatentGoalSpace):
             self._last_latent = np.zeros(space.dim)
 
@@ -225,7 +225,7 @@ class GoalExploration(Strategy):
         if self.sampler is not None:
             goal = record.goal if directed else None
             k = record.module if directed else -1
-            self.sampler.learn(parts, k, goal, self.low[k], self.high[k])
+            self.sampler.learn(parts, k, goal, self.low[k], self.high[k], context)
         if directed:
             k = record.module
             exploit = record.kind == "exploit"
@@ -275,14 +275,25 @@ class GoalExploration(Strategy):
     def _random(self, rng: np.random.Generator) -> Proposal:
         return Proposal(theta=rng.uniform(-1.0, 1.0, self.n_params), kind="random")
 
-    def sample_goal(self, module: int, rng: np.random.Generator) -> np.ndarray:
+    def sample_goal(
+        self, module: int, rng: np.random.Generator, context: np.ndarray | None = None
+    ) -> np.ndarray:
         """A goal in ``module``: chosen by the ``goal_sampling`` sampler where it has a
-        candidate, else one draw of ``goals``: uniform in the bounds seen so far, uniform in
-        [-1, 1]^d (``box``), or clipped N(0, 1) (``normal``)."""
+        candidate (``context``: the inverse model's context now, its reachability guard),
+        else one draw of ``goals``: uniform in the bounds seen so far, uniform in [-1, 1]^d
+        (``box``), or clipped N(0, 1) (``normal``)."""
         if self.sampler is not None:
-            goal = self.sampler.goal(module, rng, self.low[module], self.high[module])
+            lo, hi = self.low[module], self.high[module]
+            drawn = None
+            if self.sampler.mode == "sparse":
+                drawn = np.stack([self._draw_goal(module, rng) for _ in range(N_DRAWS)])
+            goal = self.sampler.goal(module, rng, lo, hi, context, drawn)
             if goal is not None:
                 return goal
+        return self._draw_goal(module, rng)
+
+    def _draw_goal(self, module: int, rng: np.random.Generator) -> np.ndarray:
+        """One draw of the goal distribution ``goals`` in ``module``."""
         d = len(self.low[module])
         if self.goals == "normal":
             return np.clip(rng.normal(0.0, 1.0, d), -NORMAL_CLIP, NORMAL_CLIP)
@@ -301,14 +312,13 @@ class GoalExploration(Strategy):
         module = self.interest.choose(rng) if self.modular else 0
         if self.policy.size(module) == 0:
             return self._random(rng)
-        goal = self.sample_goal(module, rng)
+        ctx = self._propose_context(context)
+        goal = self.sample_goal(module, rng, ctx)
         exploit = self.exploit > 0 and rng.random() < self.exploit
         if self._plays_random(module):
             theta = rng.uniform(-1.0, 1.0, self.n_params)
         else:
-            theta = self.policy.infer(
-                module, self._propose_context(context), goal, rng, 0.0 if exploit else self.sigma
-            )
+            theta = self.policy.infer(module, ctx, goal, rng, 0.0 if exploit else self.sigma)
         return Proposal(
             theta=theta, goal=goal, module=module, kind="exploit" if exploit else "explore"
         )
@@ -321,7 +331,7 @@ class GoalExploration(Strategy):
             module = self.interest.choose(rng) if self.modular else 0
             if self.policy.size(module) == 0:
                 return self._random(rng)
-            goal = self.sample_goal(module, rng)
+            goal = self.sample_goal(module, rng, ctx)
             base = None if self._plays_random(module) else self.policy.nearest_theta(
                 module, ctx, goal)  # fmt: skip
         else:

@@ -96,8 +96,10 @@ class GoalExplorationOptions:
         goal_sampling: how a goal is chosen in its module (``explore.learner.goal_sampling``):
             "uniform" (default, the paper's: one draw of the ``goals`` distribution),
             "density" (the least dense of candidates among the reached outcomes, after MEGA)
-            or "frontier" (that outcome moved one bandwidth out of the reached set). ``goals``
-            applies to "uniform" (and to the others' fallback when no outcome is a candidate).
+            "frontier" (that outcome moved one bandwidth out of the reached set) or "sparse"
+            (the least dense of 10 draws of ``goals`` near the reached set). ``goals`` applies
+            to "uniform" and "sparse" (and to the others' fallback when no outcome is a
+            candidate).
         goal_misses: "density"'s reachability guard: a reached outcome aimed at and missed
             this many times is no longer a candidate (default 3; 0: no guard).
     """

@@ -82,6 +82,38 @@ def test_density_prefers_sparse_regions_among_many_outcomes():
     assert far.mean() > 0.8  # against 2% of the outcomes drawn uniformly
 
 
+def test_with_a_context_the_goal_was_reached_from_a_context_near_it():
+    # outcomes reached from two contexts: from A a cluster and a few spread ones, from B only
+    # spread ones (sparser still). From A, the goal is one of A's spread outcomes, not B's
+    rng = np.random.default_rng(3)
+    from_a = np.vstack([rng.normal(0.0, 0.02, (280, 2)), rng.uniform(-1, 1, (20, 2))])
+    from_b = rng.uniform(-1, 1, (300, 2)) * 3
+    a, b = np.array([0.0, 0.0, 1.0]), np.array([1.0, 1.0, 0.0])
+    s = GoalSampler("density", [2], context_dim=3)
+    lo, hi = np.full(2, -3.0), np.full(2, 3.0)
+    for o, c in [(o, a) for o in from_a] + [(o, b) for o in from_b]:
+        s.learn([o], -1, None, lo, hi, c)
+    for k in range(20):
+        goal = s.goal(0, np.random.default_rng(k), lo, hi, a + 0.01)
+        assert any(np.array_equal(goal, o) for o in from_a[280:])
+    # without the context, B's sparser outcomes win
+    blind = [s.goal(0, np.random.default_rng(k), lo, hi) for k in range(20)]
+    assert sum(any(np.array_equal(g, o) for o in from_b) for g in blind) >= 15
+
+
+def test_sparse_takes_the_least_dense_draw_near_the_reached_set():
+    rng = np.random.default_rng(4)
+    pts = np.vstack([rng.normal(0.0, 0.05, (200, 2)), rng.uniform(-1, 1, (40, 2))])
+    s = sampler_over(pts, "sparse")
+    lo, hi = pts.min(0), pts.max(0)
+    in_cluster, in_a_hole, far_out = [0.0, 0.0], [0.7, -0.7], [30.0, 30.0]
+    drawn = np.array([in_cluster, in_a_hole, far_out])
+    goal = s.goal(0, np.random.default_rng(0), lo, hi, drawn=drawn)
+    assert np.array_equal(goal, in_a_hole)  # far_out is sparser still, but out of reach
+    alone = s.goal(0, np.random.default_rng(0), lo, hi, drawn=np.array([far_out, far_out]))
+    assert np.array_equal(alone, far_out)  # nothing near: the first draw, as uniform
+
+
 def test_frontier_steps_one_bandwidth_out_of_the_reached_set():
     ref = np.array([[0.0, 0.0], [0.1, 0.0], [0.2, 0.0]])
     h = np.array([0.1, 0.1])
@@ -118,7 +150,8 @@ def test_the_guard_drops_an_outcome_missed_goal_misses_times():
 
 def test_bad_goal_sampling_values_are_one_line_errors():
     expected = (
-        r"option goal_sampling must be one of 'uniform', 'density', 'frontier', got 'dense' "
+        r"option goal_sampling must be one of 'uniform', 'density', 'frontier', 'sparse', got "
+        r"'dense' "
         r"\(did you mean 'density'\?\)$"
     )
     with pytest.raises(StrategyError, match=expected):
@@ -161,7 +194,7 @@ def same(a: list, b: list) -> bool:
     return len(a) == len(b) and all(x.equals(y) for x, y in zip(a, b, strict=True))
 
 
-@pytest.mark.parametrize("sampling", ["density", "frontier"])
+@pytest.mark.parametrize("sampling", ["density", "frontier", "sparse"])
 @pytest.mark.parametrize("strategy", ["rge-efr", "mge-efr", "rge-vae", "mge-sae"])
 def test_runs_are_deterministic_and_resume_to_the_same_history(
     strategy, sampling, models, tmp_path
