@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -136,25 +137,19 @@ def confinement(run: RunData) -> Confinement:
     )
 
 
-def arena_figure(run: RunData, out: Path) -> Path | None:
-    """The run's goals and outcomes over the arena (module doc); None for a run without goals
-    placed in the arena."""
-    c = confinement(run)
-    has_goal = np.all(np.isfinite(c.goal_xy), axis=1)
-    if not has_goal.any():
-        return None
+def draw_arena(ax: Any, run: RunData, c: Confinement) -> None:
+    """The arena from above on ``ax``: the ring and its sectors (those no moved ball entered
+    shaded), the ball after each episode, the goals placed in the arena (module doc)."""
     ball, scene, u = run.ball, run.scene, run.scene.unit
     assert ball is not None
-    ring = scene.ring is not None
-    fig, axes = _new_figure(2 if ring else 1, squeeze=False)
-    ax = axes[0][0]
+    has_goal = np.all(np.isfinite(c.goal_xy), axis=1)
     h = scene.ball_half_width
     _square(ax, h, f"the metric's square (+-{h} {u})", u)
-    if ring:
+    if scene.ring is not None:
         t = np.linspace(0, 2 * np.pi, 361)
-        for r in scene.ring:  # type: ignore[union-attr]
+        for r in scene.ring:
             ax.plot(r * np.cos(t), r * np.sin(t), color="0.3", lw=0.8)
-        reach = scene.ring[1] * 1.05  # type: ignore[index]
+        reach = scene.ring[1] * 1.05
         for k in range(N_SECTORS):
             a0 = np.radians(k * SECTOR_DEG)
             ax.plot([0, reach * np.cos(a0)], [0, reach * np.sin(a0)], color="0.8", lw=0.5)
@@ -172,6 +167,18 @@ def arena_figure(run: RunData, out: Path) -> Path | None:
     if c.sectors_reached is not None:
         reached = f"\nsectors a moved ball entered: {c.sectors_reached} of {N_SECTORS} (unshaded)"
     ax.set_title(f"Goals ({c.how}) and outcomes{reached}", fontsize=9)
+
+
+def arena_figure(run: RunData, out: Path) -> Path | None:
+    """The run's goals and outcomes over the arena (module doc); None for a run without goals
+    placed in the arena."""
+    c = confinement(run)
+    if not np.all(np.isfinite(c.goal_xy), axis=1).any():
+        return None
+    u = run.scene.unit
+    ring = run.scene.ring is not None
+    fig, axes = _new_figure(2 if ring else 1, squeeze=False)
+    draw_arena(axes[0][0], run, c)
     if ring and c.goal_sectors is not None and c.ball_sectors is not None:
         right = axes[0][1]
         centres = np.arange(N_SECTORS) * SECTOR_DEG + SECTOR_DEG / 2
