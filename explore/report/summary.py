@@ -2,7 +2,8 @@
 of runs, with its figures (explore/report/figures.py).
 
 A run report (``report_run``) writes into its output folder ``coverage.png``, ``scatter.png``,
-``goals.png`` (only when the strategy set goals), ``summary.md`` and ``summary.html``.
+``goals.png`` and ``arena.png`` (only when the strategy set goals; ``arena.png``: goals and
+outcomes over the arena, explore/report/arena.py), ``summary.md`` and ``summary.html``.
 
 A campaign is a folder ``CAMPAIGN/STRATEGY/RUN/`` (e.g. ``CAMPAIGN/rpe/seed-0/``). Its report
 (``report_campaign``) writes ``campaign_coverage.png`` and the summaries from each run's
@@ -31,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from explore.report.arena import N_SECTORS, arena_figure, confinement
 from explore.report.figures import (
     FIG_PX,
     N_CELLS,
@@ -50,8 +52,9 @@ log = logging.getLogger(__name__)
 
 INCOMPLETE = "REPORT_INCOMPLETE"  # in an output folder whose report stopped being moved in
 # every file a report may write: those this report did not write are stale, removed
-REPORT_FILES = (COVERAGE_FILE, "scatter.png", "goals.png", "campaign_coverage.png",
-                "campaign_scatter.png", "summary.md", "summary.html")  # fmt: skip
+REPORT_FILES = (COVERAGE_FILE, "scatter.png", "goals.png", "arena.png", "reality_gap.png",
+                "campaign_coverage.png", "campaign_scatter.png",
+                "summary.md", "summary.html")  # fmt: skip
 
 
 # ---- summaries -------------------------------------------------------------------------------
@@ -122,6 +125,17 @@ def _run_markdown(run: RunData, figures: list[Path], out_dir: Path) -> str:
     gap = gap_line(run.path, run.scene.unit)  # a run warmed by a prior (docs/warm_start.md)
     if gap is not None:
         rows.append(["reality gap (the prior's outcome against the arm's)", gap])
+    if run.has_records and run.goals is not None and run.goals.shape[1]:
+        c = confinement(run)
+        if c.sectors_reached is not None:
+            rows.append(
+                ["ring sectors a moved ball entered", f"{c.sectors_reached} of {N_SECTORS}"]
+            )
+        if np.isfinite(c.goal_distance):
+            unit = run.scene.unit
+            dist = (f"{1000 * c.goal_distance:.0f} mm" if unit == "m"
+                    else f"{c.goal_distance:.3f} {unit}")  # fmt: skip
+            rows.append(["goal to outcome in the arena, median", f"{dist} ({c.how})"])
     parts = [
         f"# Run report: {run.path.name}",
         "",
@@ -335,6 +349,9 @@ def report_run(run_path: Path, out_dir: Path | None = None) -> list[Path]:
         goals = goals_figure(run, tmp / "goals.png")
         if goals is not None:
             figures.append(goals)
+            arena = arena_figure(run, tmp / "arena.png")
+            if arena is not None:
+                figures.append(arena)
         scene = run.scene
         gap = gap_figure(run.path, tmp / "reality_gap.png", scene.ball_half_width, scene.unit)
         if gap is not None:

@@ -119,19 +119,6 @@ def test_goal_panels_follow_the_modules(runs):
     assert goal_panels(run) == [(0, 0, 1), (0, 2, 2), (1, 0, 1)]
 
 
-@pytest.fixture(scope="module")
-def goal_run(tmp_path_factory) -> Path:
-    """A goal-exploration run on the twin: 3 random episodes, then 4 with goals."""
-    from explore.runs.config import RunConfig, StrategyConfig
-    from explore.runs.open_run import open_run
-
-    out = tmp_path_factory.mktemp("goal") / "rge-efr-s1"
-    strategy = StrategyConfig("rge-efr", {"bootstrap": 3, "random_episodes": 0})
-    with open_run(out, RunConfig(strategy=strategy, seed=1, episodes=7), mode="new") as run:
-        run.explore()
-    return out
-
-
 def test_report_of_a_goal_run_has_the_reached_outcomes(goal_run, tmp_path):
     from explore.learner.goal_spaces import wrap_safe_features
     from explore.rigs.arena import TWIN_ARENA
