@@ -377,10 +377,13 @@ class EmulatedDrives:
         if not self.sync_step_s:
             log.info(
                 "emulated drives: %d SYNCs, %d of them answered with the pump's positions (the "
-                "twin's lock busy for %.0f ms)",
+                "twin's lock busy for %.0f ms); the host's heartbeat silent for at most %.2f s "
+                "while watched, %d reaction(s) to its loss",
                 self.syncs,
                 self.stale_syncs,
                 SYNC_LOCK_WAIT_S * 1e3,
+                self.guard.longest_silence_s,
+                len(self.guard.reactions),
             )
         self.guard.stop()
         self._pump_stop.set()

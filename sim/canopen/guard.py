@@ -83,6 +83,9 @@ class HostGuard:
         self._watching = {d.node_id: False for d in self.drives}
         self._entry = {d.node_id: 0 for d in self.drives}  # the 0x1016:1 being watched
         self.reactions: list[tuple[int, float]] = []  # (node id, monotonic s) of each reaction
+        #: the longest silence of a watched host that ended with its heartbeat, s (the host was
+        #: alive: what a consumer time must stay above; ``ergo twin serve`` logs it at the end)
+        self.longest_silence_s = 0.0
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -130,6 +133,8 @@ class HostGuard:
         heard = self.heard_at.get(producer, 0.0)
         if heard != seen.get(n):
             seen[n] = heard
+            if self._watching[n]:  # a silence the host ended itself: it was alive
+                self.longest_silence_s = max(self.longest_silence_s, self._silent[n])
             self._silent[n] = 0.0
             if not self._watching[n]:
                 self._watching[n] = True

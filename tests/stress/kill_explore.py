@@ -155,8 +155,9 @@ def main() -> int:
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="kill-explore-"))
     print(f"load before: {load_average():.1f}; {args.busy} busy; logs in {tmp}", flush=True)
+    serve_log = (tmp / "serve.log").open("w")  # read by no one while it runs: never a full pipe
     serve = subprocess.Popen([*ERGO, "twin", "serve", "--bus", args.bus], cwd=ROOT,
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+                             stdout=subprocess.PIPE, stderr=serve_log, text=True)  # fmt: skip
     lines: list[str] = []
     loads: list[float] = []
     try:
@@ -175,6 +176,10 @@ def main() -> int:
     finally:
         serve.terminate()
         serve.wait(timeout=10)
+        serve_log.close()
+    for line in (tmp / "serve.log").read_text().splitlines():
+        if "emulated drives" in line:
+            print(line)
     limp = [float(x.split("+")[1].split()[0]) for x in lines if "limp at" in x]
     print(
         f"{args.bus}{' (group)' if args.group else ''}: {len(limp)}/{len(lines)} limp, "
