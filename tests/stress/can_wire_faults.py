@@ -25,8 +25,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from kill_explore import ERGO, ROOT, CanReader  # tests/stress/, beside this script
-from load import busy, load_average
+from kill_explore import ERGO, ROOT, CanReader, served_and_busy  # tests/stress/, beside this
+from load import load_average
 
 GARBAGE_AFTER_S = 7.0  # s after explore starts (its connect takes 2-4 s at load 4-8)
 FAULT_S = 2.0  # how long the faults last, s
@@ -88,31 +88,14 @@ def main() -> int:
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="can-wire-"))
     print(f"load before: {load_average():.1f}; {args.busy} busy; runs in {tmp}", flush=True)
-    serve_log = (tmp / "serve.log").open("w")  # read by no one while it runs: never a full pipe
-    serve = subprocess.Popen([*ERGO, "twin", "serve", "--bus", "canopen"], cwd=ROOT,
-                             stdout=subprocess.PIPE, stderr=serve_log, text=True)  # fmt: skip
     bad = 0
     loads: list[float] = []
-    try:
-        assert serve.stdout is not None
-        device = serve.stdout.readline().split()[-1]
-        camera = serve.stdout.readline().split()[-1]
-        with busy(args.busy):
-            end = time.monotonic() + args.warmup
-            while load_average() < args.busy and time.monotonic() < end:
-                time.sleep(1.0)
-            for k in range(args.first, args.first + args.runs):
-                line, n_enabled = one_run(k, device, camera, tmp)
-                loads.append(load_average())
-                bad += n_enabled > 0
-                print(f"{line} (load {loads[-1]:.1f})", flush=True)
-    finally:
-        serve.terminate()
-        serve.wait(timeout=10)
-        serve_log.close()
-        for line in (tmp / "serve.log").read_text().splitlines():
-            if "emulated drives" in line:
-                print(line)
+    with served_and_busy("canopen", tmp, args.busy, args.warmup) as (device, camera):
+        for k in range(args.first, args.first + args.runs):
+            line, n_enabled = one_run(k, device, camera, tmp)
+            loads.append(load_average())
+            bad += n_enabled > 0
+            print(f"{line} (load {loads[-1]:.1f})", flush=True)
     print(
         f"canopen wire faults: {bad}/{args.runs} run(s) left a drive enabled "
         f"{AFTER_EXIT_S:.0f} s after explore exited; load {min(loads, default=0):.1f}-"

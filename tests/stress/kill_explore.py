@@ -23,6 +23,7 @@ or "STILL ENABLED"), then the count limp and the largest time, and the load aver
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import random
 import signal
@@ -30,6 +31,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 from load import busy, load_average  # tests/stress/load.py, beside this script
@@ -142,6 +144,32 @@ def one_kill(args: argparse.Namespace, k: int, port: str, camera: str, tmp: Path
             time.sleep(0.5)  # the guardian died with the group: nothing left to reap
 
 
+@contextlib.contextmanager
+def served_and_busy(bus: str, tmp: Path, n_busy: int, warmup_s: float) -> Iterator[tuple[str, str]]:
+    """``ergo twin serve --bus BUS`` (its log in ``tmp/serve.log``) beside ``n_busy`` busy
+    processes, once the load average reached ``n_busy`` (at most ``warmup_s``); yields the
+    served pty and camera URL; prints the emulated drives' summary at the end."""
+    serve_log = (tmp / "serve.log").open("w")  # read by no one while it runs: never a full pipe
+    serve = subprocess.Popen([*ERGO, "twin", "serve", "--bus", bus], cwd=ROOT,
+                             stdout=subprocess.PIPE, stderr=serve_log, text=True)  # fmt: skip
+    try:
+        assert serve.stdout is not None
+        port = serve.stdout.readline().split()[-1]
+        camera = serve.stdout.readline().split()[-1]
+        with busy(n_busy):
+            end = time.monotonic() + warmup_s
+            while load_average() < n_busy and time.monotonic() < end:
+                time.sleep(1.0)
+            yield port, camera
+    finally:
+        serve.terminate()
+        serve.wait(timeout=10)
+        serve_log.close()
+        for line in (tmp / "serve.log").read_text().splitlines():
+            if "emulated drives" in line:
+                print(line)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--bus", choices=("dynamixel", "canopen"), required=True)
@@ -155,31 +183,14 @@ def main() -> int:
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="kill-explore-"))
     print(f"load before: {load_average():.1f}; {args.busy} busy; logs in {tmp}", flush=True)
-    serve_log = (tmp / "serve.log").open("w")  # read by no one while it runs: never a full pipe
-    serve = subprocess.Popen([*ERGO, "twin", "serve", "--bus", args.bus], cwd=ROOT,
-                             stdout=subprocess.PIPE, stderr=serve_log, text=True)  # fmt: skip
     lines: list[str] = []
     loads: list[float] = []
-    try:
-        assert serve.stdout is not None
-        port = serve.stdout.readline().split()[-1]
-        camera = serve.stdout.readline().split()[-1]
-        with busy(args.busy):
-            end = time.monotonic() + args.warmup
-            while load_average() < args.busy and time.monotonic() < end:
-                time.sleep(1.0)
-            for k in range(args.first, args.first + args.kills):
-                line = one_kill(args, k, port, camera, tmp)
-                loads.append(load_average())
-                print(f"{line} (load {loads[-1]:.1f})", flush=True)
-                lines.append(line)
-    finally:
-        serve.terminate()
-        serve.wait(timeout=10)
-        serve_log.close()
-    for line in (tmp / "serve.log").read_text().splitlines():
-        if "emulated drives" in line:
-            print(line)
+    with served_and_busy(args.bus, tmp, args.busy, args.warmup) as (port, camera):
+        for k in range(args.first, args.first + args.kills):
+            line = one_kill(args, k, port, camera, tmp)
+            loads.append(load_average())
+            print(f"{line} (load {loads[-1]:.1f})", flush=True)
+            lines.append(line)
     limp = [float(x.split("+")[1].split()[0]) for x in lines if "limp at" in x]
     print(
         f"{args.bus}{' (group)' if args.group else ''}: {len(limp)}/{len(lines)} limp, "
