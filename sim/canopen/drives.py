@@ -43,7 +43,7 @@ import math
 import random
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -340,7 +340,10 @@ class EmulatedDrives:
         self._pump_wake = threading.Event()
         self._pump_stop = threading.Event()
         self._pump_thread: threading.Thread | None = None
-        self.guard = HostGuard(self.drives, self._lock)  # each drive's watch of the host
+        #: whether frames from the host wait unread before this bus (the pty bridge's, set by
+        #: the server), for the watch of the host
+        self.host_backlog: Callable[[], bool] = lambda: False
+        self.guard = HostGuard(self.drives, self._lock, self._backlog)  # the watch of the host
 
     # ---- lifecycle -------------------------------------------------------------------------
     def start(self) -> None:
@@ -399,6 +402,10 @@ class EmulatedDrives:
             if self.network.notifier is not None:
                 self.network.notifier.stop(self.network.NOTIFIER_SHUTDOWN_TIMEOUT)
             self.network.bus = None
+
+    def _backlog(self) -> bool:
+        queue = getattr(self._bus, "queue", None)  # python-can's virtual bus
+        return bool(self.host_backlog() or (queue is not None and queue.qsize()))
 
     def __enter__(self) -> EmulatedDrives:
         self.start()

@@ -17,9 +17,11 @@ The watch then rests until the node is heard again, which also clears the error 
 unless the drive is in FAULT.
 
 Unlike a drive's firmware, the emulator shares a machine with the host and can itself be
-starved of CPU for a while, with the host's heartbeats waiting unread in the pty meanwhile:
-a stall of the watch's own thread longer than ``STALL_S`` counts only as ``STALL_S`` of
-silence, so the host's heartbeat is not called missing because the emulator did not run.
+starved of CPU for a while, with the host's heartbeats waiting unread meanwhile. So time does
+not count as silence while frames wait unread (``backlog``: bytes in the pty from the host, or
+frames in the drives' own bus queue), and a stall of the watch's own thread longer than
+``STALL_S`` counts only as ``STALL_S``: the host's heartbeat is not called missing because
+the emulator did not run.
 """
 
 from __future__ import annotations
@@ -48,8 +50,9 @@ ABORT_VALUE_RANGE = 0x06090030  # SDO abort code: value range of parameter excee
 # writes, 1 s, so the reaction comes at most this late).
 CHECK_PERIOD_S = 0.01
 # The longest gap of the watch's own thread that counts in full as the host's silence, s
-# (guess: ten check periods; a longer gap is the emulator starved, not the host silent).
-STALL_S = 0.1
+# (guess: a quarter of the emulator's consumer time, 2 s; a longer gap is the emulator
+# starved, not the host silent).
+STALL_S = 0.5
 # States in which the reactions 2 and 3 take the drive to SWITCH ON DISABLED (CiA 402-2
 # transitions 7, 9, 10, 12).
 POWERED = (
@@ -73,11 +76,15 @@ class HostGuard:
     Args:
         drives: the emulated drives.
         lock: the drives' lock (their state is changed under it).
+        backlog: whether frames from the host wait unread now (time then is not silence).
     """
 
-    def __init__(self, drives: Sequence[EmulatedDrive], lock: Any) -> None:
+    def __init__(
+        self, drives: Sequence[EmulatedDrive], lock: Any, backlog: Callable[[], bool]
+    ) -> None:
         self.drives = list(drives)
         self.lock = lock
+        self.backlog = backlog
         self.heard_at: dict[int, float] = {}  # producer node id -> monotonic s
         self._silent = {d.node_id: 0.0 for d in self.drives}  # s of silence counted
         self._watching = {d.node_id: False for d in self.drives}
@@ -117,7 +124,7 @@ class HostGuard:
         seen: dict[int, float] = {}
         while not self._stop.wait(CHECK_PERIOD_S):
             now = time.monotonic()
-            step, last = min(now - last, STALL_S), now
+            step, last = (0.0 if self.backlog() else min(now - last, STALL_S)), now
             for d in self.drives:
                 self._check(d, step, seen)
 
@@ -156,7 +163,11 @@ class HostGuard:
         the drives' lock."""
         option = d.od_int(0x6007)
         self.reactions.append((d.node_id, time.monotonic()))
-        log.warning(
+        # a warning when it cuts torque; after a host that turned torque off and closed (the
+        # usual end of a session), a line of information
+        cuts = d.state is State.OPERATION_ENABLED and option in (1, 2, 3)
+        log.log(
+            logging.WARNING if cuts else logging.INFO,
             "drive %d: no heartbeat of node %d for %.2f s: abort connection option %d",
             d.node_id, producer, silent_s, option,
         )  # fmt: skip

@@ -131,3 +131,20 @@ def test_a_drive_without_a_heartbeat_consumer_stops_the_connect_in_one_line(
     assert "\n" not in message
     assert message.startswith("node 1 (m1) refused 0x1016:1 = ")
     assert "heartbeat consumer (host node 127, 600 ms)" in message
+
+
+def test_time_with_frames_waiting_unread_is_not_the_hosts_silence(rig) -> None:
+    """The emulator starved (the host's frames wait in the pty): no reaction until it reads."""
+    drives, can = rig
+    behind = [True]
+    drives.host_backlog = lambda: behind[0]
+    with make_arm(can) as arm:
+        arm.set_torque(True)
+        arm._host_heartbeat.stop()
+        time.sleep(3 * CONSUMER_MS / 1000)
+        assert states(drives) == {State.OPERATION_ENABLED} and drives.guard.reactions == []
+        behind[0] = False  # caught up: the host is silent indeed
+        deadline = time.monotonic() + BOUND_S
+        while states(drives) != {State.SWITCH_ON_DISABLED} and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert states(drives) == {State.SWITCH_ON_DISABLED}
