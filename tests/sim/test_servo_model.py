@@ -106,7 +106,7 @@ def _dynamics_payload(servos: ServoModel) -> dict:
         ("armature", 1.0),
         ("frictionloss", 5.0),
         ("force_limit", 1e-6),
-    ],  # fmt: skip
+    ],
 )
 def test_a_dynamics_payload_out_of_range_is_one_line_naming_the_field(field, value):
     from robot.calibration_files import CalibrationError
