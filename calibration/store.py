@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
@@ -192,7 +193,11 @@ def save(kind: str, rig_id: str, data: dict[str, Any], directory: str | Path | N
     }
     text = json.dumps(doc, indent=2, allow_nan=False) + "\n"
     path.parent.mkdir(parents=True, exist_ok=True)
-    return atomic_write(path, text)
+    try:
+        return atomic_write(path, text)
+    except OSError as exc:  # named by the file asked for, never the temporary one
+        what = "is a directory" if path.is_dir() else f"cannot be written ({exc.strerror or exc})"
+        raise CalibrationError(f"{path} {what}: nothing written") from exc
 
 
 # The arena file keeps a copy of the intrinsics it was fitted with (its homography is only
@@ -236,7 +241,7 @@ def load_arena_file(path: str | Path) -> dict[str, Any]:
     path = Path(path)
     data = load_file(path, "arena")
     camera_path = path.with_name("camera.json")
-    if camera_path.is_file():
+    if os.path.lexists(camera_path):  # a folder or a dangling link there is refused, not skipped
         camera = load_file(camera_path, "camera")
         why = intrinsics_mismatch(data, camera)
         if why is not None:

@@ -154,6 +154,11 @@ class Arm(ABC):
         # from the servos' (or an emulator's).
         self.interrupted_at: float | None = None
         self.torque_off_sent_at: float | None = None
+        #: what the servos do when this process dies without its own torque-off (SIGKILL, an
+        #: OOM kill): "limp" (the default: a guardian process, and on CANopen the drives'
+        #: heartbeat consumer, cut torque) or "hold" (they keep their last target; the user's
+        #: explicit choice, the rigs' option ``on_crash``). Set it before ``connect``.
+        self.on_crash = "limp"
 
     # ---- lifecycle -------------------------------------------------------------------------
     @property

@@ -59,7 +59,7 @@ def _start_guardian(arm: Arm, forward_fd: int) -> Guardian | None:
     if payload is None:
         return None
     try:
-        return Guardian.start(payload, forward_fd, WATCHER_RT_PRIORITY)
+        return Guardian.start(payload, forward_fd, WATCHER_RT_PRIORITY, arm.on_crash)
     except OSError as exc:
         log.warning("no torque-off guardian for %s (%s): the watcher thread alone acts", arm, exc)
         return None

@@ -20,9 +20,14 @@ of the arm's process but a pipe and the bytes to write.
   shared buffer, then passes the signal number on to the watcher thread (which confirms the
   torque-off the usual way). A SIGINT or SIGTERM sent to the guardian itself (Ctrl-C reaches the
   whole process group) does the same.
-- The guardian ends when the pipe closes: when the block of ``torque_off_on_signals`` ends, and
-  when the arm's process dies (SIGKILL included: then it writes nothing, as no handler of the
-  arm's process would have).
+- The guardian ends when the pipe closes. When the block of ``torque_off_on_signals`` ends,
+  ``Guardian.stop`` first writes ``DONE`` to the pipe (the arm's own torque-off follows): the
+  guardian exits writing nothing. When the pipe closes without it, the arm's process died
+  without its torque-off (SIGKILL, an OOM kill, a crash in a native library): the guardian
+  writes the payload ``DEATH_WRITES`` times, ``DEATH_SPACING_S`` apart, then exits. Unless
+  the user chose to hold (``on_death="hold"``, the rigs' option ``on_crash=hold``): then it
+  writes nothing, and the servos keep their last target (on CANopen the drives' own heartbeat
+  consumer is off too, ``robot.canopen.guard``).
 
 On a real half-duplex bus the guardian's packet can collide with a servo's reply in progress;
 the watcher's confirmed torque-off follows in any case.
@@ -45,14 +50,27 @@ log = logging.getLogger(__name__)
 # wrote the payload (time.monotonic, 0 before), then the payload.
 _HEADER = struct.Struct("<IId")
 PAYLOAD_CAPACITY = 4096  # bytes: 6 SLCAN RPDO lines and a SYNC take about 130
+# The byte ``Guardian.stop`` writes before closing the pipe: the arm's process ends the block
+# itself (a signal number is at most 64, so it is never one).
+DONE = 0xFF
+# What a guardian does when the arm's process dies without DONE: "limp" writes the payload,
+# "hold" writes nothing (the servos keep their last target).
+ON_DEATH = ("limp", "hold")
+# After a death the payload is written this many times, this far apart, s: the dead process
+# may have left half a packet (or an SLCAN line) on the port, which can swallow the first copy
+# into a frame the receiver drops; the next copies then arrive whole (guess: the longest
+# packet of the arm, a SYNC WRITE of six goals, is under 50 bytes, two copies of the payload).
+DEATH_WRITES = 3
+DEATH_SPACING_S = 0.02
 # How long ending the block waits for the guardian to exit after its pipe closed, s (it exits
 # at once; a bound against a hang).
 GUARDIAN_EXIT_S = 1.0
 
 GUARDIAN = r"""
 import mmap, os, signal, struct, sys, time
-port, shm_fd, pipe_fd, forward_fd, rt = sys.argv[1], *map(int, sys.argv[2:6])
+port, shm_fd, pipe_fd, forward_fd, rt, on_death = sys.argv[1], *map(int, sys.argv[2:7])
 H = struct.Struct("<IId")
+DONE, WRITES, SPACING = @CONSTANTS@
 shm = mmap.mmap(shm_fd, 0)
 try:
     os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt))
@@ -93,6 +111,7 @@ def on_signal(signum, frame):
 signal.signal(signal.SIGINT, on_signal)
 signal.signal(signal.SIGTERM, on_signal)
 print("ready", flush=True)
+done = False
 while True:
     try:
         data = os.read(pipe_fd, 64)
@@ -100,13 +119,24 @@ while True:
         continue
     if not data:
         break
+    if DONE in data:
+        done = True
+        data = data.replace(bytes([DONE]), b"")
     if any(b in (signal.SIGINT, signal.SIGTERM) for b in data):
         cut()
-    try:
-        os.write(forward_fd, data)
-    except OSError:
-        pass
+    if data:
+        try:
+            os.write(forward_fd, data)
+        except OSError:
+            pass
+if not done and on_death:
+    for k in range(WRITES):
+        if k:
+            time.sleep(SPACING)
+        cut()
 """
+
+SCRIPT = GUARDIAN.replace("@CONSTANTS@", f"{DONE}, {DEATH_WRITES}, {DEATH_SPACING_S!r}")
 
 
 class EmergencyPayload:
@@ -167,16 +197,21 @@ class Guardian:
     payload: EmergencyPayload
 
     @classmethod
-    def start(cls, payload: EmergencyPayload, forward_fd: int, rt_priority: int) -> Guardian:
-        """Start one for ``payload``; it passes each signal number on to ``forward_fd``.
-        Raises OSError when it cannot start."""
+    def start(
+        cls, payload: EmergencyPayload, forward_fd: int, rt_priority: int, on_death: str = "limp"
+    ) -> Guardian:
+        """Start one for ``payload``; it passes each signal number on to ``forward_fd``, and
+        when the arm's process dies without ``stop`` it writes the payload (``on_death``
+        "limp") or nothing ("hold"). Raises OSError when it cannot start."""
+        if on_death not in ON_DEATH:
+            raise ValueError(f"on_death must be one of {ON_DEATH}, got {on_death!r}")
         read_fd, write_fd = os.pipe()
         try:
             os.set_blocking(write_fd, False)  # set_wakeup_fd needs a non-blocking fd
             fds = (payload.fd, read_fd, forward_fd)
-            args = [payload.port, *map(str, fds), str(rt_priority)]
+            args = [payload.port, *map(str, fds), str(rt_priority), str(int(on_death == "limp"))]
             proc = subprocess.Popen(
-                [sys.executable, "-S", "-c", GUARDIAN, *args],
+                [sys.executable, "-S", "-c", SCRIPT, *args],
                 pass_fds=fds, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
             )  # fmt: skip
         except BaseException:
@@ -194,7 +229,10 @@ class Guardian:
         return cls(proc, write_fd, payload)
 
     def stop(self) -> None:
-        """Close its pipe and wait for it to exit (killed past ``GUARDIAN_EXIT_S``)."""
+        """Tell it the arm's process ends the block itself (``DONE``), close its pipe and wait
+        for it to exit (killed past ``GUARDIAN_EXIT_S``)."""
+        with contextlib.suppress(OSError):
+            os.write(self.wakeup_fd, bytes([DONE]))
         with contextlib.suppress(OSError):
             os.close(self.wakeup_fd)
         try:

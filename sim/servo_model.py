@@ -176,6 +176,21 @@ def write_model(model: Any, act_idx: np.ndarray, dof_idx: np.ndarray, servos: Se
 
 
 # ---- a rig's fitted servos (its dynamics.json) --------------------------------------------
+# A rig's fitted servos (its dynamics.json) stay within these factors of NOMINAL's, per field
+# (guesses: a decade around the nominal XL-320 either way, wider than the fit's own bounds,
+# calibration/dynamics/fit.py RATIO_BOUNDS, so that every fit passes; the force limit up to
+# 10 x the XL-320's 0.39 N.m stall torque, about an XM430's 4.1 N.m; the friction loss from 0,
+# up to 0.1 N.m, a quarter of the stall torque). What is out of them is a damaged file, not a
+# servo: kp = 1e300 would make the twin's physics blow up.
+PAYLOAD_RATIO_BOUNDS = {
+    "kp": (0.1, 10.0),
+    "damping": (0.1, 10.0),
+    "armature": (0.05, 20.0),
+    "frictionloss": (0.0, 100.0),
+    "force_limit": (0.1, 10.5),
+}
+
+
 def check_dynamics(c: Fields) -> ServoModel:
     """Check a dynamics calibration's payload (``ergo calibrate dynamics``: ``servos``, the
     ``recording`` fitted, the ``held_out_rms_rad``); returns its servo model. A bad field is a
@@ -184,6 +199,14 @@ def check_dynamics(c: Fields) -> ServoModel:
         servos = ServoModel.from_dict(c.get("servos"))
     except ServoModelError as exc:
         c.fail("servos", f"is not a servo model ({exc})")
+    for name, (lo, hi) in PAYLOAD_RATIO_BOUNDS.items():
+        arr, nominal = servos.array(name), NOMINAL.array(name)
+        if np.any(arr < lo * nominal) or np.any(arr > hi * nominal):
+            c.fail(
+                "servos",
+                f"{name} must be within [{lo * nominal[0]:g}, {hi * nominal[0]:g}] "
+                f"({lo:g}-{hi:g} x the nominal twin's, sim/servo_model.py), got {arr.tolist()}",
+            )
     rec = c.get("recording")
     if not isinstance(rec, dict) or not isinstance(rec.get("sha256"), str):
         c.fail("recording", "must name the recording fitted (path, sha256)")

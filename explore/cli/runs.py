@@ -42,10 +42,10 @@ def run_check(args: argparse.Namespace) -> int:
 
     try:
         s = survey(args.run)
+        holder = holder_of(args.run)  # a writer.lock that is not a plain file: RunStoreError
     except RunStoreError as exc:
         raise CliError(str(exc)) from exc
     print(f"{args.run}:")
-    holder = holder_of(args.run)
     if holder is not None:
         print(f"being written now by {describe_holder(holder)}")
     for line in describe(args.run, s):

@@ -86,6 +86,7 @@ def make_rig(config: RigConfig, options: Options) -> Rig:
         arm = CanArm(bus_spec, spec=joints.spec, config=config_for(bus_spec, **arm_config))
     except (CanBusError, ValueError) as exc:
         raise RigError(f"rig 'canopen': {exc}") from exc
+    arm.on_crash = options.on_crash
     return Rig(
         arm=arm, camera=camera, clock=RealClock(), config=config,
         sensor=camera_sensor(config, camera),

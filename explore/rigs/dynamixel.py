@@ -75,6 +75,7 @@ def make_rig(config: RigConfig, options: Options) -> Rig:
         )
     except (ValueError, KeyError, TypeError, BusError) as exc:
         raise RigError(f"dynamixel rig: {exc}") from exc
+    arm.on_crash = options.on_crash
     camera = rig_camera(options, config.name)
     return Rig(
         arm=arm, camera=camera, clock=RealClock(), config=config,

@@ -33,6 +33,7 @@ from explore.rigs.arena import TWIN_ARENA
 from explore.rigs.rig import RigConfig, RigError
 from explore.rigs.video import VideoOptions
 from robot.spec import ArmSpec, ergo_jr_spec
+from robot.torque_guardian import ON_DEATH
 from vision.camera import Camera, CameraError, make_camera
 
 log = logging.getLogger(__name__)
@@ -60,6 +61,10 @@ class HardwareOptions(VideoOptions):
         directions, offsets: per joint +1/-1 and rad, in the rig's own convention (default:
             the joint calibration's, else +1 and 0); refused when they differ from the joint
             calibration file's unless ``joint_calibration`` is ``"none"``.
+        on_crash: what the servos do when the controller's process dies without its own
+            torque-off (SIGKILL, an OOM kill): ``"limp"`` (default: torque off, by a guardian
+            process and, on CANopen, the drives' heartbeat consumer) or ``"hold"`` (they keep
+            their last target; docs/real_arm.md).
     """
 
     camera: int | str = field(default=0, metadata={"expected": CAMERA})
@@ -70,9 +75,14 @@ class HardwareOptions(VideoOptions):
     joint_calibration: str | None = None
     directions: tuple[float, ...] | None = None
     offsets: tuple[float, ...] | None = None
+    on_crash: str = "limp"
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        if self.on_crash not in ON_DEATH:
+            raise BadOption(
+                "on_crash", f"must be one of {', '.join(ON_DEATH)}, got {self.on_crash!r}"
+            )
         if isinstance(self.camera, int) and self.camera < 0:
             raise BadOption("camera", f"must be {CAMERA}, got {self.camera!r}")
 

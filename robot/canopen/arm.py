@@ -8,9 +8,11 @@ torque, the health monitor. At connect:
 1. every node answers an SDO read of its device type 0x1000 (low word 402: a drive);
 2. units: increments per revolution from 0x608F (position encoder resolution);
 3. SDO configuration: mode of operation 0x6060 = 8 (cyclic synchronous position), software
-   position limits 0x607D from the arm spec, producer heartbeat 0x1017, optionally the
-   following error window 0x6065; PDO mapping RPDO1 = controlword 0x6040 + target position
-   0x607A, TPDO1 = statusword 0x6041 + position actual 0x6064, both synchronous;
+   position limits 0x607D from the arm spec, producer heartbeat 0x1017, the drive's guard of
+   the host (``robot.canopen.guard``: the host's heartbeat, which the drive consumes, 0x1016,
+   and its reaction when it stops, 0x6007), optionally the following error window 0x6065;
+   PDO mapping RPDO1 = controlword 0x6040 + target position 0x607A, TPDO1 = statusword
+   0x6041 + position actual 0x6064, both synchronous;
 4. NMT start (OPERATIONAL), then one SYNC to read the drives' states and positions.
 
 Each command is one cycle: RPDO1 to every node, then a SYNC; the drives apply the targets at
@@ -44,15 +46,16 @@ import logging
 import math
 import threading
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from robot.arm import Arm, JointState, RecoveryPolicy
 from robot.canopen import cia402, emcy
-from robot.canopen.bus import DEFAULT_BITRATE, CanBusSpec, is_pty, parse_can_spec
+from robot.canopen.bus import DEFAULT_BITRATE, CanBusSpec, parse_can_spec
 from robot.canopen.cia402 import State
+from robot.canopen.config import EDS_PATH, PTY_SETTINGS, CanArmConfig, config_for
+from robot.canopen.guard import HostHeartbeat, configure_drive_guard
 from robot.canopen.network import (
     HEARTBEAT_OPERATIONAL,
     CanNodeError,
@@ -68,71 +71,14 @@ from robot.watchdog import Watchdog
 
 log = logging.getLogger(__name__)
 
-EDS_PATH = Path(__file__).resolve().parent / "ergo_drive.eds"
+# re-exported: the settings of a CanArm live in ``robot.canopen.config``
+__all__ = ["EDS_PATH", "PTY_SETTINGS", "CanArm", "CanArmConfig", "config_for"]
+
 CSP = 8  # modes of operation 0x6060: cyclic synchronous position (CiA 402-2)
 DEVICE_PROFILE_402 = 402  # low word of 0x1000 for a drive (CiA 402-2)
 # A heartbeat lost to a garbled SLCAN line while the node's TPDOs keep coming is excused for up
 # to this many heartbeat limits (guess: a burst of noise of a few hundred ms; longer is a stop).
 GARBLED_HEARTBEAT_GRACE = 3.0
-
-
-@dataclass(frozen=True)
-class CanArmConfig:
-    """Settings of a ``CanArm``; defaults are guesses for small servo drives at 1 Mbit/s.
-
-    Attributes:
-        node_ids: CANopen node id of each joint's drive (None: the spec's servo ids).
-        directions: +1/-1 per joint (drive counts grow with the joint angle or against it).
-        offsets: joint angle at drive position 0, per joint, rad.
-        heartbeat_ms: producer heartbeat time written to each node's 0x1017, ms (guess: 100 ms
-            notices a dead node within 150 ms, at 6 frames per 100 ms of bus load).
-        heartbeat_factor: a node is lost when silent for this times its heartbeat time (1.5,
-            the brief; CiA 301 leaves the consumer time to the integrator).
-        pdo_timeout_s: longest wait for the TPDOs answering a SYNC, s (guess: a 1 Mbit/s bus
-            carries the 13 frames of a cycle in about 1.5 ms; an SLCAN pty adds a few ms).
-        max_position_age_s: the arm stops when a node has answered no SYNC for this long, s
-            (guess: 20 control periods at 40 Hz; the drive itself keeps following its last
-            target meanwhile, and a dead node is caught sooner by its heartbeat).
-        state_timeout_s: longest time for the drives to reach a CiA 402 state, s (guess: real
-            drives take up to a few hundred ms to switch on, e.g. to release a brake; the
-            emulator behind a pty on a loaded machine was measured taking over 1 s).
-        sdo_timeout_s: SDO response timeout, s (canopen's default is 0.3 s).
-        following_error_window: if set, written to 0x6065, rad (None: leave the drive's).
-        eds: the drives' EDS (object dictionary).
-    """
-
-    node_ids: tuple[int, ...] | None = None
-    directions: tuple[float, ...] | None = None
-    offsets: tuple[float, ...] | None = None
-    heartbeat_ms: int = 100
-    heartbeat_factor: float = 1.5
-    pdo_timeout_s: float = 0.02
-    max_position_age_s: float = 0.5
-    state_timeout_s: float = 3.0
-    sdo_timeout_s: float = 0.3
-    following_error_window: float | None = None
-    eds: Path = EDS_PATH
-
-
-# The settings of a CanArm on an SLCAN pty, i.e. the emulator of `ergo twin serve --bus
-# canopen` (a real adapter is a tty or a network interface, never a pty), where not given:
-# - heartbeat 500 ms: the emulator's heartbeats cross several Python threads on a shared
-#   machine; gaps over 150 ms were seen with the camera rendering under load, so 100 ms x 1.5
-#   stopped `ergo calibrate joints` (measured 2026-12-02; 500 is a guess with margin);
-# - SDO timeout 2 s: one SDO of the connect's configuration went unanswered for canopen's
-#   0.3 s at load 6-8, and for 1.0 s at load 13-15 (measured with tests/stress/load.py, 2026-12-02).
-# Neither is a safety bound on a real arm, which keeps CanArmConfig's defaults.
-PTY_SETTINGS = {"heartbeat_ms": 500, "sdo_timeout_s": 2.0}
-
-
-def config_for(can: str | CanBusSpec, **given: object) -> CanArmConfig:
-    """A ``CanArmConfig`` for the bus ``can``: the fields ``given`` (None values left out),
-    the pty's ``PTY_SETTINGS`` where the channel is a pseudo-terminal, else the defaults."""
-    spec = can if isinstance(can, CanBusSpec) else parse_can_spec(can, None)
-    fields = {k: v for k, v in given.items() if v is not None}
-    if spec.interface == "slcan" and is_pty(spec.channel):
-        fields = {**PTY_SETTINGS, **fields}
-    return CanArmConfig(**fields)  # type: ignore[arg-type]
 
 
 class CanArm(Arm):
@@ -176,6 +122,20 @@ class CanArm(Arm):
                 f"{self.config.heartbeat_ms}, {self.config.heartbeat_factor}): a node without "
                 f"a heartbeat cannot be watched"
             )
+        cfg = self.config
+        if not 1 <= cfg.master_id <= 127 or cfg.master_id in self.node_ids:
+            raise ValueError(
+                f"master_id must be a node id in 1..127 that no drive has, got {cfg.master_id}"
+            )
+        hb_ms, consumer_ms = cfg.master_heartbeat_ms, cfg.consumer_ms
+        if hb_ms < 1 or not 2 * hb_ms <= consumer_ms <= 0xFFFF:
+            raise ValueError(
+                f"consumer_ms must be at least twice master_heartbeat_ms and at most 65535 "
+                f"(got {cfg.consumer_ms} and {cfg.master_heartbeat_ms})"
+            )
+        if not -0x8000 <= cfg.abort_option <= 0x7FFF:
+            raise ValueError(f"abort_option is a 16-bit integer (0x6007), got {cfg.abort_option}")
+        self._host_heartbeat: HostHeartbeat | None = None
         self.scaling: JointScaling | None = None
         self._heartbeat_s = self.config.heartbeat_ms / 1000.0
         self._wake = threading.Event()
@@ -202,6 +162,9 @@ class CanArm(Arm):
         try:
             with net.guard.hold():
                 net.open()
+                self._host_heartbeat = HostHeartbeat(
+                    net.network, self.config.master_id, self.config.master_heartbeat_ms / 1000
+                ).start()
                 self._configure()
                 net.start(self._heartbeat_s, self.config.state_timeout_s)
             self._start_monitor()
@@ -214,7 +177,7 @@ class CanArm(Arm):
                 net.target[:] = net.counts
         except BaseException:
             self._stop_monitor()
-            net.close()
+            self._close_network()
             raise
 
     def _configure(self) -> None:
@@ -244,6 +207,8 @@ class CanArm(Arm):
             net.sdo_write(i, 0x607D, 1, int(lo[i]))
             net.sdo_write(i, 0x607D, 2, int(hi[i]))
             net.sdo_write(i, 0x1017, 0, self.config.heartbeat_ms)
+            consumer = 0 if self.on_crash == "hold" else self.config.consumer_ms
+            configure_drive_guard(net, i, self.config.master_id, consumer, self.config.abort_option)
             if self.config.following_error_window is not None:
                 window = self.config.following_error_window * cpr[i] / (2 * np.pi)
                 net.sdo_write(i, 0x6065, 0, round(window))
@@ -264,6 +229,14 @@ class CanArm(Arm):
     # ---- disconnect ------------------------------------------------------------------------
     def _disconnect(self) -> None:
         self._stop_monitor()
+        self._close_network()
+
+    def _close_network(self) -> None:
+        """Stop the host's heartbeat (the drives then take their 0x6007 reaction after their
+        consumer time: their torque is off already), then close the network."""
+        if self._host_heartbeat is not None:
+            self._host_heartbeat.stop()
+            self._host_heartbeat = None
         self.net.close()
 
     def _stop_monitor(self) -> None:

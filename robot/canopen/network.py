@@ -416,8 +416,11 @@ class DriveNetwork:
         with self.cond:
             self.emcy_active[i] = None if code & 0xFF00 == 0 else (code, register)
         stops = bool(code & 0xFF00) and self.on_alarm is not None
-        # an EMCY that stops the arm is told once, by its safety stop; others as a warning
-        log.log(logging.DEBUG if stops else logging.WARNING, "%s: %s", self.who(i),
+        # an EMCY that stops the arm is told once, by its safety stop; an error reset (a drive
+        # hearing the host again after its watch of the host timed out) only with --verbose;
+        # others as a warning
+        quiet = stops or not code & 0xFF00
+        log.log(logging.DEBUG if quiet else logging.WARNING, "%s: %s", self.who(i),
                 emcy.describe(code, register))  # fmt: skip
         if stops:
             self.on_alarm()

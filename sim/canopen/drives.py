@@ -10,7 +10,9 @@ its EMCY producer reports faults. This module adds what a servo drive does:
   applied at the SYNC; the joint targets go to the twin; then every node transmits its
   synchronous TPDOs (statusword 0x6041, position actual 0x6064 with the default mapping);
 - software position limits 0x607D, following error 0x60F4 against the window 0x6065;
-- faults: EMCY + FAULT state, cleared by a fault reset (rising edge of controlword bit 7).
+- faults: EMCY + FAULT state, cleared by a fault reset (rising edge of controlword bit 7);
+- the watch of the host: the heartbeat consumer 0x1016 and the abort connection option code
+  0x6007 (``sim.canopen.guard``): a silent host leaves the drive limp;
 
 Physics: either a ``sim.realtime.RealtimeLoop`` steps the twin in wall time (the server), or
 ``sync_step_s`` advances it by a fixed amount at every SYNC (tests: a fake clock that makes
@@ -41,7 +43,7 @@ import math
 import random
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -50,16 +52,17 @@ import numpy as np
 from canopen.sdo import SdoAbortedError
 
 from robot.canopen import cia402, emcy
-from robot.canopen.arm import EDS_PATH
 from robot.canopen.bus import open_bus
 from robot.canopen.cia402 import State
+from robot.canopen.config import EDS_PATH
+from sim.canopen.faulty import SYNC_COB_ID, FaultyNetwork
+from sim.canopen.guard import HostGuard, check_guard_write
 from sim.twin import Twin
 
 log = logging.getLogger(__name__)
 
 NODE_IDS = (1, 2, 3, 4, 5, 6)
 CSP = 8  # modes of operation 0x6060: cyclic synchronous position (CiA 402-2)
-SYNC_COB_ID = 0x080
 # 0x6065 value meaning "following error monitoring off" (CiA 402-2).
 WINDOW_OFF = 0xFFFFFFFF
 # SDO abort codes (CiA 301 table "SDO abort codes").
@@ -77,42 +80,6 @@ PUMP_PERIOD_S = 0.005
 # latest positions instead, s (guess: a fifth of the 40 Hz control period; the lock is held
 # for a physics catch-up, about 6 ms per simulated s, or a scene copy for a render).
 SYNC_LOCK_WAIT_S = 0.005
-
-
-def _is_pdo_or_sync(can_id: int) -> bool:
-    """SYNC and the four TPDO/RPDO pairs (0x180..0x57F), not SDO/EMCY/NMT/heartbeat."""
-    return can_id == SYNC_COB_ID or 0x180 <= can_id < 0x580
-
-
-class _FaultyNetwork(canopen.Network):
-    """A canopen network that loses a fraction of PDO/SYNC frames, both ways."""
-
-    # Longest blocking receive of the notifier thread, s (bounds the time ``stop`` takes).
-    NOTIFIER_CYCLE = 0.1
-
-    def __init__(self, bus: Any, drop_rate: float, seed: int) -> None:
-        super().__init__(bus)
-        self.drop_rate = drop_rate
-        self.dropped = 0
-        self._rng = random.Random(seed)
-        self._rng_lock = threading.Lock()
-
-    def _drop(self, can_id: int) -> bool:
-        if self.drop_rate <= 0 or not _is_pdo_or_sync(can_id):
-            return False
-        with self._rng_lock:
-            lost = self._rng.random() < self.drop_rate
-        if lost:
-            self.dropped += 1
-        return lost
-
-    def notify(self, can_id: int, data: bytearray, timestamp: float) -> None:
-        if not self._drop(can_id):
-            super().notify(can_id, data, timestamp)
-
-    def send_message(self, can_id: int, data: bytes, remote: bool = False) -> None:
-        if not self._drop(can_id):
-            super().send_message(can_id, data, remote)
 
 
 class EmulatedDrive:
@@ -158,7 +125,7 @@ class EmulatedDrive:
         self.node.data_store.setdefault(0x1018, {})[4] = node_id.to_bytes(4, "little")
 
     # ---- object dictionary ---------------------------------------------------------------
-    def _od_int(self, index: int, subindex: int = 0) -> int:
+    def od_int(self, index: int, subindex: int = 0) -> int:
         obj = self.node.object_dictionary[index]
         var = obj if isinstance(obj, canopen.objectdictionary.ODVariable) else obj[subindex]
         return int(var.decode_raw(self.node.get_data(index, subindex)))
@@ -167,14 +134,14 @@ class EmulatedDrive:
     def counts_per_rev(self) -> float:
         """Increments per revolution from 0x608F (sub 1 / sub 2), cached."""
         if self._cpr is None:
-            self._cpr = self._od_int(0x608F, 1) / max(1, self._od_int(0x608F, 2))
+            self._cpr = self.od_int(0x608F, 1) / max(1, self.od_int(0x608F, 2))
         return self._cpr
 
     @property
     def mode(self) -> int:
         """Modes of operation 0x6060, cached."""
         if self._mode is None:
-            self._mode = self._od_int(0x6060)
+            self._mode = self.od_int(0x6060)
         return self._mode
 
     def statusword(self) -> int:
@@ -200,10 +167,11 @@ class EmulatedDrive:
         return None
 
     def _on_write(self, index: int, subindex: int, od: Any, data: bytes) -> None:
+        check_guard_write(index, data)
         if index == 0x608F and subindex in (1, 2):
             value = int.from_bytes(data[:4], "little")
-            inc = value if subindex == 1 else self._od_int(0x608F, 1)
-            revs = value if subindex == 2 else self._od_int(0x608F, 2)
+            inc = value if subindex == 1 else self.od_int(0x608F, 1)
+            revs = value if subindex == 2 else self.od_int(0x608F, 2)
             if inc <= 0 or revs <= 0:
                 raise SdoAbortedError(ABORT_VALUE_RANGE)
             self._cpr = inc / revs
@@ -221,7 +189,7 @@ class EmulatedDrive:
 
     def _limit(self, counts: int) -> int:
         """Clamp a target to the software position limits 0x607D."""
-        lo, hi = self._od_int(0x607D, 1), self._od_int(0x607D, 2)
+        lo, hi = self.od_int(0x607D, 1), self.od_int(0x607D, 2)
         return min(max(counts, lo), hi) if lo < hi else counts
 
     # ---- state machine ---------------------------------------------------------------------
@@ -362,7 +330,7 @@ class EmulatedDrives:
         self._by_id = {d.node_id: d for d in self.drives}
         self._owns_bus = isinstance(bus, str)
         self._bus = open_bus(bus) if isinstance(bus, str) else bus
-        self.network = _FaultyNetwork(self._bus, drop_rate, seed)
+        self.network = FaultyNetwork(self._bus, drop_rate, seed)
         self._lock = threading.RLock()
         self._scheduled_faults: dict[int, float] = {}
         self.syncs = 0
@@ -372,6 +340,10 @@ class EmulatedDrives:
         self._pump_wake = threading.Event()
         self._pump_stop = threading.Event()
         self._pump_thread: threading.Thread | None = None
+        #: whether frames from the host wait unread before this bus (the pty bridge's, set by
+        #: the server), for the watch of the host
+        self.host_backlog: Callable[[], bool] = lambda: False
+        self.guard = HostGuard(self.drives, self._lock, self._backlog)  # the watch of the host
 
     # ---- lifecycle -------------------------------------------------------------------------
     def start(self) -> None:
@@ -382,6 +354,8 @@ class EmulatedDrives:
             self.network.add_node(d.node)
         self.network.subscribe(SYNC_COB_ID, self._on_sync)
         self.network.subscribe(0x000, self._on_nmt)
+        for cob_id, callback in self.guard.subscriptions():
+            self.network.subscribe(cob_id, callback)
         self.network.connect()
         with self.twin.lock:
             q = self.twin.joint_positions()
@@ -395,6 +369,7 @@ class EmulatedDrives:
             self._pump_stop.clear()
             self._pump_thread = threading.Thread(target=self._pump, name="drives-pump", daemon=True)
             self._pump_thread.start()
+        self.guard.start()
         self._started = True
 
     def stop(self) -> None:
@@ -405,11 +380,15 @@ class EmulatedDrives:
         if not self.sync_step_s:
             log.info(
                 "emulated drives: %d SYNCs, %d of them answered with the pump's positions (the "
-                "twin's lock busy for %.0f ms)",
+                "twin's lock busy for %.0f ms); the host's heartbeat silent for at most %.2f s "
+                "while watched, %d reaction(s) to its loss",
                 self.syncs,
                 self.stale_syncs,
                 SYNC_LOCK_WAIT_S * 1e3,
+                self.guard.longest_silence_s,
+                len(self.guard.reactions),
             )
+        self.guard.stop()
         self._pump_stop.set()
         self._pump_wake.set()
         if self._pump_thread is not None:
@@ -423,6 +402,10 @@ class EmulatedDrives:
             if self.network.notifier is not None:
                 self.network.notifier.stop(self.network.NOTIFIER_SHUTDOWN_TIMEOUT)
             self.network.bus = None
+
+    def _backlog(self) -> bool:
+        queue = getattr(self._bus, "queue", None)  # python-can's virtual bus
+        return bool(self.host_backlog() or (queue is not None and queue.qsize()))
 
     def __enter__(self) -> EmulatedDrives:
         self.start()
@@ -557,7 +540,7 @@ class EmulatedDrives:
             del self._scheduled_faults[d.node_id]
             d.trip()
             return
-        window = d._od_int(0x6065)
+        window = d.od_int(0x6065)
         if window != WINDOW_OFF and abs(d.actual - d.demand) > window:
             d.trip()
 

@@ -24,9 +24,11 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import fcntl
 import logging
 import os
 import select
+import struct
 import sys
 import termios
 import threading
@@ -122,6 +124,16 @@ class SlcanPtyBridge(OnPty):
             except (OSError, ValueError):
                 return False
         return True
+
+    def backlog(self) -> bool:
+        """Whether bytes from the host wait unread in the pty."""
+        master, _ = self.pty.fds()
+        if master is None:
+            return False
+        try:
+            return struct.unpack("i", fcntl.ioctl(master, termios.FIONREAD, b"\0" * 4))[0] > 0
+        except OSError:
+            return False
 
     def _host_to_bus(self) -> None:
         import can
@@ -292,6 +304,7 @@ def serve(args: argparse.Namespace) -> int:
             drives,
             SlcanPtyBridge(bridge_bus, link=getattr(args, "link", None)) as bridge,
         ):
+            drives.host_backlog = bridge.backlog
             announce = [f"canopen bus (slcan) on {bridge.path}"]
             if bridge.link:
                 announce.append(f"canopen bus link {bridge.link}")

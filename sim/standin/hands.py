@@ -69,6 +69,13 @@ MOVE_WALL_BOUND_S = 120.0
 TICK_S = 0.01  # how often the hands update their grips, wall s
 IDLE_S = 0.5  # how often idle hands look up (a move wakes them at once), wall s
 MAX_LINE = 1 << 16  # bytes of one request line
+# Where a person holds a board (guesses): within arm's reach of the desk arm's base, m (the
+# arena is 0.2 m in radius, the served camera under 1 m above it); turned at most a full turn
+# about each axis, degrees (any pose has such angles); squares of printable size, m (a 2 mm
+# square is the finest a laser printer keeps sharp; 0.2 m, a sheet of A3 across two squares).
+BOARD_REACH_M = 1.5
+BOARD_TURN_DEG = 360.0
+BOARD_SQUARE_M = (0.002, 0.2)
 
 
 class HandsError(RuntimeError):
@@ -322,6 +329,17 @@ class Hands:
         euler = _vector(euler_deg, "euler_deg")
         if pos[2] <= 0.0:
             raise HandsError(f"board position z = {pos[2]} m: it must be above the floor")
+        if np.any(np.abs(pos) > BOARD_REACH_M):
+            raise HandsError(
+                f"board position {pos.tolist()} m: a hand reaches {BOARD_REACH_M} m at most"
+            )
+        if np.any(np.abs(euler) > BOARD_TURN_DEG):
+            raise HandsError(
+                f"board euler_deg {euler.tolist()}: each angle within +-{BOARD_TURN_DEG:g} deg"
+            )
+        lo, hi = BOARD_SQUARE_M
+        if not lo <= geometry.square_m <= hi:
+            raise HandsError(f"board square_m {geometry.square_m}: must be in [{lo}, {hi}] m")
         rot = euler_matrix(euler)
         body = pos - rot[:, 2] * BOARD_THICKNESS_M / 2  # the box's centre behind its face
         import mujoco

@@ -183,3 +183,20 @@ def test_calibrate_show_gives_each_file_with_its_age_and_hash(tmp_path, capsys):
         assert f"({path}, made " in line and f"sha256 {store.file_sha256(path)[:12]})" in line
     assert "made just now" in lines[0] and "fx 600.0 +-1.2" in lines[0]
     assert re.search(r"made \d+ days ago", lines[2]) and "m2 -11.5 deg -1 [-86, +115]" in lines[2]
+
+
+def test_a_camera_json_that_is_a_folder_beside_an_arena_is_refused_not_skipped(tmp_path):
+    path = store.save("arena", "r", arena_payload(camera_payload()), tmp_path)
+    (tmp_path / "r" / "camera.json").mkdir()
+    with pytest.raises(CalibrationError) as err:
+        store.load_arena_file(path)
+    assert "camera.json" in str(err.value) and "\n" not in str(err.value)
+
+
+def test_saving_over_a_folder_names_the_file_not_its_temporary(tmp_path):
+    (tmp_path / "r" / "arena.json").mkdir(parents=True)
+    with pytest.raises(CalibrationError) as err:
+        store.save("arena", "r", arena_payload(camera_payload()), tmp_path)
+    msg = str(err.value)
+    assert msg == f"{tmp_path / 'r' / 'arena.json'} is a directory: nothing written"
+    assert not [p for p in (tmp_path / "r").iterdir() if p.name != "arena.json"]  # no leftover

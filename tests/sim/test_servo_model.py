@@ -88,3 +88,44 @@ def test_targets_are_the_latest_given_and_applied_targets_what_the_actuators_hol
     twin.reset()  # a reset drops commands still in flight
     twin.step(0.05)
     np.testing.assert_array_equal(twin.applied_targets(), 0.0)
+
+
+def _dynamics_payload(servos: ServoModel) -> dict:
+    return {
+        "servos": servos.to_dict(),
+        "recording": {"path": "r.npz", "sha256": "0" * 64},
+        "held_out_rms_rad": {"nominal": 0.02, "fitted": 0.004},
+    }
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("kp", 1e300),
+        ("damping", 50.0),
+        ("armature", 1.0),
+        ("frictionloss", 5.0),
+        ("force_limit", 1e-6),
+    ],
+)
+def test_a_dynamics_payload_out_of_range_is_one_line_naming_the_field(field, value):
+    from robot.calibration_files import CalibrationError
+    from robot.fields import Fields
+    from sim.servo_model import check_dynamics
+
+    payload = _dynamics_payload(NOMINAL.replace(**{field: [value] * 6}))
+    with pytest.raises(CalibrationError) as info:
+        check_dynamics(Fields("dynamics.json: data", payload, CalibrationError, name="data"))
+    message = str(info.value)
+    assert "\n" not in message and field in message and "nominal" in message
+
+
+def test_the_stand_ins_servos_and_the_nominal_pass_the_dynamics_check():
+    from robot.calibration_files import CalibrationError
+    from robot.fields import Fields
+    from sim.servo_model import check_dynamics
+    from sim.standin.hidden import draw_hidden
+
+    for servos in [NOMINAL, *(draw_hidden(seed).servos for seed in range(300, 320))]:
+        payload = _dynamics_payload(servos)
+        assert check_dynamics(Fields("d", payload, CalibrationError, name="data")) == servos

@@ -42,3 +42,12 @@ def test_rig_builds_unconnected() -> None:
     assert str(rig.arm.bus_spec) == "slcan:/dev/pts/99" and rig.arm.bus_spec.bitrate == 500000
     assert type(rig.camera).__name__ == "OpenCVCamera"
     assert type(rig.clock).__name__ == "RealClock"
+
+
+def test_on_crash_is_limp_unless_the_user_says_hold():
+    from explore.options import BadOption
+    from explore.rigs.dynamixel import Options
+
+    assert Options().on_crash == "limp" and Options(on_crash="hold").on_crash == "hold"
+    with pytest.raises(BadOption, match="on_crash must be one of limp, hold"):
+        Options(on_crash="stiff")

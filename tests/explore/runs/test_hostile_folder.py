@@ -92,6 +92,9 @@ def test_a_linked_file_in_a_received_run_is_refused_and_left_alone(run, victim, 
     if name in (WRITER_LOCK_FILE, HISTORY_FILE):
         assert ergo("runs", "salvage", str(run)) == 2
         assert name in _one_line(capsys) and victim.read_bytes() == before
+    if name == WRITER_LOCK_FILE:  # checked too: one line, not a traceback
+        assert ergo("runs", "check", str(run)) == 2
+        assert name in _one_line(capsys) and victim.read_bytes() == before
 
 
 @pytest.mark.parametrize("link", ["symbolic", "hard"])
