@@ -13,7 +13,7 @@ which is what a query costs without the tree. Three shapes:
   a 2-D ball position (a fixed random map, tanh(u A + b), plus 0.01 noise), and the goals
   are uniform in the bounding box of the outcomes, as RGE samples them. Real latents are far
   from uniform: those of a 5000-episode rge-vae run on the twin put 98% of their variance in
-  one principal component (measured on seed 0 of docs/notebook.md section 0, with its VAE).
+  one principal component (measured on seed 0 of the earlier twin campaign, with its VAE).
 
 Prints per size: the insertion cost per episode (amortised over the tree rebuilds), the
 points a query scans (those left outside the tree until its next rebuild; all of them where

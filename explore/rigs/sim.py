@@ -60,7 +60,7 @@ class Options(VideoOptions):
         render_quality: ``chosen``, the only value (the scene's own settings, docs/twin.md),
             kept so that run folders that name it still open; ``legacy`` (MuJoCo's default
             quality, the images before 2026-12-01) was removed: no current result needs it
-            (docs/notebook.md holds the results made with it).
+            (the results made with it are in git history).
         distractor: ``none`` (default) or ``walk``: a second ball (red) that the arm cannot
             move, taking a random step on the ball's ring before every episode
             (``distractor_walk``).
@@ -97,7 +97,7 @@ class Options(VideoOptions):
             raise BadOption(
                 "render_quality",
                 f"must be 'chosen', got {self.render_quality!r} (the legacy render mode was "
-                "removed on 2026-12-03: no current result needs it; docs/notebook.md)",
+                "removed: no current result needs it)",
             )
 
 

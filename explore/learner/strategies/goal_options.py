@@ -26,7 +26,7 @@ LATENT_FORMS = ("raw", "zscore")
 # because the ball is not reset between episodes, on the rig as on the twin. With the paper's
 # simulation settings (sigma 0.05, no random episodes), rge-efr replayed bootstrap motions that
 # never touched the ball where it lay in 2 of 3 seeds (0 touches in 1400 goal episodes) and
-# reached fewer cells than RPE (docs/notebook.md, section 2).
+# reached fewer cells than RPE (docs/results_stalls.md).
 SIGMA_RIG = 0.2  # exploration noise in the [-1, 1] parameter space, original rig
 RANDOM_EPISODES_RIG = 0.1  # share of random motor babbling episodes after the bootstrap, rig
 # An outcome less than this fraction of a diagonal away from its context counts as "unchanged"

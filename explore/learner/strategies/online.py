@@ -25,7 +25,7 @@ from explore.learner.strategies.goal_exploration import (
 )
 
 ONLINE_BOOTSTRAP = 2000  # paper: 2000 random episodes before the online VAE (rig)
-# CPU schedule, the one of the pre-trained VAE in docs/notebook.md (section 4): Adam lr 1e-3,
+# CPU schedule, the one of the pre-trained VAE in docs/results_vae.md: Adam lr 1e-3,
 # batch 64, beta 10 with a KL capacity rising to 10 nats over 500 iterations, 700 iterations.
 # The paper used 200k iterations of batch 32 at lr 1e-5 on a GPU. The plain VAE (beta 1) at
 # 1500 iterations, the first default, collapsed on a bootstrap's images: total KL 0.11 nats at
