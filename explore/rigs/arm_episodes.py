@@ -7,7 +7,7 @@ The outcome is observed with the arm back at its rest pose (upright, over the ar
 so that the arm hides no part of the ring and the outcome image varies with the ball alone; the
 next episode's context is the same scene. The original implementation observed the outcome with
 the arm where its movement ended: there the arm's pose dominated the image, and a VAE trained on
-such images encoded the arm, not the ball (measured on the earlier twin; docs/notebook.md in git history).
+such images encoded the arm, not the ball (measured on the earlier twin: docs/notebook.md, in git).
 
 All positions in metres (arena frame: origin at the arm's base, z up), angles in radians,
 durations in seconds.
