@@ -16,11 +16,13 @@ from __future__ import annotations
 
 import argparse
 import shutil
+import sys
 import tempfile
 import time
 from pathlib import Path
 
-from vision.untrained import save_untrained_models
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # testkit/, not installed
+from testkit.untrained_models import save_untrained_models
 
 STRATEGIES = ("rpe", "rge-efr", "mge-efr", "rge-vae", "mge-vae", "rge-sae", "mge-sae")
 

@@ -15,7 +15,7 @@ docs/standin.md has the table. What is hidden:
   command delay);
 - where the ball starts on its ring.
 
-This module draws and writes them; only ``sim.standin.truth`` reads the file back, and only
+This module draws and writes them; only ``testkit.standin_truth`` reads the file back, and only
 tests and bench scripts import that (tests/sim/standin/test_secrecy.py checks it).
 
 Units: metres, radians, seconds, pixels.

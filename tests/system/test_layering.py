@@ -6,6 +6,7 @@ source (every import statement, inside functions too), so a lazy import cannot h
 from __future__ import annotations
 
 import ast
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -79,21 +80,43 @@ def test_the_wings_of_explore_import_downwards_only():
 # The episode's seam (explore/rigs: the Rig, the episode player, the ball sensors) and the
 # exploration loop (explore/runs) know no simulator: a twin is one rig among others, behind its
 # BallSensor. Only the rigs that are simulators build one (and arena.py, the twin arena's Scene,
-# reads the twin's dimensions); the fault soak (explore/runs/soak.py)
-# builds twin rigs with faulty buses on purpose.
+# reads the twin's dimensions).
 SIMULATED_RIGS = ("sim.py", "sim_dataset.py", "armballs.py", "arena.py")
-SOAK = "soak.py"
 
 
 def test_the_episode_seam_and_the_loop_import_no_simulator():
     bad = []
-    for wing, exempt in (("rigs", SIMULATED_RIGS), ("runs", (SOAK,))):
+    for wing, exempt in (("rigs", SIMULATED_RIGS), ("runs", ())):
         for path in sorted((ROOT / "explore" / wing).glob("*.py")):
             if path.name in exempt:
                 continue
             bad += [f"{path.relative_to(ROOT)} imports {n}" for n in _imports(path)
                     if n.split(".")[0] == "sim"]  # fmt: skip
     assert bad == []
+
+
+# testkit/ holds what tests, bench/ and experiments/ share (the scripted owner, the stand-in's
+# truth, the fault soak, synthetic views, untrained models, the inverse-model diagnosis): no
+# product module imports it, and it is not installed.
+TESTKIT = "testkit"
+
+
+def test_no_product_module_imports_the_testkit():
+    bad = [
+        f"{path.relative_to(ROOT)} imports {name}"
+        for package in PACKAGES
+        for path in _modules(package)
+        for name in _imports(path)
+        if name.split(".")[0] == TESTKIT
+    ]
+    assert bad == []
+
+
+def test_the_testkit_is_not_installed():
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    include = config["tool"]["setuptools"]["packages"]["find"]["include"]
+    assert not [p for p in include if p.split("*")[0].split(".")[0] == TESTKIT]
+    assert {p.rstrip("*") for p in include} >= set(PACKAGES)
 
 
 def test_the_shared_modules_of_explore_import_no_wing():

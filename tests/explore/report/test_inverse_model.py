@@ -1,4 +1,4 @@
-"""The inverse-model diagnosis (explore/report/inverse_model.py,
+"""The inverse-model diagnosis (testkit/inverse_model.py,
 experiments/diagnose_inverse_model.py) re-finds the neighbour the meta-policy really used."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from explore.campaigns.trial import run_one
-from explore.report.inverse_model import PAIRS, DiagnosisError, diagnose, figure
+from testkit.inverse_model import PAIRS, DiagnosisError, diagnose, figure
 from vision.vae import Vae, VaeConfig
 
 torch.set_num_threads(1)

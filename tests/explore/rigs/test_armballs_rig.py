@@ -34,7 +34,7 @@ BOOTSTRAP = 10
 def models(tmp_path_factory) -> dict[str, str]:
     """An untrained VAE (latents ranked by a made-up KL) and spatial autoencoder: enough to
     run the strategies; what they learn is not what is tested here."""
-    from vision.untrained import save_untrained_models
+    from testkit.untrained_models import save_untrained_models
 
     return save_untrained_models(tmp_path_factory.mktemp("models"))
 
