@@ -9,8 +9,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from plumbing.cli_errors import error
 from robot.bus_flags import add_bus_arguments, bus_from_args, make_arm
-from robot.cli_errors import error
 from sim.models.make_scene import BALL_RADIUS
 
 DEFAULT_VIEWS = 15  # views to collect from a live camera (OpenCV's tutorial: 10-15, docs/facts.md)

@@ -21,7 +21,7 @@ import re
 from pathlib import Path
 from typing import Any
 
-from robot.fields import Fields
+from plumbing.fields import Fields
 
 SCHEMA = "ergo-explore/calibration"
 ENV_DIR = "ERGO_CALIBRATION_DIR"

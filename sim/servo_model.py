@@ -31,13 +31,13 @@ from typing import Any
 
 import numpy as np
 
+from plumbing.fields import Fields, is_matrix
 from robot.calibration_files import (
     CalibrationError,
     CalibrationMissing,
     calibration_path,
     read_document,
 )
-from robot.fields import Fields, is_matrix
 
 N_JOINTS = 6
 # The per-joint fields, in the order reports and fits list them.

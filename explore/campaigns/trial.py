@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, Any
 from explore.rigs import rig as rigs
 from explore.rigs.rig import RigConfig
 from explore.runs.layout import TRIAL_FILE
-from robot.files import atomic_write
+from plumbing.files import atomic_write
 
 # explore.runs.config loads cv2 (vision.observation): imported where a trial is made, as before
 if TYPE_CHECKING:

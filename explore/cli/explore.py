@@ -12,8 +12,8 @@ from typing import Any
 from explore.cli.rerun_flags import add_rerun_arguments, check_viewer
 from explore.rigs.rig import RIGS
 from explore.runs.layout import METRICS_FILE
+from plumbing.cli_errors import CliError
 from robot.bus_flags import add_bus_arguments, bus_flags
-from robot.cli_errors import CliError
 
 
 def add_rig_arguments(p: argparse.ArgumentParser) -> None:

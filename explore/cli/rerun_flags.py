@@ -8,7 +8,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from robot.cli_errors import CliError
+from plumbing.cli_errors import CliError
 
 RERUN_MODES = ("save", "spawn", "off")
 

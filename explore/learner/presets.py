@@ -43,7 +43,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from robot.registry import did_you_mean
+from plumbing.registry import did_you_mean
 
 CORL2018 = "corl2018"
 CORL2018_COMMON: dict[str, Any] = {

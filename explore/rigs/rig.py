@@ -5,7 +5,7 @@ state after an episode (``snapshot``) and to restore it on resume (``restore``),
 asks which rig it is.
 
 Rigs are built by name from ``RIGS``, a table of name -> module imported lazily
-(``robot.registry.LazyTable``), so a user without a CAN adapter library never imports it. Each
+(``plumbing.registry.LazyTable``), so a user without a CAN adapter library never imports it. Each
 rig module defines its typed ``Options`` (a dataclass: unknown keys and wrong types are refused
 by ``explore.options.parse_options``), ``make_rig(config, options) -> Rig``, which returns
 an unconnected rig, ``PHYSICAL`` (a real arm, or nothing physical attached) and
@@ -29,8 +29,8 @@ from explore.rigs.ball import NO_STATE, BallSensor
 from explore.rigs.clock import Clock
 from explore.rigs.episodes import EpisodeConfig, EpisodePlayer
 from explore.rigs.motor import ergo_jr_dmp
+from plumbing.registry import LazyTable
 from robot.arm import Arm
-from robot.registry import LazyTable
 from vision.camera import Camera
 
 

@@ -26,7 +26,7 @@ from explore.learner.strategies.registry import MODELS
 from explore.runs.config import RunConfig
 from explore.runs.layout import INPUTS_KEY, RUN_FILE
 from explore.runs.store import RunStore, RunStoreError
-from robot.files import atomic_write
+from plumbing.files import atomic_write
 
 BEFORE = "inputs_before"  # run.json's key of the records replaced by an allowed change
 ALLOW_FLAG = "--allow-changed-inputs"  # ergo explore's override

@@ -22,7 +22,7 @@ import select
 import threading
 import time
 
-from robot.cli_errors import error
+from plumbing.cli_errors import error
 from sim.dynamixel.emulator import DEFAULT_OVERLOAD_AFTER_S, DynamixelEmulator, FaultConfig
 from sim.pty_port import OnPty, PtyPort
 

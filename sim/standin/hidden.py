@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from robot.files import atomic_write
+from plumbing.files import atomic_write
 from robot.spec import ERGO_JR_JOINTS
 from sim.models.make_scene import (
     ARENA_MARKER_SIZE,

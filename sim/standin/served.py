@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from robot.cli_errors import error
+from plumbing.cli_errors import error
 from sim.mjpeg_server import MjpegServer
 from sim.servo_model import ServoModel, fitted_servos
 from sim.standin.hands import HOST, Hands, HandsServer

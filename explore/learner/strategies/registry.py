@@ -1,6 +1,6 @@
 """The strategies, one entry each: what implements it (imported only when used, as every table of
-the project: ``robot.registry.LazyTable``, so ``ergo --help`` imports no torch), what it is in one
-line, the model it needs trained beforehand, whether the common goal-exploration options apply
+the project: ``plumbing.registry.LazyTable``, so ``ergo --help`` imports no torch), what it is in
+one line, the model it needs trained beforehand, whether the common goal-exploration options apply
 to it, and its named presets (explauto's way: a model's entry and its named configurations
 together).
 
@@ -28,7 +28,7 @@ from explore.learner.presets import (
 )
 from explore.learner.scene import Scene
 from explore.learner.strategies.base import Strategy, StrategyError
-from robot.registry import LazyTable
+from plumbing.registry import LazyTable
 
 
 @dataclass(frozen=True)
