@@ -30,7 +30,7 @@ STRATEGIES = ("rpe", "rge-efr", "mge-efr", "rge-vae", "mge-vae", "rge-sae", "mge
 def one_run(out: Path, strategy: str, episodes: int, models: dict[str, str]) -> tuple[float, float]:
     """(wall s, CPU s) of one run of ``episodes`` on arm2balls with the corl2018 preset."""
     from explore.campaigns.trial import Trial, run_trial
-    from explore.learner.presets import preset_options
+    from explore.learner.strategies.registry import preset_options
 
     opts = preset_options("corl2018", strategy)
     if "vae" in strategy:

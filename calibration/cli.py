@@ -249,7 +249,8 @@ def _camera_impl(args: argparse.Namespace) -> int:
 def _live_views(args: argparse.Namespace, spec) -> tuple[list, tuple[int, int]]:
     import numpy as np
 
-    from vision.camera import EndOfStream, make_camera
+    from vision.camera import EndOfStream
+    from vision.make_camera import make_camera
 
     views: list = []
     size = (0, 0)
@@ -291,7 +292,7 @@ def _read_frame(args: argparse.Namespace):
         if image is None:
             raise CalibrationError(f"cannot read image {args.image}")
         return image
-    from vision.camera import make_camera
+    from vision.make_camera import make_camera
 
     with make_camera(args.camera) as cam:
         for _ in range(5):  # let auto-exposure settle on a live camera (guess: 5 frames)
@@ -560,7 +561,8 @@ def _show_impl(args: argparse.Namespace) -> int:
 def _track(args: argparse.Namespace) -> int:
     import dataclasses
 
-    from vision.camera import CameraError, EndOfStream, make_camera
+    from vision.camera import CameraError, EndOfStream
+    from vision.make_camera import make_camera
     from vision.rectify import ArenaModel
     from vision.tracker import BallTracker, HSVRange, TrackerConfig, tracker_config_from_arena
 

@@ -54,7 +54,7 @@ def strategy_options(
         raise CampaignError(str(exc)) from None
     opts: dict[str, Any] = {}
     if preset is not None:
-        from explore.learner.presets import preset_options
+        from explore.learner.strategies.registry import preset_options
 
         try:
             opts.update(preset_options(preset, name))

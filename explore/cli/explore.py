@@ -111,8 +111,8 @@ def _strategy_options(args: argparse.Namespace, strategy: str) -> dict[str, Any]
     """The strategy options the flags give: the ``--preset``'s, then ``--strategy-option``."""
     opts: dict[str, Any] = {}
     if args.preset is not None:
-        from explore.learner.presets import preset_options
         from explore.learner.strategies import StrategyError
+        from explore.learner.strategies.registry import preset_options
 
         try:
             opts.update(preset_options(args.preset, strategy))

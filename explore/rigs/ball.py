@@ -136,7 +136,7 @@ def rig_ball_locator(config: Any) -> tuple[BallLocator | None, str | None]:
     ball positions are then recorded as unknown (NaN), never guessed, and ``open_run`` warns
     once, or refuses a run whose strategy needs the ball (``CameraSensor.blind``)."""
     from calibration.store import CalibrationError, CalibrationMissing
-    from explore.rigs.rig import RigError
+    from explore.rigs.errors import RigError
 
     try:
         path = config.options.get("arena_calibration")

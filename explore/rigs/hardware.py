@@ -33,7 +33,8 @@ from explore.rigs.arena import TWIN_ARENA
 from explore.rigs.rig import RigConfig, RigError
 from explore.rigs.video import VideoOptions
 from robot.spec import ArmSpec, ergo_jr_spec
-from vision.camera import Camera, CameraError, make_camera
+from vision.camera import Camera, CameraError
+from vision.make_camera import make_camera
 
 log = logging.getLogger(__name__)
 CAMERA = "a device index, video path or URL"

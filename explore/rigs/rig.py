@@ -28,15 +28,11 @@ from explore.options import OptionsError, parse_options
 from explore.rigs.ball import NO_STATE, BallSensor
 from explore.rigs.clock import Clock
 from explore.rigs.episodes import EpisodeConfig, EpisodePlayer
+from explore.rigs.errors import RigError
 from explore.rigs.motor import ergo_jr_dmp
 from plumbing.registry import LazyTable
 from robot.arm import Arm
 from vision.camera import Camera
-
-
-class RigError(RuntimeError):
-    """A rig could not be built or connected."""
-
 
 # name -> the module with its ``Options``, ``make_rig`` and ``PHYSICAL`` (whether a real arm is
 # attached, which only the host that has it can run)

@@ -157,3 +157,111 @@ def test_the_learner_check_sees_a_rig_import(tmp_path):
     )
     refused = {n for n in _imports(bad) if not _within(n, LEARNER_MAY_IMPORT)}
     assert refused == {"robot.spec", "sim.models.make_scene", "explore.rigs.arena"}
+
+
+# ---- no import cycle between files ----------------------------------------------------------
+def _module_name(path: Path, root: Path) -> str:
+    parts = list(path.relative_to(root).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def import_graph(root: Path = ROOT, packages: tuple[str, ...] = PACKAGES) -> dict[str, set[str]]:
+    """module -> the modules of the project it imports, read from the source: every import
+    statement (module level, inside functions, under ``TYPE_CHECKING``), relative ones
+    resolved; ``from a import b`` is an edge to the module ``a.b`` when it is one, else to
+    ``a``. A package's ``__init__`` is a module of its own (importing ``a.b`` is no edge to
+    ``a``)."""
+    files = {
+        _module_name(p, root): p for pkg in packages for p in sorted((root / pkg).rglob("*.py"))
+    }
+    graph: dict[str, set[str]] = {}
+    for name, path in files.items():
+        here = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+        edges = set()
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                edges |= {a.name for a in node.names if a.name in files}
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    up = here[: len(here) - node.level + 1]
+                    base = ".".join(up + ([node.module] if node.module else []))
+                for alias in node.names:
+                    sub = f"{base}.{alias.name}"
+                    edges |= {sub} if sub in files else ({base} if base in files else set())
+        graph[name] = edges - {name}
+    return graph
+
+
+def import_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan's algorithm,
+    iterative): each is a set of modules that import one another, directly or not."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    cycles = []
+    for start in sorted(graph):
+        if start in index:
+            continue
+        work = [(start, iter(sorted(graph[start])))]
+        index[start] = low[start] = len(index)
+        stack.append(start)
+        on_stack.add(start)
+        while work:
+            node, children = work[-1]
+            child = next(children, None)
+            if child is not None:
+                if child not in index:
+                    index[child] = low[child] = len(index)
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(graph[child]))))
+                elif child in on_stack:
+                    low[node] = min(low[node], index[child])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                component = []
+                while True:
+                    member = stack.pop()
+                    on_stack.discard(member)
+                    component.append(member)
+                    if member == node:
+                        break
+                if len(component) > 1:
+                    cycles.append(sorted(component))
+    return cycles
+
+
+def test_no_import_cycle_between_the_product_modules():
+    assert import_cycles(import_graph()) == []
+
+
+def test_the_cycle_check_sees_a_cycle(tmp_path):
+    """A lazy import inside a function and a relative one make a cycle as well."""
+    (tmp_path / "pkg").mkdir()
+    (tmp_path / "pkg" / "__init__.py").write_text("")
+    (tmp_path / "pkg" / "a.py").write_text("from pkg.b import f\n")
+    (tmp_path / "pkg" / "b.py").write_text("def f():\n    from . import c\n")
+    (tmp_path / "pkg" / "c.py").write_text("import pkg.a\n")
+    (tmp_path / "pkg" / "d.py").write_text("from pkg import a\n")
+    graph = import_graph(tmp_path, ("pkg",))
+    assert graph["pkg.b"] == {"pkg.c"}
+    assert import_cycles(graph) == [["pkg.a", "pkg.b", "pkg.c"]]
+
+
+# ---- small modules -----------------------------------------------------------------------------
+MAX_LINES = 600  # a module longer than this is split by what it does
+
+
+def test_no_product_module_is_over_600_lines():
+    long = {
+        str(path.relative_to(ROOT)): n
+        for package in PACKAGES
+        for path in _modules(package)
+        if (n := len(path.read_text().splitlines())) > MAX_LINES
+    }
+    assert long == {}

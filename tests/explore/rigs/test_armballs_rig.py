@@ -13,7 +13,7 @@ import torch
 
 from explore.campaigns.trial import Trial, run_trial
 from explore.cli import main
-from explore.learner.presets import preset_options
+from explore.learner.strategies.registry import preset_options
 from explore.runs.layout import HISTORY_FILE, METRICS_FILE
 from explore.runs.metrics import read_metrics
 from explore.runs.store import RunStore, read_synced
