@@ -109,7 +109,7 @@ class RunConfig:
         (ports and cameras change between sessions). Not checked: see ``checked``."""
         rig = self.rig
         if rig_options:
-            rig = dataclasses.replace(rig, options={**rig.options, **rig_options})
+            rig = dataclasses.replace(rig, options={**rig.options, **rig_options}, calibration=None)
         return dataclasses.replace(
             self, rig=rig, episodes=self.episodes if episodes is None else episodes
         )
