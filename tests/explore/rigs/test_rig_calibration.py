@@ -77,3 +77,19 @@ def test_a_run_resolves_its_rigs_files_once(tmp_path, monkeypatch):
         assert run.config.rig.calibration is not None
         assert Path(run.path, "run.json").is_file()
     assert len(calls) == 1
+
+
+def test_a_campaign_host_checks_the_arena_file_the_rig_will_read(tmp_path, _own_calibration_dir):
+    from explore.campaigns.trial import CampaignError, check_rig_calibration
+
+    rig = {"name": "dynamixel", "rig_id": "bench", "options": {}}
+    with pytest.raises(CampaignError, match="no arena calibration for rig 'bench'") as err:
+        check_rig_calibration(rig)
+    assert str(_own_calibration_dir / "bench" / "arena.json") in str(err.value)
+    named = tmp_path / "a.json"
+    named.write_text("{}")
+    rig["options"] = {"arena_calibration": str(named)}
+    assert check_rig_calibration(rig) == named
+    with pytest.raises(CampaignError, match=r"rig id '\.\./x' must be"):
+        check_rig_calibration({"name": "dynamixel", "rig_id": "../x", "options": {}})
+    assert check_rig_calibration({"name": "sim", "rig_id": "../x", "options": {}}) is None
