@@ -16,11 +16,13 @@ from __future__ import annotations
 
 import argparse
 import shutil
+import sys
 import tempfile
 import time
 from pathlib import Path
 
-from vision.untrained import save_untrained_models
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # testkit/, not installed
+from testkit.untrained_models import save_untrained_models
 
 STRATEGIES = ("rpe", "rge-efr", "mge-efr", "rge-vae", "mge-vae", "rge-sae", "mge-sae")
 
@@ -28,7 +30,7 @@ STRATEGIES = ("rpe", "rge-efr", "mge-efr", "rge-vae", "mge-vae", "rge-sae", "mge
 def one_run(out: Path, strategy: str, episodes: int, models: dict[str, str]) -> tuple[float, float]:
     """(wall s, CPU s) of one run of ``episodes`` on arm2balls with the corl2018 preset."""
     from explore.campaigns.trial import Trial, run_trial
-    from explore.learner.presets import preset_options
+    from explore.learner.strategies.registry import preset_options
 
     opts = preset_options("corl2018", strategy)
     if "vae" in strategy:

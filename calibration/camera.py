@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from robot.fields import Fields, is_matrix
+from plumbing.fields import Fields, is_matrix
 
 INTRINSIC_NAMES = ("fx", "fy", "cx", "cy")
 

@@ -4,13 +4,15 @@ rig (``calibration.store``). Heavy imports (OpenCV, robot backends) happen insid
 from __future__ import annotations
 
 import argparse
+import functools
 import math
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from plumbing.cli_errors import error
 from robot.bus_flags import add_bus_arguments, bus_from_args, make_arm
-from robot.cli_errors import error
 from sim.models.make_scene import BALL_RADIUS
 
 DEFAULT_VIEWS = 15  # views to collect from a live camera (OpenCV's tutorial: 10-15, docs/facts.md)
@@ -125,38 +127,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     from calibration.dynamics.command import add_arguments as dynamics_arguments
 
     dynamics_arguments(dyn)
-    dyn.set_defaults(func=lambda a: _run(_dynamics_impl, a))
+    dyn.set_defaults(func=_dynamics)
 
     show = cal.add_parser("show", help="validate and summarise a rig's calibration files")
     common(show)
     show.set_defaults(func=_show)
 
-    track = sub.add_parser("track", help="track the ball, one line per frame")
-    track.add_argument(
-        "--camera",
-        required=True,
-        help="device index, video file, folder of images, or stream URL (127.0.0.1 only)",
-    )
-    track.add_argument("--frames", type=int, default=None, help="stop after N frames")
-    track.add_argument(
-        "--arena",
-        type=Path,
-        default=None,
-        help="arena calibration file (from `ergo calibrate arena`): positions in metres",
-    )
-    track.add_argument(
-        "--hsv",
-        action="append",
-        default=None,
-        metavar="H,S,V:H,S,V",
-        help="ball colour range lower:upper (repeat for red); default: the arena file's or the "
-        "original rig's",
-    )
-    track.add_argument("--width", type=int, default=None, help="requested width, px")
-    track.add_argument("--height", type=int, default=None, help="requested height, px")
-    track.add_argument("--fps", type=float, default=None, help="requested frame rate")
-    track.add_argument("--fourcc", default=None, help="requested pixel format, e.g. MJPG")
-    track.set_defaults(func=_track)
+    from calibration.track_command import register as register_track
+
+    register_track(sub)
 
 
 def _pair(text: str, what: str) -> tuple[float, float]:
@@ -169,27 +148,31 @@ def _pair(text: str, what: str) -> tuple[float, float]:
     return a, b
 
 
-def _run(func, args: argparse.Namespace) -> int:
-    from calibration.store import CalibrationError
-    from vision.camera import CameraError
+def _command(func: Callable[[argparse.Namespace], int | None]) -> Callable[..., int]:
+    """An ``ergo calibrate`` command: ``--rig`` refused (the rig id is ``--rig-id``), and a
+    calibration or camera error said in one line (``ergo: error: ...``)."""
 
-    if args.rig_type is not None:
-        return error(
-            f"--rig {args.rig_type}: ergo calibrate takes the rig id as --rig-id ID "
-            "(--rig is the rig type of ergo explore)"
-        )
-    try:
-        return int(func(args) or 0)
-    except (CalibrationError, CameraError) as exc:
-        return error(exc)
+    @functools.wraps(func)
+    def command(args: argparse.Namespace) -> int:
+        from calibration.store import CalibrationError
+        from vision.camera import CameraError
+
+        if args.rig_type is not None:
+            return error(
+                f"--rig {args.rig_type}: ergo calibrate takes the rig id as --rig-id ID "
+                "(--rig is the rig type of ergo explore)"
+            )
+        try:
+            return int(func(args) or 0)
+        except (CalibrationError, CameraError) as exc:
+            return error(exc)
+
+    return command
 
 
 # ---- camera ------------------------------------------------------------------------------
+@_command
 def _camera(args: argparse.Namespace) -> int:
-    return _run(_camera_impl, args)
-
-
-def _camera_impl(args: argparse.Namespace) -> int:
     import cv2
 
     from calibration import charuco, store
@@ -249,7 +232,8 @@ def _camera_impl(args: argparse.Namespace) -> int:
 def _live_views(args: argparse.Namespace, spec) -> tuple[list, tuple[int, int]]:
     import numpy as np
 
-    from vision.camera import EndOfStream, make_camera
+    from vision.camera import EndOfStream
+    from vision.make_camera import make_camera
 
     views: list = []
     size = (0, 0)
@@ -277,10 +261,6 @@ def _live_views(args: argparse.Namespace, spec) -> tuple[list, tuple[int, int]]:
 
 
 # ---- arena -------------------------------------------------------------------------------
-def _arena(args: argparse.Namespace) -> int:
-    return _run(_arena_impl, args)
-
-
 def _read_frame(args: argparse.Namespace):
     import cv2
 
@@ -291,7 +271,7 @@ def _read_frame(args: argparse.Namespace):
         if image is None:
             raise CalibrationError(f"cannot read image {args.image}")
         return image
-    from vision.camera import make_camera
+    from vision.make_camera import make_camera
 
     with make_camera(args.camera) as cam:
         for _ in range(5):  # let auto-exposure settle on a live camera (guess: 5 frames)
@@ -362,7 +342,8 @@ def _print_markers(args: argparse.Namespace) -> None:
     )
 
 
-def _arena_impl(args: argparse.Namespace) -> int:
+@_command
+def _arena(args: argparse.Namespace) -> int:
     import numpy as np
 
     from calibration import arena as ar
@@ -423,10 +404,6 @@ def _arena_impl(args: argparse.Namespace) -> int:
 
 
 # ---- joints ------------------------------------------------------------------------------
-def _joints(args: argparse.Namespace) -> int:
-    return _run(_joints_impl, args)
-
-
 def _make_arm(args: argparse.Namespace):
     """The arm the bus flags name, with raw servo angles (directions +1 and offsets 0, the
     backends' defaults), so that the result applies directly."""
@@ -435,7 +412,8 @@ def _make_arm(args: argparse.Namespace):
     return make_arm(bus, model=args.model) if bus.kind == "dynamixel" else make_arm(bus)
 
 
-def _joints_impl(args: argparse.Namespace) -> int:
+@_command
+def _joints(args: argparse.Namespace) -> int:
     from calibration import store
     from calibration.joints import calibrate_joints, interactive_prompt
 
@@ -480,11 +458,8 @@ def _joints_impl(args: argparse.Namespace) -> int:
 
 
 # ---- show --------------------------------------------------------------------------------
-def _show(args: argparse.Namespace) -> int:
-    return _run(_show_impl, args)
-
-
-def _dynamics_impl(args: argparse.Namespace) -> int:
+@_command
+def _dynamics(args: argparse.Namespace) -> int:
     from calibration.dynamics.command import run
 
     return run(args)
@@ -533,7 +508,8 @@ def _age(created: Any) -> str:
     return "made just now" if seconds >= -60 else "dated in the future (check the clock)"
 
 
-def _show_impl(args: argparse.Namespace) -> int:
+@_command
+def _show(args: argparse.Namespace) -> int:
     from calibration import store
 
     bad = 0
@@ -554,54 +530,3 @@ def _show_impl(args: argparse.Namespace) -> int:
             f"sha256 {store.file_sha256(path)[:12]})"
         )
     return 1 if bad else 0
-
-
-# ---- track -------------------------------------------------------------------------------
-def _track(args: argparse.Namespace) -> int:
-    import dataclasses
-
-    from vision.camera import CameraError, EndOfStream, make_camera
-    from vision.rectify import ArenaModel
-    from vision.tracker import BallTracker, HSVRange, TrackerConfig, tracker_config_from_arena
-
-    arena, config = None, TrackerConfig()
-    if args.arena is not None:
-        from calibration import store
-
-        try:  # validated (version, finite numbers) and checked against camera.json beside it
-            data = store.load_arena_file(args.arena)
-        except store.CalibrationError as exc:
-            return error(exc)
-        arena = ArenaModel.from_dict(data)
-        config = tracker_config_from_arena(data)
-    if args.hsv:
-        try:
-            ranges = tuple(HSVRange.parse(h) for h in args.hsv)
-        except ValueError as exc:
-            return error(f"--hsv: {exc}")
-        config = dataclasses.replace(config, ranges=ranges)
-    tracker = BallTracker(config, arena)
-    try:
-        camera = make_camera(args.camera, args.width, args.height, args.fps, args.fourcc)
-    except CameraError as exc:
-        return error(exc)
-    n = 0
-    try:
-        with camera:
-            for warning in getattr(camera, "settings_warnings", []):
-                print(f"warning: camera ignored a setting: {warning}", file=sys.stderr)
-            while args.frames is None or n < args.frames:
-                try:
-                    frame = camera.read()
-                except EndOfStream:
-                    if n:  # a recording played to its end (none at all: an error)
-                        break
-                    raise
-                obs = tracker.track(frame.image)
-                print(f"frame {n} t={frame.timestamp:.3f}s: {obs.describe()}", flush=True)
-                n += 1
-    except CameraError as exc:
-        return error(exc)
-    except KeyboardInterrupt:
-        pass
-    return 0

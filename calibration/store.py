@@ -20,6 +20,8 @@ from pathlib import Path
 from typing import Any
 
 from calibration.camera import check_camera_payload
+from plumbing.fields import Fields, is_matrix
+from plumbing.files import atomic_write
 from robot.calibration_files import (
     DEFAULT_DIR,
     ENV_DIR,
@@ -33,8 +35,6 @@ from robot.calibration_files import (
     check_rig_id,
     read_document,
 )
-from robot.fields import Fields, is_matrix
-from robot.files import atomic_write
 
 __all__ = [
     "DEFAULT_DIR",

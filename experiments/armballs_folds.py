@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from explore.runs.layout import METRICS_FILE
-from robot.cli_errors import error
+from plumbing.cli_errors import error
 
 ROOT = Path(__file__).resolve().parents[1]
 PUBLISHED_RUNS = ROOT / "docs" / "armballs_published_runs.csv"

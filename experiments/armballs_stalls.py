@@ -34,7 +34,7 @@ import numpy as np
 from script_helpers import save_figure  # experiments/script_helpers.py, beside this script
 
 from explore.runs.layout import METRICS_FILE, RUN_FILE
-from robot.cli_errors import error
+from plumbing.cli_errors import error
 
 ROOT = Path(__file__).resolve().parents[1]
 PUBLISHED_RUNS = ROOT / "docs" / "armballs_published_runs.csv"

@@ -1,5 +1,5 @@
 """Camera intrinsics recovered from synthetic views of a ChArUco board and of a plain chessboard
-through a known camera (calibration/synthetic.py ray-casts the print; the camera's matrix and
+through a known camera (testkit/synthetic_views.py ray-casts the print; the camera's matrix and
 distortion are those of tests/calibration: made up, webcam-like).
 
 Prints, per board and seed, fx, fy, cx, cy (px) with their standard deviations (the larger of
@@ -14,13 +14,17 @@ against the known camera. A set of views the calibration refuses is printed with
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 
 import numpy as np
 
 from calibration.charuco import BoardSpec, calibrate, coverage_cells
 from calibration.chessboard import ChessboardSpec
 from calibration.store import CalibrationError
-from calibration.synthetic import board_images
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # testkit/, not installed
+from testkit.synthetic_views import board_images
 
 SIZE = (480, 640)  # (height, width)
 K_TRUE = np.array([[610.0, 0.0, 322.0], [0.0, 605.0, 236.0], [0.0, 0.0, 1.0]])

@@ -1,6 +1,6 @@
 """Why does goal exploration reach fewer or more ball cells than RPE? The inverse model of
 finished runs, engineered (rge-efr, mge-efr) or learned (the VAEs', the spatial autoencoder's):
-what each goal episode's nearest neighbour was and did (explore/report/inverse_model.py says
+what each goal episode's nearest neighbour was and did (testkit/inverse_model.py says
 what is measured).
 
     .venv/bin/python experiments/diagnose_inverse_model.py RUN [RUN ...] [--vae DIR] [--figure PNG]
@@ -18,7 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from explore.report.inverse_model import DiagnosisError, diagnose, figure
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # testkit/, not installed
+from testkit.inverse_model import DiagnosisError, diagnose, figure
 
 
 def main() -> int:

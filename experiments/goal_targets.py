@@ -14,13 +14,16 @@ distance from a goal to its nearest outcome over the outcomes' median distance t
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
 
-from explore.report.inverse_model import goal_space_vectors
 from explore.runs.store import RunStore
 from vision.cli import parse_seeds
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # testkit/, not installed
+from testkit.inverse_model import goal_space_vectors
 
 SECTOR_DEG = 30
 

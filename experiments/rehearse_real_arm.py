@@ -2,7 +2,7 @@
 and what each calibration recovered against the stand-in's hidden parameters.
 
 For each bus and seed: ``ergo twin serve --bus BUS --stand-in SEED``, then the guide's
-commands in order, typed by ``sim.standin.owner.Owner`` (its hands move the limp joints and
+commands in order, typed by ``testkit.standin_owner.Owner`` (its hands move the limp joints and
 hold the chessboard): ``ergo bus scan``, ``ergo calibrate joints``, ``ergo calibrate camera``
 (live views), ``ergo calibrate arena``, ``ergo calibrate show``, ``ergo explore`` (rge-efr).
 Prints, per rig: the largest joint offset error (deg) and whether every direction is right,
@@ -44,8 +44,10 @@ import numpy as np
 
 from explore.runs.layout import METRICS_FILE
 from explore.runs.store import read_history
-from sim.standin.owner import Owner, ServedRig, read_saved
-from sim.standin.truth import arena_error_mm, camera_errors, joint_errors, read_hidden
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # testkit/, not installed
+from testkit.standin_owner import Owner, ServedRig, read_saved
+from testkit.standin_truth import arena_error_mm, camera_errors, joint_errors, read_hidden
 
 # ``ergo calibrate dynamics`` over a bus, s, against hangs: 45 s of recording and a fit that
 # took 108-467 s on 2 shared cores (docs/dynamics.md); a run over 900 s was measured at load 10.

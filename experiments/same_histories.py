@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from explore.runs.layout import METRICS_FILE
-from robot.cli_errors import error
+from plumbing.cli_errors import error
 
 
 def same_run(a: Path, b: Path) -> tuple[bool, str]:

@@ -35,8 +35,8 @@ sys.path.insert(0, str(ROOT))
 
 from calibration import store  # noqa: E402
 from robot.spec import ERGO_JR_JOINTS, ergo_jr_spec  # noqa: E402
-from sim.standin.owner import ServedRig  # noqa: E402
-from sim.standin.truth import read_hidden  # noqa: E402
+from testkit.standin_owner import ServedRig  # noqa: E402
+from testkit.standin_truth import read_hidden  # noqa: E402
 
 ERGO = [str(Path(sys.executable).parent / "ergo")]
 FIELDS = ("kp", "damping", "armature", "frictionloss")

@@ -29,7 +29,7 @@ sys.path.insert(0, str(ROOT))
 from calibration.dynamics.fit import arm_spec, simulate  # noqa: E402
 from calibration.dynamics.recording import Recording  # noqa: E402
 from sim.servo_model import ServoModel  # noqa: E402
-from sim.standin.truth import read_hidden  # noqa: E402
+from testkit.standin_truth import read_hidden  # noqa: E402
 
 FIELDS = ("kp", "damping", "armature", "frictionloss")
 SCALE = 1.5  # each field's change in the sensitivities (a guess at "clearly wrong")

@@ -24,14 +24,17 @@ ball's angle against the episode, one panel per run (at most 4 runs).
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
 
-from explore.report.inverse_model import goal_space_vectors
 from explore.report.run_data import run_scene
 from explore.runs.metrics import CellCounter
 from explore.runs.store import RunStore
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # testkit/, not installed
+from testkit.inverse_model import goal_space_vectors
 
 SECTOR_DEG = 30.0
 OFF_WALL_M = 0.01  # a ball this far inside the ring's outer limit is off the wall (a choice)

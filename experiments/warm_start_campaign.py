@@ -1,6 +1,6 @@
 """An arm's exploration from scratch against warmed by its twin (docs/warm_start.md), on stand-in
 rigs served over a bus (``ergo twin serve --bus BUS --stand-in SEED``), with the guide's
-commands (docs/real_arm.md) typed by ``sim.standin.owner.Owner``.
+commands (docs/real_arm.md) typed by ``testkit.standin_owner.Owner``.
 
 For each bus and stand-in: the calibrations of the guide (joints, camera, arena), then, as
 asked by ``--arms``:
@@ -38,9 +38,11 @@ import sys
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # testkit/, not installed
+
 from explore.runs.layout import METRICS_FILE
 from explore.runs.store import RunStore, read_history
-from sim.standin.owner import Owner, ServedRig
+from testkit.standin_owner import Owner, ServedRig
 
 ERGO = [sys.executable, "-m", "explore.cli"]
 TWIN_STRATEGY = "rge-efr"

@@ -3,7 +3,7 @@ into a frozen dataclass, with one-line errors naming the option and what was exp
 
 Each rig and each strategy declares its options as a dataclass (field types and defaults);
 ``parse_options(Options, given, where)`` refuses unknown keys with the list of known ones and
-values of the wrong type (by the predicates of ``robot.fields``, which also checks
+values of the wrong type (by the predicates of ``plumbing.fields``, which also checks
 ``run.json``'s config and the calibration files). The field types understood are ``bool``,
 ``int``, ``float``, ``str``, ``Literal[...]``, ``tuple[T, ...]`` and ``tuple[T, T]`` of those,
 and unions of them with ``None`` (a JSON list becomes a tuple). A field's
@@ -20,8 +20,8 @@ import types
 import typing
 from typing import Any, Literal, TypeVar, Union, get_args, get_origin
 
-from robot.fields import is_int, is_number
-from robot.registry import did_you_mean
+from plumbing.fields import is_int, is_number
+from plumbing.registry import did_you_mean
 
 T = TypeVar("T")
 

@@ -27,48 +27,12 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from robot.errors import BusError, LinkLost, NotConnectedError, SafetyStop
+from robot.joint_state import JointState
 from robot.spec import ArmSpec
 from robot.torque_guardian import EmergencyPayload
 from robot.watchdog import Watchdog
 
 log = logging.getLogger(__name__)
-
-
-@dataclass
-class JointState:
-    """One reading of all joints.
-
-    Attributes:
-        positions: shape (n,), rad.
-        velocities: shape (n,), rad/s.
-        loads: shape (n,), signed fraction of the maximum torque (NaN if unknown).
-        temperatures: shape (n,), degrees C (NaN if unknown).
-        errors: shape (n,), backend error flags per joint, 0 when healthy.
-        timestamp: seconds.
-    """
-
-    positions: np.ndarray
-    velocities: np.ndarray
-    loads: np.ndarray
-    temperatures: np.ndarray
-    errors: np.ndarray
-    timestamp: float
-
-    @classmethod
-    def from_positions(
-        cls, positions: np.ndarray, timestamp: float, **kw: np.ndarray
-    ) -> JointState:
-        """A state with only positions known (others zero or NaN unless given)."""
-        n = len(positions)
-        # defaults made only for what is missing (an arm reads this every control tick)
-        return cls(
-            positions=np.asarray(positions, dtype=float),
-            velocities=kw["velocities"] if "velocities" in kw else np.zeros(n),
-            loads=kw["loads"] if "loads" in kw else np.full(n, np.nan),
-            temperatures=kw["temperatures"] if "temperatures" in kw else np.full(n, np.nan),
-            errors=kw["errors"] if "errors" in kw else np.zeros(n, dtype=int),
-            timestamp=timestamp,
-        )
 
 
 # Reconnection attempts after a lost link before a safe stop, and the pauses between them:

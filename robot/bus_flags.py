@@ -11,9 +11,9 @@ import argparse
 from dataclasses import dataclass
 from typing import Any, Literal
 
+from plumbing.registry import LazyTable
 from robot.canopen.bus import DEFAULT_BITRATE
 from robot.dynamixel.bus import DEFAULT_BAUD
-from robot.registry import LazyTable
 
 # bus kind -> the arm class on that bus: ``cls(where, rate, **kw)``
 ARMS = LazyTable(

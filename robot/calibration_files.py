@@ -18,10 +18,11 @@ from __future__ import annotations
 import json
 import os
 import re
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from robot.fields import Fields
+from plumbing.fields import Fields
 
 SCHEMA = "ergo-explore/calibration"
 ENV_DIR = "ERGO_CALIBRATION_DIR"
@@ -66,6 +67,57 @@ def calibration_path(kind: str, rig_id: str, directory: str | Path | None = None
     if kind not in KINDS:
         raise CalibrationError(f"unknown calibration kind {kind!r}; known: {', '.join(KINDS)}")
     return calibration_root(directory) / check_rig_id(rig_id) / f"{kind}.json"
+
+
+@dataclass(frozen=True)
+class RigCalibration:
+    """One rig's calibration files, resolved once and passed down: where its joints, camera,
+    arena and dynamics files are (they may not exist). Made at a command's entry
+    (``explore.rigs.rig.RigConfig.resolved`` for a run, ``ergo twin serve --rig-id``) and read
+    by the rig (joints, arena), the twin (dynamics) and a run's inputs check.
+
+    Attributes:
+        rig_id: the rig's id.
+        joints: its ``joints.json``, or the file named instead; None: no joint file is read.
+        camera: the ``camera.json`` beside the arena file, which that file is checked against.
+        arena: its ``arena.json``, or the file named instead.
+        dynamics: its ``dynamics.json``.
+    """
+
+    rig_id: str
+    joints: Path | None
+    camera: Path
+    arena: Path
+    dynamics: Path
+
+    @classmethod
+    def find(
+        cls,
+        rig_id: str,
+        directory: str | Path | None = None,
+        *,
+        arena: str | Path | None = None,
+        joints: str | Path | None = None,
+        read_joints: bool = True,
+    ) -> RigCalibration:
+        """Rig ``rig_id``'s files under ``calibration_root(directory)``; ``arena`` and
+        ``joints`` name other files instead (``~`` expanded), ``read_joints=False`` none.
+        A one-line ``CalibrationError`` for an id that cannot name a folder."""
+        folder = calibration_root(directory) / check_rig_id(rig_id)
+        arena_path = Path(arena).expanduser() if arena else folder / "arena.json"
+        joints_path = Path(joints).expanduser() if joints else folder / "joints.json"
+        return cls(
+            rig_id,
+            joints_path if read_joints else None,
+            arena_path.with_name("camera.json"),
+            arena_path,
+            folder / "dynamics.json",
+        )
+
+    def existing(self, kinds: tuple[str, ...] = KINDS) -> list[tuple[str, Path]]:
+        """(kind, path) of the files of ``kinds`` that exist, in that order."""
+        paths = {k: getattr(self, k) for k in kinds}
+        return [(k, p) for k, p in paths.items() if p is not None and p.is_file()]
 
 
 # ---- reading -----------------------------------------------------------------------------

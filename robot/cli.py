@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import argparse
 
+from plumbing.registry import LazyTable
 from robot.bus_flags import add_bus_arguments, bus_from_args
-from robot.registry import LazyTable
 
 # bus kind -> "module:function(args) -> int"
 SCANNERS = LazyTable(

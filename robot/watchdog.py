@@ -5,12 +5,10 @@ torque and raises ``SafetyStop``."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from robot.arm import JointState
+from robot.joint_state import JointState
 
 # XL-320 temperature limit: 65 C by default (control table address 12, ROBOTIS e-manual);
 # we stop 5 C earlier. Load limit 0.9 of max torque held for 2 s: a guess that lets normal

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from robot.registry import LazyTable
+from plumbing.registry import LazyTable
 
 # --bus NAME -> "module:function(args) -> int" that serves until interrupted.
 BUS_SERVERS = LazyTable(

@@ -7,8 +7,8 @@ identification of a user's arm (``ergo calibrate dynamics``) or a stand-in rig's
 give others. ``Twin(servos=...)`` builds its servos from one. A rig's fitted servos are its
 ``dynamics.json`` calibration (``<root>/<rig_id>/dynamics.json``, ``robot/calibration_files.py``):
 ``check_dynamics`` is that payload's check (``calibration/store.py`` validates through it) and
-``fitted_servos`` reads it for the twin (``--rig sim --rig-id X``, the Gymnasium environments,
-``ergo twin serve --rig-id X``).
+``fitted_servos`` reads it, from a rig's resolved ``RigCalibration``, for the twin (``--rig sim
+--rig-id X``, the Gymnasium environments, ``ergo twin serve --rig-id X``).
 
 MuJoCo mapping (position actuator on a hinge joint, MJCF reference):
 - ``kp``: actuator ``gainprm[0]`` and ``-biasprm[1]`` (torque = kp * (target - q)), N.m/rad;
@@ -31,13 +31,13 @@ from typing import Any
 
 import numpy as np
 
+from plumbing.fields import Fields, is_matrix
 from robot.calibration_files import (
     CalibrationError,
     CalibrationMissing,
-    calibration_path,
+    RigCalibration,
     read_document,
 )
-from robot.fields import Fields, is_matrix
 
 N_JOINTS = 6
 # The per-joint fields, in the order reports and fits list them.
@@ -218,13 +218,11 @@ def check_dynamics(c: Fields) -> ServoModel:
     return servos
 
 
-def fitted_servos(
-    rig_id: str, directory: str | Path | None = None
-) -> tuple[ServoModel | None, Path]:
-    """(servo model, file) of rig ``rig_id``'s dynamics calibration, or (None, the file looked
-    for) without one; a damaged or foreign file raises a one-line ``CalibrationError`` naming
-    it."""
-    path = calibration_path("dynamics", rig_id, directory)
+def fitted_servos(calibration: RigCalibration) -> tuple[ServoModel | None, Path]:
+    """(servo model, file) of a rig's dynamics calibration (``calibration.dynamics``), or
+    (None, the file looked for) without one; a damaged or foreign file raises a one-line
+    ``CalibrationError`` naming it."""
+    path = calibration.dynamics
     try:
         doc = read_document(path, "dynamics")
     except CalibrationMissing:

@@ -1,5 +1,5 @@
-"""The ``Camera`` interface (``connect()``, ``read() -> Frame``, ``disconnect()``) and
-``make_camera``, the camera a source string names."""
+"""The ``Camera`` interface (``connect()``, ``read() -> Frame``, ``disconnect()``); the camera a
+source string names is ``vision/make_camera.py``'s."""
 
 from __future__ import annotations
 
@@ -73,40 +73,3 @@ class Camera(ABC):
 
     @abstractmethod
     def _read(self) -> Frame: ...
-
-
-def make_camera(
-    source: int | str,
-    width: int | None = None,
-    height: int | None = None,
-    fps: float | None = None,
-    fourcc: str | None = None,
-    *,
-    files: str = "replay",
-) -> Camera:
-    """The camera a source names, not connected: the one place a source string is read.
-
-    A device index (an int, or a string of digits: ``0`` is /dev/video0) or a URL
-    (``http://127.0.0.1:PORT/stream.mjpg``) is a live ``OpenCVCamera``. A folder of images or a
-    video file is replayed frame by frame (``FileCamera``: deterministic, every frame once), or,
-    with ``files="live"``, played by OpenCV at its own rate like a live camera (a rig on the
-    wall clock). ``width``, ``height``, ``fps`` and ``fourcc`` are requested modes (ignored by a
-    replay, except ``fps`` for its timestamps).
-
-    Raises:
-        CameraError: a source that is none of these (empty, negative, not an int or a string).
-    """
-    if files not in ("replay", "live"):
-        raise ValueError(f"files must be 'replay' or 'live', got {files!r}")
-    if isinstance(source, str) and source.strip().isdigit():
-        source = int(source.strip())
-    bad = isinstance(source, bool) or not isinstance(source, int | str) or source == ""
-    if bad or (isinstance(source, int) and source < 0):
-        raise CameraError(f"camera must be a device index, video path or URL, got {source!r}")
-    from vision.opencv_camera import OpenCVCamera
-
-    if isinstance(source, str) and "://" not in source and files == "replay":
-        from vision.file_camera import FileCamera
-
-        return FileCamera(source, fps=fps)
-    return OpenCVCamera(source, width=width, height=height, fps=fps, fourcc=fourcc)

@@ -11,7 +11,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from robot.cli_errors import error
+from plumbing.cli_errors import error
 
 MAX_INDEX = 10  # device indices probed by default (/dev/video0..9): a convention
 

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from robot.files import atomic_write
+from plumbing.files import atomic_write
 
 HELDOUT = 0.1  # share of a dataset kept out of training to score the model (guess)
 SELECTION_FILE = "selection.json"

@@ -38,7 +38,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from robot.files import atomic_write
+from plumbing.files import atomic_write
 from vision.observation import OBSERVATION_SIZE
 
 IMAGE_SIZE = OBSERVATION_SIZE  # 64, the paper (vision/observation.py)

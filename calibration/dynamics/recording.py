@@ -32,9 +32,9 @@ import numpy as np
 
 from calibration.dynamics.excitation import Segment
 from calibration.store import CalibrationError
+from plumbing.files import atomic_write
 from robot.arm import Arm
 from robot.errors import RobotError
-from robot.files import atomic_write
 from robot.spec import CONTROL_RATE_HZ
 
 FORMAT = "ergo-explore/dynamics-recording"
@@ -75,7 +75,7 @@ class Recording:
         return self.load[self.measured_segment == self.segment_names.index(name)]
 
     def save(self, path: str | Path) -> Path:
-        """Write the ``.npz`` atomically (``robot.files.atomic_write``)."""
+        """Write the ``.npz`` atomically (``plumbing.files.atomic_write``)."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         buf = io.BytesIO()

@@ -9,7 +9,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from explore.campaigns.trial import CampaignError, Trial, TrialResult
-from robot.registry import LazyTable
+from plumbing.registry import LazyTable
 
 # backend name -> "module:function(trials, settings) -> list[TrialResult]", imported lazily so
 # that the local backend never imports Ray

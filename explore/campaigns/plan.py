@@ -27,7 +27,7 @@ from explore.campaigns.trial import (
     trial_resources,
 )
 from explore.rigs.rig import RigConfig
-from robot.registry import did_you_mean
+from plumbing.registry import did_you_mean
 
 
 def option_target(key: str) -> tuple[str | None, str]:
@@ -54,7 +54,7 @@ def strategy_options(
         raise CampaignError(str(exc)) from None
     opts: dict[str, Any] = {}
     if preset is not None:
-        from explore.learner.presets import preset_options
+        from explore.learner.strategies.registry import preset_options
 
         try:
             opts.update(preset_options(preset, name))
@@ -85,7 +85,7 @@ def campaign_id(out: Path) -> str:
     """
     import os
 
-    from robot.files import atomic_write, temporary_name
+    from plumbing.files import atomic_write, temporary_name
 
     marker = out / CAMPAIGN_FILE
     found = read_json(marker).get("id")

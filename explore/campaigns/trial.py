@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, Any
 from explore.rigs import rig as rigs
 from explore.rigs.rig import RigConfig
 from explore.runs.layout import TRIAL_FILE
-from robot.files import atomic_write
+from plumbing.files import atomic_write
 
 # explore.runs.config loads cv2 (vision.observation): imported where a trial is made, as before
 if TYPE_CHECKING:
@@ -175,18 +175,18 @@ def trial_resources(rig: dict[str, Any]) -> dict[str, float]:
 
 def check_rig_calibration(rig: dict[str, Any]) -> Path | None:
     """On the host that runs a trial on a physical rig: the arena calibration file the rig will
-    use (found by rig id, calibration/store.py, or the ``arena_calibration`` option).
+    use (``RigConfig.resolved``: found by rig id, or the ``arena_calibration`` option).
 
     A campaign on an arm without ball tracking records only unknown (NaN) outcomes for hours,
     so a missing file fails the trial before it starts. None for the twin.
     """
     if not is_physical(rig):
         return None
-    from calibration.store import CalibrationError, calibration_path
+    from calibration.store import CalibrationError
 
-    named = rig.get("options", {}).get("arena_calibration")
     try:
-        path = Path(named) if named else calibration_path("arena", rig["rig_id"])
+        config = RigConfig(rig["name"], rig["rig_id"], dict(rig.get("options", {})))
+        path = config.resolved().calibration.arena
     except CalibrationError as exc:
         raise CampaignError(str(exc)) from exc
     if not path.is_file():

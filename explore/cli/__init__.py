@@ -9,8 +9,8 @@ import logging
 import sys
 from typing import Any
 
-from robot.cli_errors import CliError, error
-from robot.registry import LazyTable, RegistryError, did_you_mean
+from plumbing.cli_errors import CliError, error
+from plumbing.registry import LazyTable, RegistryError, did_you_mean
 
 # Each package's ``register(subparsers) -> None``, in the order of ``ergo --help``. Each module
 # must import quickly (no torch or MuJoCo at module level) so that ``ergo --help`` stays fast.

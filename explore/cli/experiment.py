@@ -20,7 +20,7 @@ from explore.campaigns.trial import CampaignError
 from explore.cli.explore import add_rig_arguments, parse_key_values, rig_of
 from explore.learner.presets import PRESETS
 from explore.learner.strategies.registry import MODELS
-from robot.cli_errors import CliError
+from plumbing.cli_errors import CliError
 
 # Rigs that can render an outcome database (``--rig``): the twin (explore/rigs/sim_dataset.py)
 # and those whose rig module has an ``outcome_dataset`` (explore/rigs/armballs.py).

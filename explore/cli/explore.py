@@ -12,8 +12,8 @@ from typing import Any
 from explore.cli.rerun_flags import add_rerun_arguments, check_viewer
 from explore.rigs.rig import RIGS
 from explore.runs.layout import METRICS_FILE
+from plumbing.cli_errors import CliError
 from robot.bus_flags import add_bus_arguments, bus_flags
-from robot.cli_errors import CliError
 
 
 def add_rig_arguments(p: argparse.ArgumentParser) -> None:
@@ -116,8 +116,8 @@ def _strategy_options(args: argparse.Namespace, strategy: str) -> dict[str, Any]
     """The strategy options the flags give: the ``--preset``'s, then ``--strategy-option``."""
     opts: dict[str, Any] = {}
     if args.preset is not None:
-        from explore.learner.presets import preset_options
         from explore.learner.strategies import StrategyError
+        from explore.learner.strategies.registry import preset_options
 
         try:
             opts.update(preset_options(args.preset, strategy))

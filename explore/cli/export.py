@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from robot.cli_errors import CliError
+from plumbing.cli_errors import CliError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -30,7 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run_export_lerobot(args: argparse.Namespace) -> int:
-    from robot.registry import INSTALL
+    from plumbing.registry import INSTALL
 
     try:  # the export extra, checked before any work starts
         import av  # noqa: F401

@@ -4,13 +4,12 @@ run's rerun recording). Heavy imports (matplotlib, rerun) happen inside the comm
 from __future__ import annotations
 
 import argparse
-import os
 import shlex
 import subprocess
 import sys
 from pathlib import Path
 
-from robot.cli_errors import CliError
+from plumbing.cli_errors import CliError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -74,13 +73,6 @@ def run_report(args: argparse.Namespace) -> int:
     return 0
 
 
-def has_display() -> bool:
-    """Whether a viewer window can open here."""
-    if sys.platform in ("darwin", "win32"):
-        return True
-    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
-
-
 def viewer_command(files: list[Path]) -> list[str]:
     """The ``rerun`` viewer command for ``files`` (this environment's executable if any)."""
     from explore.report.recorder import viewer_executable
@@ -90,7 +82,7 @@ def viewer_command(files: list[Path]) -> list[str]:
 
 def run_replay(args: argparse.Namespace) -> int:
     from explore.cli.rerun_flags import make_recorder
-    from explore.report.recorder import recording_paths
+    from explore.report.recorder import has_display, recording_paths
     from explore.runs.store import RunStore, RunStoreError
 
     if not RunStore.is_run(args.run):

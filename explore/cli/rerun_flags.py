@@ -8,7 +8,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from robot.cli_errors import CliError
+from plumbing.cli_errors import CliError
 
 RERUN_MODES = ("save", "spawn", "off")
 
@@ -46,8 +46,7 @@ def check_viewer(args: argparse.Namespace) -> None:
         return
     import sys
 
-    from explore.cli.report import has_display
-    from explore.report.recorder import viewer_executable
+    from explore.report.recorder import has_display, viewer_executable
 
     if not has_display():
         print(

@@ -8,7 +8,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from robot.cli_errors import CliError
+from plumbing.cli_errors import CliError
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -2,9 +2,10 @@
 
 A preset gives each strategy the options that reproduce a campaign (each strategy's entry in
 ``explore.learner.strategies.registry.STRATEGIES`` holds them under the preset's name, composed
-from the settings below); options given on the command line win over it, and a run stores the
-options it ran with (``run.json``), so a resumed run needs no preset. Our defaults (the
-twin's) are untouched.
+from the settings below, read by its ``preset_options``; this module imports none of the
+strategies); options given on the command line win over it, and a run stores the options it
+ran with (``run.json``), so a resumed run needs no preset. Our defaults (the twin's) are
+untouched.
 
 ``corl2018``: the ArmBalls / Arm-2-Balls campaign of Laversanne-Finot, Péré and Oudeyer (CoRL
 2018), from its dataset's config columns (``docs/armballs_published_config.csv``, extracted from
@@ -43,8 +44,6 @@ from __future__ import annotations
 
 from typing import Any
 
-from robot.registry import did_you_mean
-
 CORL2018 = "corl2018"
 CORL2018_COMMON: dict[str, Any] = {
     "sigma": 0.05,
@@ -69,17 +68,3 @@ CORL2018_LEARNED: dict[str, Any] = {"bootstrap": 400, "goals": "normal", "latent
 CORL2018_SPATIAL: dict[str, Any] = {"bootstrap": 400, "goals": "box"}
 
 PRESETS = (CORL2018,)
-
-
-def preset_options(preset: str, strategy: str) -> dict[str, Any]:
-    """The options ``preset`` gives ``strategy`` (its registry entry's; none for RPE). Raises
-    ``StrategyError`` for an unknown preset or strategy (one line)."""
-    # imported here: the registry reads this module's settings
-    from explore.learner.strategies import STRATEGIES, StrategyError
-
-    if preset not in PRESETS:
-        raise StrategyError(
-            f"unknown preset {preset!r}{did_you_mean(preset, PRESETS)}; "
-            f"choose one of {', '.join(PRESETS)}"
-        )
-    return dict(STRATEGIES.entry(strategy).presets.get(preset, {}))

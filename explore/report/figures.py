@@ -30,7 +30,7 @@ from explore.learner.scene import Scene
 from explore.report.run_data import RunData
 from explore.runs.layout import COVERAGE_FILE, METRICS_FILE
 from explore.runs.metrics import N_BINS, read_metrics
-from robot.files import atomic_write
+from plumbing.files import atomic_write
 
 FIG_PX = (960, 640)  # width, height of every figure, pixels
 DPI = 100

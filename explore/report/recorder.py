@@ -114,6 +114,13 @@ MISS_COLOR = (200, 200, 200)
 GOAL_RADIUS_UI = -5.0  # goal-space points: 5 UI points whatever the space's scale
 
 
+def has_display() -> bool:
+    """Whether a viewer window can open here."""
+    if sys.platform in ("darwin", "win32"):
+        return True
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
 def viewer_executable() -> str | None:
     """The rerun viewer to start: the one installed beside this Python (a venv's ``bin/``, also
     when the venv is not activated: ``.venv/bin/ergo``), else the one on PATH; None if neither."""

@@ -15,14 +15,29 @@ durations in seconds.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
 from explore.learner.dmp import MotorPrimitive
 from explore.learner.experience import Observation
+from explore.rigs.ball import BallSensor
+from explore.rigs.clock import Clock
 from explore.rigs.episodes import EpisodeConfig, EpisodeResult
-from explore.rigs.rig import Rig
+from robot.arm import Arm
+
+
+class ArmRig(Protocol):
+    """What ``EpisodeRunner`` takes of a rig: ``explore.rigs.rig.Rig`` is one (this module does
+    not import it: ``Rig.episodes`` imports this one)."""
+
+    arm: Arm | None
+    clock: Clock | None
+    sensor: BallSensor | None
+    motor: MotorPrimitive
+    video_frame: Callable[[], np.ndarray] | None
 
 
 @dataclass
@@ -54,7 +69,7 @@ class EpisodeRunner:
     ``explore.rigs.episodes.EpisodePlayer`` of every rig with an arm to drive."""
 
     def __init__(
-        self, rig: Rig, motor: MotorPrimitive | None = None, config: EpisodeConfig | None = None
+        self, rig: ArmRig, motor: MotorPrimitive | None = None, config: EpisodeConfig | None = None
     ) -> None:
         self.rig = rig
         self.motor = motor if motor is not None else rig.motor

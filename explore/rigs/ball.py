@@ -105,17 +105,6 @@ def tracker_locator(arena: Any, tracker_config: Any = None) -> BallLocator:
     return locate
 
 
-def calibrated_locator(rig_id: str, directory: str | None = None) -> BallLocator:
-    """The tracker with the arena calibration saved for ``rig_id`` (``ergo calibrate arena``).
-
-    Raises ``calibration.store.CalibrationError`` with a one-line message when the file is
-    missing or invalid.
-    """
-    from calibration.store import load
-
-    return locator_from_calibration(load("arena", rig_id, directory))
-
-
 def locator_from_calibration(data: dict[str, Any]) -> BallLocator:
     """The tracker from an ``arena`` calibration's data (its model and ball colour ranges)."""
     from vision.rectify import ArenaModel
@@ -131,20 +120,15 @@ def camera_sensor(config: Any, camera: Camera) -> CameraSensor:
 
 
 def rig_ball_locator(config: Any) -> tuple[BallLocator | None, str | None]:
-    """The tracker for a physical rig from its arena calibration (found by ``rig_id``, or the
-    file named by the rig option ``arena_calibration``), and None; without one, (None, why):
-    ball positions are then recorded as unknown (NaN), never guessed, and ``open_run`` warns
-    once, or refuses a run whose strategy needs the ball (``CameraSensor.blind``)."""
-    from calibration.store import CalibrationError, CalibrationMissing
-    from explore.rigs.rig import RigError
+    """The tracker for a physical rig from its arena calibration (``RigConfig.resolved``: found by
+    ``rig_id``, or the file named by the rig option ``arena_calibration``), and None; without one,
+    (None, why): ball positions are then recorded as unknown (NaN), never guessed, and ``open_run``
+    warns once, or refuses a run whose strategy needs the ball (``CameraSensor.blind``)."""
+    from calibration.store import CalibrationError, CalibrationMissing, load_arena_file
+    from explore.rigs.errors import RigError
 
     try:
-        path = config.options.get("arena_calibration")
-        if path:
-            from calibration.store import load_arena_file
-
-            return locator_from_calibration(load_arena_file(path)), None
-        return calibrated_locator(config.rig_id), None
+        return locator_from_calibration(load_arena_file(config.resolved().calibration.arena)), None
     except (CalibrationMissing, FileNotFoundError) as exc:
         return None, str(exc)
     except CalibrationError as exc:  # a file that is there but wrong: never run without it

@@ -30,16 +30,16 @@ import numpy as np
 from explore.learner.scene import Scene
 from explore.options import BadOption
 from explore.rigs.arena import TWIN_ARENA
-from explore.rigs.rig import RigConfig, RigError
+from explore.rigs.rig import NO_JOINT_CALIBRATION, RigConfig, RigError
 from explore.rigs.video import VideoOptions
 from robot.spec import ArmSpec, ergo_jr_spec
 from robot.torque_guardian import ON_DEATH
-from vision.camera import Camera, CameraError, make_camera
+from vision.camera import Camera, CameraError
+from vision.make_camera import make_camera
 
 log = logging.getLogger(__name__)
 CAMERA = "a device index, video path or URL"
 TWIN_RIG_ID = RigConfig.rig_id  # the default id, the simulated twin's
-NO_JOINT_CALIBRATION = "none"  # option joint_calibration: use the options, read no file
 # Hand-typed offsets within this of the file's are the same offsets (rad): far below an
 # XL-320's position unit (0.005 rad), far above JSON round-off.
 SAME_OFFSET_RAD = 1e-6
@@ -143,13 +143,8 @@ class JointSetup:
 
 def joint_calibration_path(config: RigConfig) -> Path | None:
     """The joint calibration file a physical rig reads (it may not exist), or None when the
-    option ``joint_calibration`` is ``"none"``."""
-    from calibration.store import calibration_path
-
-    named = config.options.get("joint_calibration")
-    if named == NO_JOINT_CALIBRATION:
-        return None
-    return Path(named).expanduser() if named else calibration_path("joints", config.rig_id)
+    option ``joint_calibration`` is ``"none"`` (``RigConfig.resolved``)."""
+    return config.resolved().calibration.joints
 
 
 def joint_setup(
@@ -209,23 +204,17 @@ def joint_setup(
 
 def calibration_files(config: RigConfig) -> list[tuple[str, Path]]:
     """(kind, path) of the calibration files a physical rig reads that exist: its joint
-    calibration, its arena calibration and the camera calibration beside it (which the arena
-    file is checked against); for the ``sim`` rig its fitted servos (``dynamics.json``), if
-    any; none for other rigs with nothing physical attached."""
-    from calibration.store import calibration_path
+    calibration, the camera calibration beside its arena calibration (which the arena file is
+    checked against) and its arena calibration; for the ``sim`` rig its fitted servos
+    (``dynamics.json``), if any; none for other rigs with nothing physical attached. The files
+    are the config's (``RigConfig.resolved``)."""
     from explore.rigs.rig import is_physical
 
-    if not is_physical(config.name):  # the twin reads its rig id's fitted servos, if any
-        dynamics = calibration_path("dynamics", config.rig_id)
-        return [("dynamics", dynamics)] if config.name == "sim" and dynamics.is_file() else []
-    named = config.options.get("arena_calibration")
-    arena = Path(named).expanduser() if named else calibration_path("arena", config.rig_id)
-    files = [
-        ("joints", joint_calibration_path(config)),
-        ("camera", arena.with_name("camera.json")),
-        ("arena", arena),
-    ]
-    return [(kind, path) for kind, path in files if path is not None and path.is_file()]
+    if is_physical(config.name):
+        return config.resolved().calibration.existing(("joints", "camera", "arena"))
+    if config.name == "sim":  # the twin reads its rig id's fitted servos, if any
+        return config.resolved().calibration.existing(("dynamics",))
+    return []
 
 
 def scene(config: Any, options: Any) -> Scene:

@@ -5,7 +5,7 @@ state after an episode (``snapshot``) and to restore it on resume (``restore``),
 asks which rig it is.
 
 Rigs are built by name from ``RIGS``, a table of name -> module imported lazily
-(``robot.registry.LazyTable``), so a user without a CAN adapter library never imports it. Each
+(``plumbing.registry.LazyTable``), so a user without a CAN adapter library never imports it. Each
 rig module defines its typed ``Options`` (a dataclass: unknown keys and wrong types are refused
 by ``explore.options.parse_options``), ``make_rig(config, options) -> Rig``, which returns
 an unconnected rig, ``PHYSICAL`` (a real arm, or nothing physical attached) and
@@ -16,7 +16,7 @@ building the rig).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
 
@@ -28,15 +28,14 @@ from explore.options import OptionsError, parse_options
 from explore.rigs.ball import NO_STATE, BallSensor
 from explore.rigs.clock import Clock
 from explore.rigs.episodes import EpisodeConfig, EpisodePlayer
+from explore.rigs.errors import RigError
 from explore.rigs.motor import ergo_jr_dmp
+from plumbing.registry import LazyTable
 from robot.arm import Arm
-from robot.registry import LazyTable
+from robot.calibration_files import CalibrationError, RigCalibration
 from vision.camera import Camera
 
-
-class RigError(RuntimeError):
-    """A rig could not be built or connected."""
-
+NO_JOINT_CALIBRATION = "none"  # rig option joint_calibration: use the options, read no file
 
 # name -> the module with its ``Options``, ``make_rig`` and ``PHYSICAL`` (whether a real arm is
 # attached, which only the host that has it can run)
@@ -67,9 +66,29 @@ class RigConfig:
     name: str = "sim"
     rig_id: str = "twin"
     options: dict[str, Any] = field(default_factory=dict)
+    #: its calibration files, once resolved (``resolved``): found on the host that runs it,
+    #: never stored in ``run.json``
+    calibration: RigCalibration | None = field(default=None, compare=False, repr=False)
 
     def to_dict(self) -> dict[str, Any]:
         return {"name": self.name, "rig_id": self.rig_id, "options": dict(self.options)}
+
+    def resolved(self) -> RigConfig:
+        """This config with its calibration files found (``calibration``), by its id or the
+        files its options name (``arena_calibration``; ``joint_calibration``, ``"none"``: no
+        joint file): the one place a rig's files are resolved, once, at the command's entry
+        (``open_run``, ``make_rig``), then passed down in the config. A config that has them is
+        returned as it is; a bad id is a one-line ``CalibrationError``."""
+        if self.calibration is not None:
+            return self
+        joints = self.options.get("joint_calibration")
+        found = RigCalibration.find(
+            self.rig_id,
+            arena=self.options.get("arena_calibration"),
+            joints=None if joints == NO_JOINT_CALIBRATION else joints,
+            read_joints=joints != NO_JOINT_CALIBRATION,
+        )
+        return replace(self, calibration=found)
 
 
 @dataclass
@@ -183,8 +202,15 @@ def is_physical(name: str) -> bool:
 
 
 def make_rig(config: RigConfig) -> Rig:
-    """Build (not connect) the rig named in ``config``."""
-    return RIGS.load(config.name).make_rig(config, rig_options(config))
+    """Build (not connect) the rig named in ``config``, its calibration files resolved
+    (``RigConfig.resolved``; a bad id is a ``RigError``)."""
+    module = RIGS.load(config.name)
+    options = rig_options(config)
+    try:
+        config = config.resolved()
+    except CalibrationError as exc:
+        raise RigError(f"rig {config.name!r}: {exc}") from None
+    return module.make_rig(config, options)
 
 
 def rig_scene(config: RigConfig) -> Scene:

@@ -152,13 +152,14 @@ def twin_arena_model(camera: Any) -> Any:
 
 
 def rig_servos(config: RigConfig):
-    """The twin's servos for ``config.rig_id``: its fitted ``dynamics.json`` (``ergo calibrate
-    dynamics``) when there is one, else None (the nominal twin's); a bad file is a RigError."""
+    """The twin's servos for ``config.rig_id``: its fitted ``dynamics.json``
+    (``RigConfig.resolved``) (``ergo calibrate dynamics``) when there is one, else None (the nominal
+    twin's); a bad file is a RigError."""
     from calibration.store import CalibrationError
     from sim.servo_model import fitted_servos
 
     try:
-        return fitted_servos(config.rig_id)[0]
+        return fitted_servos(config.resolved().calibration)[0]
     except CalibrationError as exc:
         raise RigError(f"{exc} (a damaged twin calibration is not ignored)") from None
 

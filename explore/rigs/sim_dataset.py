@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from explore.rigs.arena import R_MAX, R_MIN
-from robot.files import atomic_write
+from plumbing.files import atomic_write
 from robot.spec import ergo_jr_spec
 from vision.observation import OBSERVATION_SIZE
 
@@ -103,5 +103,5 @@ def save_dataset(path: str | Path, data: dict[str, np.ndarray]) -> None:
     """Write a dataset as a compressed ``.npz`` (no pickle), atomically."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    # a full disk: no half-written file left, an older dataset kept (robot.files)
+    # a full disk: no half-written file left, an older dataset kept (plumbing.files)
     atomic_write(path, lambda tmp: np.savez_compressed(tmp, **data))

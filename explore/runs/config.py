@@ -25,7 +25,7 @@ from typing import Any
 from explore.rigs.episodes import EpisodeConfig
 from explore.rigs.rig import RIGS, RigConfig
 from explore.runs.store import RunStoreError
-from robot.fields import Fields, is_int
+from plumbing.fields import Fields, is_int
 
 # Seeds feed numpy.random.default_rng([seed, episode]): non-negative integers only.
 MAX_SEED = 2**63 - 1
@@ -116,7 +116,7 @@ class RunConfig:
         (ports and cameras change between sessions). Not checked: see ``checked``."""
         rig = self.rig
         if rig_options:
-            rig = dataclasses.replace(rig, options={**rig.options, **rig_options})
+            rig = dataclasses.replace(rig, options={**rig.options, **rig_options}, calibration=None)
         return dataclasses.replace(
             self, rig=rig, episodes=self.episodes if episodes is None else episodes
         )

@@ -20,7 +20,7 @@ from explore.runs.metrics import METRICS_FILE, MetricsLog
 from explore.runs.prior import WarmStart
 from explore.runs.record import EpisodeRecord
 from explore.runs.store import RunStore, RunStoreError
-from robot.files import atomic_write
+from plumbing.files import atomic_write
 from robot.signals import torque_off_on_signals
 
 log = logging.getLogger(__name__)
@@ -43,7 +43,7 @@ def add_fault_counts(run_path: Path, counts: dict[str, float]) -> dict[str, floa
         sessions = 0
     for k, v in counts.items():
         totals[k] = round(totals.get(k, 0.0) + float(v), 3)
-    # a full disk: no half-written file left behind (robot.files)
+    # a full disk: no half-written file left behind (plumbing.files)
     atomic_write(path, json.dumps({"sessions": sessions + 1, "totals": totals}, indent=1))
     return totals
 

@@ -22,7 +22,7 @@ import numpy as np
 
 from explore.learner.scene import Scene
 from explore.runs.layout import METRICS_FILE
-from robot.files import atomic_write
+from plumbing.files import atomic_write
 
 N_BINS = 30  # paper
 # The published curves' checkpoints: int(i * 10000 / 30), i = 0..29 (results/

@@ -20,7 +20,7 @@ import functools
 import logging
 from collections.abc import Callable
 from contextlib import ExitStack
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -35,6 +35,7 @@ from explore.runs.metrics import recorded_episodes
 from explore.runs.prior import WarmStart, attach_prior, check_prior, record_prior
 from explore.runs.record import EpisodeRecord
 from explore.runs.store import RunStore, RunStoreError, check_own_files, make_run_dir
+from robot.calibration_files import CalibrationError
 
 Mode = Literal["new", "resume", "auto"]
 log = logging.getLogger(__name__)
@@ -152,6 +153,15 @@ def _check_sees_ball(config: RunConfig, rig: Rig, strategy: Strategy) -> None:
     log.warning("no ball tracking for rig %r (%s): run '%s'", rig_id, why, calibrate)
 
 
+def _with_calibration(config: RunConfig) -> RunConfig:
+    """``config`` with its rig's calibration files resolved (``RigConfig.resolved``), once,
+    for the rig, its inputs check and record; a bad rig id is a one-line ``RigError``."""
+    try:
+        return replace(config, rig=config.rig.resolved())
+    except CalibrationError as exc:
+        raise RigError(f"rig {config.rig.name!r}: {exc}") from None
+
+
 def open_run(
     path: str | Path,
     config: RunConfig | None = None,
@@ -211,6 +221,7 @@ def open_run(
             run_config = run_config.as_made()  # options whose default changed since
             if episodes is not None or rig_options:
                 run_config = run_config.with_overrides(episodes, rig_options).checked()
+            run_config = _with_calibration(run_config)
             # the same calibrations and model as when it started, unless allowed: before
             # anything is built (explore/runs/inputs.py)
             note = check_inputs(store, run_config, allow_changed_inputs)
@@ -224,7 +235,7 @@ def open_run(
             if config is None:
                 raise RunStoreError(f"{path} holds no run and no config was given for a new one")
             run_config = config.with_overrides(episodes, rig_options).checked()
-            run_config = run_config.with_defaults_pinned()
+            run_config = _with_calibration(run_config.with_defaults_pinned())
             store = None
             notes = []
             warmed = run_config.warm_start is not None

@@ -38,7 +38,7 @@ from explore.runs.layout import HISTORY_FILE, PRIOR_KEY, REALITY_GAP_FILE, RUN_F
 from explore.runs.lock import is_being_written
 from explore.runs.record import EpisodeRecord
 from explore.runs.store import RunStore, RunStoreError, read_history
-from robot.files import atomic_write
+from plumbing.files import atomic_write
 
 PRIOR_BEFORE = "prior_before"  # run.json's key of the prior records replaced by an override
 CAMPAIGN_MARKER = "campaign.json"  # a campaign folder's (explore/campaigns/trial.py)

@@ -77,7 +77,7 @@ from explore.runs.layout import (
     next_frame,
 )
 from explore.runs.record import EpisodeRecord, RecordError
-from robot.files import NOFOLLOW, atomic_write
+from plumbing.files import NOFOLLOW, atomic_write
 
 RUN_FORMAT = 1
 APP = "ergo-explore"

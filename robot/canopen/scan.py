@@ -15,6 +15,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from plumbing.cli_errors import error
 from robot.canopen.bus import (
     DEFAULT_BITRATE,
     CanBusError,
@@ -22,7 +23,6 @@ from robot.canopen.bus import (
     open_bus,
     parse_can_spec,
 )
-from robot.cli_errors import error
 
 # How long to listen for answers and heartbeats, s (guess: covers heartbeat times up to 1 s,
 # and the SDO answers of 127 nodes at any bitrate >= 125 kbit/s).

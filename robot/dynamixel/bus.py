@@ -24,6 +24,9 @@ errors.
 
 Half-duplex adapters echo every byte sent; the decoder returns that echo as an instruction
 packet and the bus ignores it.
+
+Beside it: the errors (``bus_errors``), the port (``serial_port``), the matching of replies to
+requests and the latency estimate (``replies``).
 """
 
 from __future__ import annotations
@@ -33,13 +36,30 @@ import logging
 import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, fields
-from typing import Any, Protocol
+from dataclasses import dataclass
 
 from robot.bus_guard import BusGuard
 from robot.dynamixel import protocol as proto
+from robot.dynamixel.bus_errors import (
+    CallPreemptedError,
+    CorruptPacketError,
+    DynamixelError,
+    HardwareAlertError,
+    NoStatusError,
+    PortLostError,
+    ServoError,
+)
 from robot.dynamixel.control_table import XL320, Model
-from robot.errors import BusError, LinkLost
+from robot.dynamixel.replies import (
+    MAX_LATENCY_S,
+    BusCounters,
+    Expected,
+    LatencyEstimate,
+    Replies,
+    question_of,
+)
+from robot.dynamixel.serial_port import SerialLike, open_serial
+from robot.errors import BusError
 
 try:  # pyserial's flush and buffer resets call termios, whose errors are not OSErrors
     from termios import error as _TermiosError
@@ -62,11 +82,6 @@ DEFAULT_LATENCY_S = 0.020
 # Retries per call after the first attempt. Guess: two lost packets in a row are rare on a
 # healthy bus, three mean something is wrong.
 DEFAULT_RETRIES = 2
-# The slack adapts to the reply latency the bus measures (``LatencyEstimate``), never below
-# ``latency_s`` and never above this, s. Guess: a USB adapter at its worst (a 16 ms latency
-# timer, a busy host) answers well within it; on 2 cores at load 8 an emulator's reply was
-# seen up to about 0.3 s late. A reply later than this counts as lost.
-MAX_LATENCY_S = 0.5
 # How long a request's reply is still expected after the call gave up on it, s: a reply later
 # than that is taken for one to a later request of the same size. Status packets up to 0.5 s
 # late were measured on 2 cores at load 7 (twin serve over a pty, tests/stress/hil_pty.py); a
@@ -83,116 +98,9 @@ MAX_OUTSTANDING = 8
 # load 5-6 on 2 cores, replies 30 ms late were read up to about that late) and costs one such
 # wait per lost reply.
 SPARE_PATIENCE = 2.0
-# Each retry of a call waits this many times longer than the attempt before (20, 80, 320 ms
-# from the default slack), up to MAX_LATENCY_S: a reply that is late rather than lost is
-# still caught, and a servo that is gone is reported after at most the sum. Guess; 2 (TCP's,
-# RFC 6298 5.5) let the soak's 30 ms late replies (2 ms floor) run out every retry.
-RETRY_BACKOFF = 4.0
-# Gains of the latency estimate: the smoothed latency and its mean deviation, as TCP's
-# retransmission timer (RFC 6298: alpha 1/8, beta 1/4; slack = mean + 4 deviations).
-LATENCY_GAIN, DEVIATION_GAIN, DEVIATIONS = 1 / 8, 1 / 4, 4.0
-# How long one serial read may block while waiting (pyserial timeout), s. Small, so the
-# deadline is kept to about this precision; not a protocol figure.
-POLL_S = 0.001
 # Bytes of a status packet besides its parameters: header 4, id 1, length 2, instruction 1,
 # error 1, CRC 2 (e-manual, "Status Packet").
 STATUS_OVERHEAD = 11
-
-
-class DynamixelError(BusError):
-    """Base of the Dynamixel bus errors."""
-
-
-class PortLostError(DynamixelError, LinkLost):
-    """The serial port failed under the bus (adapter unplugged, pty closed): a ``LinkLost``,
-    which the arm answers by reopening the port by name."""
-
-
-class CallPreemptedError(DynamixelError):
-    """A call gave up because another thread took the bus for an emergency torque off."""
-
-
-class NoStatusError(DynamixelError):
-    """No status packet arrived in time (servo absent, unpowered, wrong id or baud rate).
-
-    Attributes:
-        ids: the servos that did not answer.
-    """
-
-    def __init__(self, message: str, ids: Sequence[int] = ()) -> None:
-        super().__init__(message)
-        self.ids = list(ids)
-
-
-class CorruptPacketError(DynamixelError):
-    """Status packets arrived but failed their CRC (noise, wrong baud rate, collision)."""
-
-    def __init__(self, message: str, ids: Sequence[int] = ()) -> None:
-        super().__init__(message)
-        self.ids = list(ids)
-
-
-class ServoError(DynamixelError):
-    """A servo answered with an error in its status packet.
-
-    Attributes:
-        servo_id: who answered.
-        error: the decoded error byte.
-    """
-
-    def __init__(self, message: str, servo_id: int, error: proto.StatusError) -> None:
-        super().__init__(message)
-        self.servo_id = servo_id
-        self.error = error
-
-
-class HardwareAlertError(ServoError):
-    """A servo raised its alert bit; its Hardware Error Status was read and decoded.
-
-    Attributes:
-        hardware_status: the raw Hardware Error Status byte (-1 if it could not be read).
-        bits: names of the bits set (e.g. ["overload"]).
-        data: what the call had read before the alert (id -> bytes), for callers that want it.
-    """
-
-    def __init__(
-        self,
-        message: str,
-        servo_id: int,
-        error: proto.StatusError,
-        hardware_status: int,
-        bits: list[str],
-        data: Mapping[int, bytes] | None = None,
-    ) -> None:
-        super().__init__(message, servo_id, error)
-        self.hardware_status = hardware_status
-        self.bits = bits
-        self.data = dict(data or {})
-
-
-@dataclass
-class BusCounters:
-    """Totals since the bus was created (or ``reset``)."""
-
-    calls: int = 0
-    retries: int = 0  # extra attempts made after a timeout or a corrupt reply
-    timeouts: int = 0  # attempts that ended with missing replies and nothing corrupt
-    crc_errors: int = 0  # corrupt frames received, and CRC errors reported by servos
-    servo_errors: int = 0  # status packets with an error number (ServoError raised)
-    alerts: int = 0  # status packets with the alert bit (HardwareAlertError raised)
-    # status packets that came after their exchange had given up on them: recognised (each
-    # servo answers its requests in order) and set aside, never taken for a later call's
-    late_replies: int = 0
-    # total duration of the calls that needed a retry, s: an upper bound of what the faults
-    # cost (the first attempt's wait for the timeout, then the retries)
-    retried_call_s: float = 0.0
-
-    def reset(self) -> None:
-        for f in fields(self):
-            setattr(self, f.name, 0)
-
-    def as_dict(self) -> dict[str, float]:
-        return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
 @dataclass(frozen=True)
@@ -202,252 +110,6 @@ class PingReply:
     id: int
     model_number: int
     firmware: int
-
-
-class SerialLike(Protocol):
-    """What the bus needs of a pyserial ``Serial`` (an in-process fake may stand in)."""
-
-    @property
-    def in_waiting(self) -> int: ...
-
-    def read(self, size: int = 1) -> bytes: ...
-
-    def write(self, data: bytes) -> int | None: ...
-
-    def flush(self) -> None: ...
-
-    def reset_input_buffer(self) -> None: ...
-
-    def close(self) -> None: ...
-
-
-def open_serial(port: str, baud: int) -> Any:
-    """Open ``port`` (a path or a pyserial URL such as ``loop://``) at ``baud`` with a short
-    read timeout; one-line ``BusError`` when that fails."""
-    import serial  # pyserial; imported here so that the codec works without it
-
-    try:
-        if "://" in port:
-            return serial.serial_for_url(port, baudrate=baud, timeout=POLL_S)
-        return serial.Serial(port, baudrate=baud, timeout=POLL_S, exclusive=True)
-    except ValueError as exc:
-        raise BusError(f"cannot open Dynamixel bus {port} at {baud} baud: {exc}") from exc
-    except serial.SerialException as exc:
-        raise BusError(_explain_open_error(port, baud, exc)) from exc
-
-
-def _explain_open_error(port: str, baud: int, exc: Exception) -> str:
-    text = str(exc)
-    errno = getattr(exc, "errno", None)
-    if errno == 2 or "No such file" in text:
-        why = "no such port (unplugged? check `ls /dev/ttyUSB* /dev/ttyACM*`)"
-    elif errno == 13 or "Permission denied" in text:
-        why = "permission denied (add your user to the dialout group)"
-    elif errno in (11, 16) or "lock" in text or "busy" in text.lower():
-        why = "port busy (another program has it open)"
-    elif "baud" in text.lower():
-        why = f"the port refuses {baud} baud"
-    else:
-        why = text.splitlines()[0] if text else type(exc).__name__
-    return f"cannot open Dynamixel bus {port}: {why}"
-
-
-@dataclass
-class LatencyEstimate:
-    """The reply latency beyond the wire time (adapter, OS, servo), learnt from the replies:
-    the slack every timeout adds (``slack``), between ``floor`` and ``cap`` (the floor wins
-    when it is the larger: a slack asked for is kept), s.
-
-    A sample is how much later than its wire time and return delays a reply was read, from
-    the request it answers. After a retry that is ambiguous (the first reply may answer the
-    first request, late, or the retry, the first reply lost): it gives no sample (Karn's
-    rule) until a second reply comes and shows the first was late; a reply that may be a
-    later call's (``_Replies.set_aside``) gives none until that call's own reply comes too.
-    """
-
-    floor: float
-    cap: float = MAX_LATENCY_S
-    mean: float | None = None
-    deviation: float = 0.0
-    largest: float = 0.0  # the largest sample seen, s
-    samples: int = 0
-
-    def add(self, sample: float) -> None:
-        sample = max(0.0, sample)
-        self.largest = max(self.largest, sample)
-        self.samples += 1
-        if self.mean is None:
-            self.mean, self.deviation = sample, sample / 2
-            return
-        self.deviation += DEVIATION_GAIN * (abs(sample - self.mean) - self.deviation)
-        self.mean += LATENCY_GAIN * (sample - self.mean)
-
-    @property
-    def slack(self) -> float:
-        """The slack of a first attempt, s."""
-        if self.mean is None:
-            return self.floor
-        return max(self.floor, min(self.cap, self.mean + DEVIATIONS * self.deviation))
-
-    @property
-    def longest(self) -> float:
-        """The most slack any attempt gets, s: a reply later than that counts as lost."""
-        return max(self.cap, self.floor)
-
-    def slack_of_attempt(self, attempt: int) -> float:
-        """The slack of attempt ``attempt`` (0: the first) of a call, s."""
-        return min(self.longest, self.slack * RETRY_BACKOFF**attempt)
-
-
-@dataclass
-class _Expected:
-    """A status packet asked for and not yet received: by which call, when, of what size.
-    ``spare``: its call already has this servo's answer (a retry's, or the first attempt's
-    come late): a reply counted against it is surplus and gives no latency sample."""
-
-    call: int
-    n_params: int
-    sent_at: float
-    nominal_s: float  # wire time and return delays up to this reply, s
-    expires: float
-    spare: bool = False
-    deadline: float = 0.0  # when its attempt stopped waiting for it, s (monotonic)
-    question: bytes = b""  # what it asked (instruction, and address + length for reads)
-
-
-_FORGOTTEN = _Expected(-1, -1, 0.0, 0.0, 0.0)  # what _match returns for a reply of nobody's
-
-
-def _match(queue: deque[_Expected] | None, status: proto.StatusPacket) -> _Expected | None:
-    """The request ``status`` answers, taken off its servo's ``queue``: the oldest one, as a
-    servo answers in order, unless the size differs (a READ's reply holds exactly the bytes
-    asked for; a status with an error number holds none and answers the oldest): then the
-    first whose size fits, the ones before it lost; ``_FORGOTTEN`` when none fits (the reply
-    of a request given up on and forgotten); None when nothing is awaited from that servo."""
-    if not queue:
-        return None
-    if status.error_code:
-        return queue.popleft()
-    n = len(status.params)
-    for k, entry in enumerate(queue):
-        if entry.n_params == n:
-            for _ in range(k):
-                queue.popleft()  # asked before, of another size: their replies were lost
-            return queue.popleft()
-    return _FORGOTTEN
-
-
-def _question(packet: proto.InstructionPacket) -> bytes:
-    """What ``packet`` asks each servo, as the servo sees it: a READ and a SYNC READ of the
-    same address and length ask the same; anything else, its instruction and parameters."""
-    if packet.instruction in (proto.Instruction.READ, proto.Instruction.SYNC_READ):
-        return b"R" + bytes(packet.params[:4])
-    return bytes([packet.instruction]) + bytes(packet.params)
-
-
-class _Replies:
-    """What one exchange of call ``call`` received, matched against the requests still
-    unanswered (``DynamixelBus._expected``, see ``DynamixelBus._exchange``)."""
-
-    def __init__(self, bus: DynamixelBus, call: int, expect: Mapping[int, int]) -> None:
-        self.bus = bus
-        self.call = call
-        self.expect = expect
-        self.got: dict[int, proto.StatusPacket] = {}
-        self.corrupt = 0
-        # late for an older call, it seemed: id -> (status, its latency sample as such)
-        self.set_aside: dict[int, tuple[proto.StatusPacket, float | None, bytes]] = {}
-        self.latency: float | None = None  # the latest of this call's replies, beyond nominal, s
-
-    @property
-    def complete(self) -> bool:
-        return all(i in self.got for i in self.expect)
-
-    def _wanted(self, status: proto.StatusPacket) -> bool:
-        n = self.expect.get(status.id)
-        return n is not None and status.id not in self.got and len(status.params) == n
-
-    def _answered(self, entry: _Expected, sid: int, now: float) -> float | None:
-        """``entry`` got its reply at ``now``: the other requests of its call to that servo
-        become spare. Returns the latency sample, or None when the reply may answer another
-        request of its call than ``entry`` (Karn's rule: a retry's, the first reply lost).
-        A spare entry's reply is a second answer to one call: the first was late, not lost,
-        and this one, the retry's, is as late as it says."""
-        others = [o for o in self.bus._expected.get(sid, ()) if o.call == entry.call]
-        for other in others:
-            other.spare = True  # surplus now: awaited only up to its attempt's deadline
-        if others and not entry.spare:
-            return None
-        return now - entry.sent_at - entry.nominal_s
-
-    def take(self, chunk: bytes) -> None:
-        """Decode ``chunk`` and sort what it holds: this call's replies, late ones of older
-        calls, corrupt frames."""
-        if not chunk:
-            return
-        bus = self.bus
-        now = time.monotonic()
-        for item in bus._decoder.feed(chunk):
-            if isinstance(item, proto.InstructionPacket):
-                continue  # our own echo
-            queue = bus._expected.get(item.id)
-            while queue and queue[0].expires < now:
-                queue.popleft()  # older than any reply can be: it was lost
-            if isinstance(item, proto.CorruptFrame):
-                entry = queue.popleft() if queue else None
-                bus.counters.crc_errors += 1
-                if entry is None or entry.call == self.call:
-                    self.corrupt += 1  # ours, or nobody's (its id may be damaged)
-                continue
-            entry = _match(queue, item)
-            if entry is _FORGOTTEN:
-                bus.counters.late_replies += 1  # for a request no longer remembered
-                continue
-            sample = None if entry is None else self._answered(entry, item.id, now)
-            if entry is not None and entry.call == self.call and entry.spare:
-                bus.counters.late_replies += 1  # an earlier attempt's, after a retry's
-                if sample is not None:
-                    bus.latency.add(sample)
-                continue
-            if entry is None or entry.call == self.call:
-                if item.id in self.expect and (entry is not None or self._wanted(item)):
-                    self.got.setdefault(item.id, item)  # unasked for but awaited: ours
-                    if sample is not None:
-                        self.latency = max(sample, self.latency or 0.0)
-                continue
-            if self._wanted(item):
-                # this call's if the request it was counted against lost its reply, unless
-                # this call's own comes too: its latency is known only then
-                self.set_aside[item.id] = (item, sample, entry.question)
-                continue
-            bus.counters.late_replies += 1
-            if sample is not None:  # an older call's first answer from this servo, late
-                bus.latency.add(sample)
-        for sid in [i for i in self.set_aside if i in self.got]:
-            _, sample, _ = self.set_aside.pop(sid)  # the servo's own answer came: that one was late
-            bus.counters.late_replies += 1
-            if sample is not None:
-                bus.latency.add(sample)
-
-    def take_set_aside(self, question: bytes) -> None:
-        """The attempt ends without some servos' replies: a reply of theirs set aside as
-        late was this call's after all (the request it was counted against had lost its
-        reply); take it, and forget this call's request it answered. Only a reply counted
-        against a request of the same ``question``: one that asked something else may be
-        that request's late answer, a wrong value for this call (the retry asks again)."""
-        for sid, (status, _, asked) in self.set_aside.items():
-            if sid in self.got:
-                continue
-            if asked != question:
-                self.bus.counters.late_replies += 1
-                continue
-            self.got[sid] = status
-            queue = self.bus._expected.get(sid, deque())
-            for k, entry in enumerate(queue):
-                if entry.call == self.call:
-                    del queue[k]
-                    break
-        self.set_aside.clear()
 
 
 class DynamixelBus:
@@ -507,7 +169,7 @@ class DynamixelBus:
         self._last_bad = 0
         # status packets asked for and not yet received, per servo id, oldest first (a servo
         # answers its requests in order); the call counter tells this call's from older ones
-        self._expected: dict[int, deque[_Expected]] = {}
+        self._expected: dict[int, deque[Expected]] = {}
         self._call_no = 0
 
     @property
@@ -582,7 +244,7 @@ class DynamixelBus:
         """Send ``packet`` and collect status packets from the ids in ``expect`` (id -> number
         of parameter bytes). Returns (replies by id, corrupt frames of this call seen).
 
-        Replies are matched to requests by counting (``_Replies``): a servo answers its
+        Replies are matched to requests by counting (``Replies``): a servo answers its
         requests in order, so its status packet first answers the oldest request of it not yet
         answered. A late reply to an earlier call is so recognised and set aside
         (``late_replies``) instead of being read as this call's answer, or as garbage; one to an
@@ -594,7 +256,7 @@ class DynamixelBus:
             raise BusError(f"Dynamixel bus {self.port} is not open")
         ser = self._serial
         wire = packet.encode()
-        replies = _Replies(self, self._call_no, expect)
+        replies = Replies(self, self._call_no, expect)
         try:
             if expect:
                 self._settle(ser, expect)
@@ -605,7 +267,7 @@ class DynamixelBus:
             if not expect:
                 return {}, 0
             deadline = sent_at + self.timeout_for(len(wire), list(expect.values()), attempt)
-            question = _question(packet)
+            question = question_of(packet)
             self._register(expect, len(wire), sent_at, deadline, question)
             last_look = False
             while not replies.complete and not last_look:
@@ -638,7 +300,7 @@ class DynamixelBus:
         nothing (a reply is matched by its size: a torque-off WRITE never waits behind a
         READ's retries), nor does one that expects no reply (a broadcast)."""
 
-        def surplus() -> list[_Expected]:
+        def surplus() -> list[Expected]:
             return [
                 e
                 for sid, n in expect.items()
@@ -646,7 +308,7 @@ class DynamixelBus:
                 if e.spare and e.n_params == n
             ]
 
-        pending = _Replies(self, -1, {})
+        pending = Replies(self, -1, {})
         while True:
             now = time.monotonic()
             if not any(e.sent_at + SPARE_PATIENCE * (e.deadline - e.sent_at) > now
@@ -684,7 +346,7 @@ class DynamixelBus:
             horizon = max(self.latency.longest, MATCH_HORIZON_S)
             expires = sent_at + nominal + horizon
             queue.append(
-                _Expected(self._call_no, n, sent_at, nominal, expires, False, deadline, question)
+                Expected(self._call_no, n, sent_at, nominal, expires, False, deadline, question)
             )
             while len(queue) > MAX_OUTSTANDING:
                 queue.popleft()  # a servo this far behind is not answering: forget the oldest

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 
-from robot.cli_errors import error
+from plumbing.cli_errors import error
 from robot.dynamixel.bus import DEFAULT_BAUD, DynamixelBus, DynamixelError, NoStatusError, PingReply
 from robot.dynamixel.control_table import MODELS
 from robot.dynamixel.protocol import MAX_SERVO_ID

@@ -6,7 +6,7 @@ import argparse
 import contextlib
 from collections.abc import Sequence
 
-from robot.cli_errors import error
+from plumbing.cli_errors import error
 from robot.dynamixel.bus import DEFAULT_BAUD, DynamixelBus, DynamixelError, NoStatusError, PingReply
 from robot.dynamixel.control_table import MODELS
 from robot.dynamixel.protocol import MAX_SERVO_ID

@@ -36,7 +36,7 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
-from robot.cli_errors import error
+from plumbing.cli_errors import error
 from sim.canopen.slcan import CanFrame, LineSplitter, SlcanAdapter, SlcanError, encode_frame
 from sim.pty_port import OnPty, PtyPort
 

@@ -23,7 +23,7 @@ import threading
 import time
 from collections.abc import Sequence
 
-from robot.cli_errors import error
+from plumbing.cli_errors import error
 from sim.dynamixel.emulator import DEFAULT_OVERLOAD_AFTER_S, DynamixelEmulator, FaultConfig
 from sim.pty_port import OnPty, PtyPort
 

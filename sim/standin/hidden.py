@@ -15,7 +15,7 @@ docs/standin.md has the table. What is hidden:
   command delay);
 - where the ball starts on its ring.
 
-This module draws and writes them; only ``sim.standin.truth`` reads the file back, and only
+This module draws and writes them; only ``testkit.standin_truth`` reads the file back, and only
 tests and bench scripts import that (tests/sim/standin/test_secrecy.py checks it).
 
 Units: metres, radians, seconds, pixels.
@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from robot.files import atomic_write
+from plumbing.files import atomic_write
 from robot.spec import ERGO_JR_JOINTS
 from sim.models.make_scene import (
     ARENA_MARKER_SIZE,

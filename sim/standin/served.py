@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from robot.cli_errors import error
+from plumbing.cli_errors import error
 from robot.spec import ergo_jr_spec
 from sim.mjpeg_server import MjpegServer
 from sim.servo_model import ServoModel, fitted_servos
@@ -111,14 +111,14 @@ def open_served_rig(args: argparse.Namespace) -> ServedRig:
 def rig_servos(rig_id: str) -> tuple[ServoModel | None, str]:
     """Rig ``rig_id``'s fitted servos (None: the nominal ones, no dynamics.json) and the line
     that says which, for ``ergo twin serve --rig-id``; a damaged file is a ``StandinError``."""
-    from robot.calibration_files import CalibrationError, check_rig_id
+    from robot.calibration_files import CalibrationError, RigCalibration
 
     try:
-        check_rig_id(rig_id)
+        calibration = RigCalibration.find(rig_id)
     except CalibrationError as exc:
         raise StandinError(f"--rig-id: {exc}") from None
     try:
-        servos, path = fitted_servos(rig_id)
+        servos, path = fitted_servos(calibration)
     except CalibrationError as exc:
         raise StandinError(f"{exc} (a damaged twin calibration is not ignored)") from None
     if servos is None:

@@ -253,7 +253,7 @@ def test_full_chain_charuco_then_markers_then_tracker(marker_twin):
     """Intrinsics calibrated from synthetic ChArUco views of the twin's (distorted) camera,
     then the arena from the twin's render, then the tracker: within 5 mm (measured < 1 mm)."""
     from calibration.charuco import BoardSpec, calibrate, detect_view
-    from calibration.synthetic import random_views, render_plane_view
+    from testkit.synthetic_views import random_views, render_plane_view
 
     cam = SimCamera(marker_twin, size=SIZE, dist_coeffs=DIST, noise_std=3.0, seed=2)
     cam.connect()

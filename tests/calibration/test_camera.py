@@ -13,7 +13,7 @@ import pytest
 from calibration import charuco, store
 from calibration.charuco import BoardSpec, calibrate, detect_view
 from calibration.store import CalibrationError
-from calibration.synthetic import look_at_pose, random_views, render_plane_view
+from testkit.synthetic_views import look_at_pose, random_views, render_plane_view
 from vision.rectify import undistort_points
 
 SIZE = (480, 640)  # (height, width)

@@ -16,8 +16,8 @@ import pytest
 from calibration.charuco import calibrate, coverage_cells
 from calibration.chessboard import ChessboardSpec
 from calibration.store import CalibrationError
-from calibration.synthetic import board_images
 from explore.cli import main
+from testkit.synthetic_views import board_images
 
 SIZE = (480, 640)  # (height, width)
 K_TRUE = np.array([[610.0, 0.0, 322.0], [0.0, 605.0, 236.0], [0.0, 0.0, 1.0]])

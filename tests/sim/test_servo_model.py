@@ -109,8 +109,8 @@ def _dynamics_payload(servos: ServoModel) -> dict:
     ],
 )
 def test_a_dynamics_payload_out_of_range_is_one_line_naming_the_field(field, value):
+    from plumbing.fields import Fields
     from robot.calibration_files import CalibrationError
-    from robot.fields import Fields
     from sim.servo_model import check_dynamics
 
     payload = _dynamics_payload(NOMINAL.replace(**{field: [value] * 6}))
@@ -121,8 +121,8 @@ def test_a_dynamics_payload_out_of_range_is_one_line_naming_the_field(field, val
 
 
 def test_the_stand_ins_servos_and_the_nominal_pass_the_dynamics_check():
+    from plumbing.fields import Fields
     from robot.calibration_files import CalibrationError
-    from robot.fields import Fields
     from sim.servo_model import check_dynamics
     from sim.standin.hidden import draw_hidden
 

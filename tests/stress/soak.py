@@ -1,5 +1,5 @@
 """Soak: N episodes with ~1% faults; a failed episode is retried by resuming the run
-(explore/runs/soak.py says what is injected and reported).
+(testkit/fault_soak.py says what is injected and reported).
 
     python tests/stress/soak.py                        # 2000 episodes over the emulated serial bus
     python tests/stress/soak.py --episodes 300 --fault-rate 0.01 --bus serial
@@ -18,7 +18,8 @@ from sim.headless import ensure_headless_gl
 
 ensure_headless_gl()  # before MuJoCo is imported
 
-from explore.runs.soak import soak  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # testkit/, not installed
+from testkit.fault_soak import soak  # noqa: E402
 
 
 def main() -> int:

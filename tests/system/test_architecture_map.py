@@ -10,7 +10,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 DOC = ROOT / "docs" / "architecture.md"
 PATH = re.compile(
-    r"`((?:robot|vision|sim|calibration|explore|tests|bench|experiments|docs)/[\w./-]*)`"
+    r"`((?:plumbing|robot|vision|sim|calibration|explore|testkit|tests|bench|experiments|docs)/[\w./-]*)`"
 )
 NAME = re.compile(r"`([A-Z_][A-Z0-9_]+|[A-Z][A-Za-z]+|[a-z_]+_[a-z_]+)`")
 

@@ -66,7 +66,7 @@ def test_an_overload_alert_stops_the_arm_with_torque_off():
 
 @pytest.mark.slow
 def test_a_short_soak_over_the_serial_bus_loses_no_episode(tmp_path):
-    from explore.runs.soak import soak
+    from testkit.fault_soak import soak
 
     result = soak(episodes=25, rate=0.05, bus="serial", seed=1, out=tmp_path / "run")
     print("\n", result)
@@ -75,7 +75,7 @@ def test_a_short_soak_over_the_serial_bus_loses_no_episode(tmp_path):
 
 
 def test_a_short_soak_with_arm_level_faults_loses_no_episode(tmp_path):
-    from explore.runs.soak import soak
+    from testkit.fault_soak import soak
 
     result = soak(episodes=15, rate=0.01, bus="arm", seed=2, out=tmp_path / "run")
     print("\n", result)

@@ -223,7 +223,7 @@ def test_a_mistyped_name_gets_did_you_mean_in_one_line(args, hint, tmp_path, cap
 
 
 def test_no_hint_for_a_name_close_to_nothing(capsys):
-    from robot.registry import did_you_mean
+    from plumbing.registry import did_you_mean
 
     assert did_you_mean("zzz", ["rpe", "rge-efr"]) == ""
     code, _, err = _cli(["explore", "--rig", "qqqq"], capsys)

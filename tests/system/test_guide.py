@@ -1,6 +1,6 @@
 """The owner's guide (docs/real_arm.md) as a test: on a stand-in rig the software has never seen
 (``ergo twin serve --stand-in SEED``), over the Dynamixel pty and over SLCAN, the guide's
-commands in order, typed by ``sim.standin.owner.Owner`` (its hands move the limp joints and
+commands in order, typed by ``testkit.standin_owner.Owner`` (its hands move the limp joints and
 hold the chessboard): scan, joints, camera (live views), arena, ``calibrate show``, a short
 exploration; on the Dynamixel rig, the arena step first fails with its markers hidden (one
 line, nothing saved lost). What each calibration recovered is checked against the stand-in's hidden
@@ -19,8 +19,8 @@ import pytest
 
 from explore.runs.layout import RUN_FILE
 from explore.runs.store import read_history
-from sim.standin.owner import Owner, ServedRig, read_saved
-from sim.standin.truth import arena_error_mm, camera_errors, joint_errors, read_hidden
+from testkit.standin_owner import Owner, ServedRig, read_saved
+from testkit.standin_truth import arena_error_mm, camera_errors, joint_errors, read_hidden
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]
 

@@ -1,6 +1,6 @@
 """The strategies, one entry each: what implements it (imported only when used, as every table of
-the project: ``robot.registry.LazyTable``, so ``ergo --help`` imports no torch), what it is in one
-line, the model it needs trained beforehand, whether the common goal-exploration options apply
+the project: ``plumbing.registry.LazyTable``, so ``ergo --help`` imports no torch), what it is in
+one line, the model it needs trained beforehand, whether the common goal-exploration options apply
 to it, and its named presets (explauto's way: a model's entry and its named configurations
 together).
 
@@ -25,10 +25,11 @@ from explore.learner.presets import (
     CORL2018_ENGINEERED,
     CORL2018_LEARNED,
     CORL2018_SPATIAL,
+    PRESETS,
 )
 from explore.learner.scene import Scene
 from explore.learner.strategies.base import Strategy, StrategyError
-from robot.registry import LazyTable
+from plumbing.registry import LazyTable, did_you_mean
 
 
 @dataclass(frozen=True)
@@ -225,3 +226,14 @@ def make_strategy(name: str, n_params: int = N_PARAMS, *, scene: Scene, **option
     """The strategy ``name`` with ``options``, proposing ``n_params`` parameters on a rig with
     ``scene`` (``explore.rigs.rig.rig_scene``)."""
     return STRATEGIES.make(name, n_params, scene, **options)
+
+
+def preset_options(preset: str, strategy: str) -> dict[str, Any]:
+    """The options ``preset`` gives ``strategy`` (its registry entry's; none for RPE). Raises
+    ``StrategyError`` for an unknown preset or strategy (one line)."""
+    if preset not in PRESETS:
+        raise StrategyError(
+            f"unknown preset {preset!r}{did_you_mean(preset, PRESETS)}; "
+            f"choose one of {', '.join(PRESETS)}"
+        )
+    return dict(STRATEGIES.entry(strategy).presets.get(preset, {}))

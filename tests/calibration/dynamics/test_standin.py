@@ -18,7 +18,7 @@ import pytest
 
 from calibration import store
 from robot.spec import ERGO_JR_JOINTS, ergo_jr_spec
-from sim.standin.truth import read_hidden
+from testkit.standin_truth import read_hidden
 
 ROOT = Path(__file__).resolve().parents[3]
 ERGO = [sys.executable, "-m", "explore.cli"]

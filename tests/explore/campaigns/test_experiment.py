@@ -138,7 +138,7 @@ def test_a_campaign_killed_with_sigkill_leaves_no_worker_running(tmp_path):
 
 def test_seeds_are_a_count_a_list_or_a_range_as_the_issue_writes_them():
     from explore.cli.experiment import parse_seeds
-    from robot.cli_errors import CliError
+    from plumbing.cli_errors import CliError
 
     assert parse_seeds("8") == list(range(8))  # `--seeds 8`: eight seeds
     assert parse_seeds("0,2,5") == [0, 2, 5]

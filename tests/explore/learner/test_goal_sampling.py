@@ -20,8 +20,8 @@ from explore.learner.goal_sampling import (
     kernel_log_density,
     scott_bandwidth,
 )
-from explore.learner.presets import preset_options
 from explore.learner.strategies import StrategyError, make_strategy
+from explore.learner.strategies.registry import preset_options
 from explore.rigs.arena import TWIN_ARENA
 from explore.runs.store import RunStore
 
@@ -170,7 +170,7 @@ A2B = {"name": "arm2balls", "rig_id": "twin", "options": {}}
 def models(tmp_path_factory) -> dict[str, str]:
     """An untrained VAE and spatial autoencoder: enough to give a latent and an image-position
     goal space (what they encode is not what is tested)."""
-    from vision.untrained import save_untrained_models
+    from testkit.untrained_models import save_untrained_models
 
     return save_untrained_models(tmp_path_factory.mktemp("models"))
 

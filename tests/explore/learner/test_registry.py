@@ -6,7 +6,7 @@ import dataclasses
 
 import pytest
 
-from explore.learner.presets import CORL2018, preset_options
+from explore.learner.presets import CORL2018
 from explore.learner.strategies import STRATEGIES, StrategyError, make_strategy
 from explore.learner.strategies.goal_exploration import (
     EngineeredOptions,
@@ -15,6 +15,7 @@ from explore.learner.strategies.goal_exploration import (
     SpatialOptions,
 )
 from explore.learner.strategies.online import OnlineOptions
+from explore.learner.strategies.registry import preset_options
 from explore.rigs.arena import TWIN_ARENA
 
 # Run folders name their strategy by these keys (run.json): they must not change.

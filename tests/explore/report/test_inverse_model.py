@@ -1,4 +1,4 @@
-"""The inverse-model diagnosis (explore/report/inverse_model.py,
+"""The inverse-model diagnosis (testkit/inverse_model.py,
 experiments/diagnose_inverse_model.py) re-finds the neighbour the meta-policy really used."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from explore.campaigns.trial import run_one
-from explore.report.inverse_model import PAIRS, DiagnosisError, diagnose, figure
+from testkit.inverse_model import PAIRS, DiagnosisError, diagnose, figure
 from vision.vae import Vae, VaeConfig
 
 torch.set_num_threads(1)
@@ -51,7 +51,7 @@ def test_the_neighbour_is_found_again_among_tied_episodes_as_the_run_picked_it(t
     # goals meet many equally near episodes; with ties "spread" the run picks one of them by a
     # hash of the query, and the diagnosis must pick the same (sigma 0: the same theta)
     from explore.campaigns.trial import Trial, run_trial
-    from explore.learner.presets import preset_options
+    from explore.learner.strategies.registry import preset_options
 
     opts = {**preset_options("corl2018", "mge-efr"), "bootstrap": 10, "sigma": 0.0,
             "one_outcome": "nearest"}  # fmt: skip

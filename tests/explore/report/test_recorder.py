@@ -31,7 +31,7 @@ from explore.runs.config import RunConfig, StrategyConfig
 from explore.runs.layout import METRICS_FILE, RECORDING_FILE
 from explore.runs.open_run import open_run
 from explore.runs.store import iter_history
-from robot.cli_errors import CliError
+from plumbing.cli_errors import CliError
 
 N = 8
 # one line of ChunkStore.summary(): "{entity}  rows={n}  static={bool}  timelines=[...]  cols=[...]"

@@ -13,7 +13,7 @@ import torch
 
 from explore.campaigns.trial import Trial, run_trial
 from explore.cli import main
-from explore.learner.presets import preset_options
+from explore.learner.strategies.registry import preset_options
 from explore.runs.layout import HISTORY_FILE, METRICS_FILE
 from explore.runs.metrics import read_metrics
 from explore.runs.store import RunStore, read_synced
@@ -34,7 +34,7 @@ BOOTSTRAP = 10
 def models(tmp_path_factory) -> dict[str, str]:
     """An untrained VAE (latents ranked by a made-up KL) and spatial autoencoder: enough to
     run the strategies; what they learn is not what is tested here."""
-    from vision.untrained import save_untrained_models
+    from testkit.untrained_models import save_untrained_models
 
     return save_untrained_models(tmp_path_factory.mktemp("models"))
 

@@ -12,7 +12,7 @@ import pytest
 from sim.models.make_scene import ARENA_MARKER_DICTIONARY, ARENA_MARKER_SIZE, ARENA_MARKERS
 from sim.servo_model import NOMINAL
 from sim.standin import hidden as H
-from sim.standin.truth import read_hidden
+from testkit.standin_truth import read_hidden
 
 SEEDS = range(40)
 

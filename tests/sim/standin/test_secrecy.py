@@ -4,11 +4,11 @@ statement, inside functions too, and every string constant), as tests/system/tes
 reads the import direction.
 
 The rules:
-- ``sim.standin.truth`` (the reader of the hidden file) is imported by tests/, bench/ and
-  experiments/ only;
-- outside ``sim/standin/``, tests/, bench/ and experiments/, only the two bus servers import the
-  stand-in, and only its serving side, ``sim.standin.served`` (which hands a bus emulator the
-  joints' mounting and the twin, nothing else);
+- ``testkit.standin_truth`` (the reader of the hidden file) is imported by tests/, bench/,
+  experiments/ and testkit/ only;
+- outside ``sim/standin/``, tests/, bench/, experiments/ and testkit/, only the two bus
+  servers import the stand-in, and only its serving side, ``sim.standin.served`` (which hands a
+  bus emulator the joints' mounting and the twin, nothing else);
 - no module outside those names the hidden file (its suffix ``-hidden.json``).
 """
 
@@ -23,10 +23,11 @@ from sim.standin.hidden import HIDDEN_SUFFIX
 
 ROOT = Path(__file__).resolve().parents[3]
 PACKAGES = ("robot", "vision", "sim", "calibration", "explore")
-FREE = ("tests", "bench", "experiments")  # may compare against the truth
+# may compare against the truth (testkit/: their shared harnesses, not installed)
+FREE = ("tests", "bench", "experiments", "testkit")
 SERVERS = {"sim/dynamixel/server.py", "sim/canopen/server.py"}
 SERVED = "sim.standin.served"
-READER = "sim.standin.truth"
+READER = "testkit.standin_truth"
 
 
 def _imported(tree: ast.AST) -> set[str]:
@@ -57,11 +58,10 @@ def violations(rel: str, source: str) -> list[str]:
     own = rel.startswith("sim/standin/")
     bad = []
     for name in sorted(_imported(tree)):
-        if name != "sim.standin" and not name.startswith("sim.standin."):
-            continue
         if name.startswith(READER):
-            if rel != "sim/standin/truth.py":
-                bad.append(f"{rel} imports {name}, the hidden file's reader")
+            bad.append(f"{rel} imports {name}, the hidden file's reader")
+        elif name != "sim.standin" and not name.startswith("sim.standin."):
+            continue
         elif not own and not (rel in SERVERS and name.startswith(SERVED)):
             bad.append(f"{rel} imports {name}")
     if not own:
@@ -103,13 +103,13 @@ def test_the_two_bus_servers_are_the_stand_ins_only_users():
 @pytest.mark.parametrize(
     ("rel", "source"),
     [
-        ("calibration/joints.py", "from sim.standin.truth import read_hidden\n"),
-        ("calibration/joints.py", "def f():\n    import sim.standin.truth\n"),
+        ("calibration/joints.py", "from testkit.standin_truth import read_hidden\n"),
+        ("calibration/joints.py", "def f():\n    import testkit.standin_truth\n"),
         ("calibration/joints.py", "from sim.standin import truth\n"),
         ("calibration/joints.py", "from sim.standin.hidden import draw_hidden\n"),
         ("explore/cli/main.py", "from sim.standin.served import open_served_rig\n"),
         ("sim/dynamixel/server.py", "from sim.standin.hidden import draw_hidden\n"),
-        ("sim/standin/served.py", "from sim.standin.truth import read_hidden\n"),
+        ("sim/standin/served.py", "from testkit.standin_truth import read_hidden\n"),
         ("calibration/cli.py", "PATH = '/tmp/ergo-standin-3-hidden.json'\n"),
     ],
 )
@@ -120,9 +120,9 @@ def test_the_check_catches(rel, source):
 @pytest.mark.parametrize(
     ("rel", "source"),
     [
-        ("tests/system/test_guide.py", "from sim.standin.truth import read_hidden\n"),
-        ("bench/bench_guide.py", "from sim.standin.truth import read_hidden\n"),
-        ("experiments/standin_dynamics.py", "from sim.standin.truth import read_hidden\n"),
+        ("tests/system/test_guide.py", "from testkit.standin_truth import read_hidden\n"),
+        ("bench/bench_guide.py", "from testkit.standin_truth import read_hidden\n"),
+        ("experiments/standin_dynamics.py", "from testkit.standin_truth import read_hidden\n"),
         ("sim/canopen/server.py", "from sim.standin.served import open_served_rig\n"),
         ("sim/standin/served.py", "from sim.standin.hidden import draw_hidden\n"),
     ],

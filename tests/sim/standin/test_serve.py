@@ -23,8 +23,8 @@ from robot.errors import SafetyStop
 from robot.spec import ERGO_JR_JOINTS
 from sim.standin.board import BoardGeometry
 from sim.standin.hands import HandsClient, HandsError, board_to_world
-from sim.standin.owner import ServedRig
-from sim.standin.truth import read_hidden
+from testkit.standin_owner import ServedRig
+from testkit.standin_truth import read_hidden
 
 ROOT = Path(__file__).resolve().parents[3]
 ERGO_SERVE = [sys.executable, "-m", "explore.cli", "twin", "serve"]
@@ -40,7 +40,7 @@ pytestmark = pytest.mark.slow
 @contextmanager
 def serve(bus: str, seed: int, hidden: Path, *flags: str) -> Iterator[dict[str, str]]:
     """``ergo twin serve --bus BUS --stand-in SEED --hidden HIDDEN FLAGS``
-    (``sim.standin.owner.ServedRig``); yields its announced lines by their first words
+    (``testkit.standin_owner.ServedRig``); yields its announced lines by their first words
     (``bus``, ``camera``, ``hands``, ``stand-in``); stops it with SIGTERM and expects exit
     code 0."""
     rig = ServedRig(bus, seed, hidden, flags=flags)

@@ -16,8 +16,8 @@ import pytest
 from calibration import store
 from sim.servo_model import NOMINAL
 from sim.standin.hidden import StandinError
-from sim.standin.owner import ServedRig
 from sim.standin.served import open_served_rig
+from testkit.standin_owner import ServedRig
 
 ROOT = Path(__file__).resolve().parents[3]
 ERGO_SERVE = [sys.executable, "-m", "explore.cli", "twin", "serve"]

@@ -1,4 +1,4 @@
-"""robot.files.atomic_write, the one atomic write of the project: the target holds the old
+"""plumbing.files.atomic_write, the one atomic write of the project: the target holds the old
 bytes or the new ones, never a part; a failure leaves no temporary file."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import os
 import numpy as np
 import pytest
 
-from robot.files import atomic_write, temporary_name
+from plumbing.files import atomic_write, temporary_name
 
 
 def test_bytes_text_and_a_writer_function_land_whole(tmp_path):

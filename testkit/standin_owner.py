@@ -5,7 +5,7 @@ chessboard in front of the camera while ``ergo calibrate camera`` collects views
 
 Every step is a subprocess of the installed ``ergo`` (``python -m explore.cli``), with the
 calibration folder in ``ERGO_CALIBRATION_DIR``: nothing here calls the calibration code
-directly, and nothing here reads the stand-in's hidden parameters (``sim.standin.truth`` is for
+directly, and nothing here reads the stand-in's hidden parameters (``testkit.standin_truth`` is for
 tests and experiment scripts, which compare what the steps recovered against them).
 
 Used by ``tests/system/test_guide.py`` and ``experiments/rehearse_real_arm.py``::

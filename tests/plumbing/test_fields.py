@@ -1,11 +1,11 @@
-"""robot.fields.Fields: every failure one line ``WHERE: field 'PATH' WHY``, of the caller's
+"""plumbing.fields.Fields: every failure one line ``WHERE: field 'PATH' WHY``, of the caller's
 error class, naming the first bad field."""
 
 from __future__ import annotations
 
 import pytest
 
-from robot.fields import Fields, is_int, is_matrix, is_number
+from plumbing.fields import Fields, is_int, is_matrix, is_number
 
 
 class Bad(ValueError):

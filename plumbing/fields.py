@@ -11,7 +11,7 @@ import math
 from collections.abc import Iterable
 from typing import Any, NoReturn
 
-from robot.registry import did_you_mean
+from plumbing.registry import did_you_mean
 
 
 def is_int(v: Any) -> bool:
