@@ -39,7 +39,8 @@ from typing import Any, Literal
 import numpy as np
 
 from robot.spec import ArmSpec, ergo_jr_spec
-from sim.standin.hands import HandsClient, HandsError
+from sim.standin.hands import HandsError
+from sim.standin.hands_client import HandsClient
 
 ERGO = [sys.executable, "-m", "explore.cli"]
 START_BOUND_S = 90.0  # against hangs (the server imports MuJoCo, draws its floor); not a target

@@ -30,14 +30,28 @@ import logging
 import threading
 import time
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from canopen.sdo import SdoAbortedError
 
 from robot.canopen.cia402 import State
 
-if TYPE_CHECKING:
-    from sim.canopen.drives import EmulatedDrive
+
+class EmulatedDrive(Protocol):
+    """What the watch needs of an emulated drive (``sim.canopen.drives.EmulatedDrive``; a
+    protocol, so that this module does not import the drives that import it)."""
+
+    node_id: int
+    state: State
+    error_code: int
+    node: Any  # its canopen LocalNode (``node.emcy``)
+
+    def od_int(self, index: int, subindex: int = 0) -> int: ...
+
+    def trip(self, code: int = ..., register: int = ...) -> None: ...
+
+    def apply_controlword(self, cw: int) -> None: ...
+
 
 log = logging.getLogger(__name__)
 

@@ -19,7 +19,8 @@ import pytest
 from robot.spec import ERGO_JR_JOINTS
 from sim.realtime import RealtimeLoop
 from sim.standin.board import BoardGeometry
-from sim.standin.hands import Hands, HandsClient, HandsError, HandsServer, board_to_world
+from sim.standin.hands import Hands, HandsError, HandsServer, board_to_world
+from sim.standin.hands_client import HandsClient
 from sim.standin.hidden import draw_hidden
 from sim.standin.lens import ServedFrames
 from sim.standin.served import served_twin

@@ -22,7 +22,8 @@ import pytest
 from robot.errors import SafetyStop
 from robot.spec import ERGO_JR_JOINTS
 from sim.standin.board import BoardGeometry
-from sim.standin.hands import HandsClient, HandsError, board_to_world
+from sim.standin.hands import HandsError, board_to_world
+from sim.standin.hands_client import HandsClient
 from testkit.standin_owner import ServedRig
 from testkit.standin_truth import read_hidden
 
