@@ -16,7 +16,10 @@ class CliError(Exception):
 
 
 def error(message: object) -> int:
-    """Print ``message`` (a string or an exception) as ``ergo: error: MESSAGE`` on stderr;
-    returns the exit code of a user error (2), for ``return error(...)`` in a command."""
-    print(f"ergo: error: {message}", file=sys.stderr)
+    """Print ``message`` (a string or an exception) as ``ergo: error: MESSAGE`` on stderr, an
+    exception's notes after it on the same line (``robot.arm.Arm.disconnect`` adds a failed
+    torque-off as one); returns the exit code of a user error (2), for ``return error(...)``."""
+    notes = getattr(message, "__notes__", None) if isinstance(message, BaseException) else None
+    text = "; ".join([str(message), *map(str, notes or ())])  # what the failure left undone
+    print(f"ergo: error: {text}", file=sys.stderr)
     return USER_ERROR_EXIT

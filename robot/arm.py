@@ -123,6 +123,13 @@ class Arm(ABC):
         #: heartbeat consumer, cut torque) or "hold" (they keep their last target; the user's
         #: explicit choice, the rigs' option ``on_crash``). Set it before ``connect``.
         self.on_crash = "limp"
+        #: a backend's word on its last torque-off when it could not confirm it (CANopen:
+        #: "not confirmed by ...: sent to ..."), None when confirmed or not said
+        self.torque_off_report: str | None = None
+        #: True while a disconnect that ends in an exception turns torque off: a backend then
+        #: leaves its report in ``torque_off_report`` instead of logging it (the exception
+        #: carries it, ``disconnect``)
+        self.quiet_torque_off = False
 
     # ---- lifecycle -------------------------------------------------------------------------
     @property
@@ -182,15 +189,32 @@ class Arm(ABC):
         """Where the step bound starts from: the measured positions by default, shape (n,)."""
         return self._read().positions
 
-    def disconnect(self, torque_off: bool = True) -> None:
-        """Close the link, turning torque off first unless told otherwise. Never raises."""
+    def disconnect(self, torque_off: bool = True, during: BaseException | None = None) -> None:
+        """Close the link, turning torque off first unless told otherwise. Never raises.
+
+        ``during``: the exception that ends the arm's use, if any (``__exit__`` passes it).
+        A torque-off that then fails or is not confirmed is added to it as a note
+        (``BaseException.add_note``), which the command's one ``ergo: error:`` line prints
+        after the cause (``plumbing.cli_errors.error``), instead of a log line of its own
+        beside it: the same link loss is said once, with what it left undone."""
         if not self._connected:
             return
         try:
             if torque_off:
-                self.set_torque(False)
+                self.quiet_torque_off = during is not None
+                try:
+                    self.set_torque(False)
+                finally:
+                    self.quiet_torque_off = False
+                report = self.torque_off_report
+                if during is not None and report and report not in str(during):
+                    during.add_note(f"torque off {report}")  # unless its stop said it
         except Exception as exc:  # keep going: the link must still be closed
-            log.error("could not turn torque off on disconnect: %s", exc)
+            if during is not None:
+                during.add_note(f"could not turn torque off on disconnect: {exc}")
+                log.debug("could not turn torque off on disconnect: %s", exc)
+            else:
+                log.error("could not turn torque off on disconnect: %s", exc)
         finally:
             try:
                 self._disconnect()
@@ -214,8 +238,8 @@ class Arm(ABC):
         self.connect()
         return self
 
-    def __exit__(self, *exc: object) -> None:
-        self.disconnect(torque_off=True)
+    def __exit__(self, exc_type: object, exc: BaseException | None, tb: object) -> None:
+        self.disconnect(torque_off=True, during=exc)
 
     # ---- I/O -------------------------------------------------------------------------------
     def read(self) -> JointState:

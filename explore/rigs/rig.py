@@ -170,10 +170,12 @@ class Rig:
         if self.clock is not None:
             self.clock.restart()
 
-    def disconnect(self) -> None:
+    def disconnect(self, during: BaseException | None = None) -> None:
+        """Torque off and close the arm, then the camera; ``during``: the exception that ends
+        the run, if any (``robot.arm.Arm.disconnect`` adds a failed torque-off to it)."""
         try:
             if self.arm is not None:
-                self.arm.disconnect(torque_off=True)
+                self.arm.disconnect(torque_off=True, during=during)
         finally:
             if self.camera is not None:
                 self.camera.disconnect()
@@ -182,8 +184,8 @@ class Rig:
         self.connect()
         return self
 
-    def __exit__(self, *exc: object) -> None:
-        self.disconnect()
+    def __exit__(self, exc_type: object, exc: BaseException | None, tb: object) -> None:
+        self.disconnect(during=exc)
 
 
 def rig_options(config: RigConfig) -> Any:

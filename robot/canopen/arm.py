@@ -442,8 +442,9 @@ class CanArm(Arm):
         if net.network is None:  # closed under the arm (a failed reconnection): blind only
             said = self.torque_off_report is not None  # the stop said so already
             self.torque_off_report = f"not confirmed: {net.blind_torque_off()}"
+            quiet = said or self.quiet_torque_off  # said by the stop, or by the exception
             log.log(
-                logging.DEBUG if said else logging.WARNING, "torque off %s", self.torque_off_report
+                logging.DEBUG if quiet else logging.WARNING, "torque off %s", self.torque_off_report
             )
             return
         before, self.torque_off_report = self.torque_off_report, None
@@ -470,7 +471,8 @@ class CanArm(Arm):
                 )
                 # said once: the disconnect after a stop sends it again (to the nodes still
                 # silent), without a second line
-                level = logging.DEBUG if before is not None else logging.WARNING
+                quiet = before is not None or self.quiet_torque_off
+                level = logging.DEBUG if quiet else logging.WARNING
                 log.log(level, "torque off %s", self.torque_off_report)
 
     def _drive_to(self, target: State) -> list[int]:

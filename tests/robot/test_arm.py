@@ -19,6 +19,7 @@ connection, torque enabled holding the current pose.
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 
 import numpy as np
@@ -27,6 +28,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from explore.rigs.motor import ergo_jr_dmp
+from plumbing.cli_errors import error
 from robot.arm import Arm, JointState, RecoveryPolicy
 from robot.errors import BusError, LinkLost, NotConnectedError, SafetyStop
 from robot.spec import ArmSpec, JointSpec, ergo_jr_spec
@@ -301,6 +303,37 @@ def test_disconnect_closes_the_link_even_when_torque_off_fails():
     arm.faults = [1]  # the torque-off write fails
     arm.disconnect()
     assert not arm.is_connected
+
+
+def test_a_torque_off_failing_under_an_exception_is_said_on_its_one_error_line(caplog, capsys):
+    """The link drops (the exception ending the run), so the torque-off on leaving the block
+    fails too: one ``ergo: error:`` line says both, and no log line of the arm repeats it. A
+    disconnect with no exception in flight still logs the failure as an error."""
+    arm = ScriptedArm(BASE, np.zeros(6), faults=[])
+    with caplog.at_level(logging.DEBUG, logger="robot.arm"), pytest.raises(LinkLost) as info:  # noqa: SIM117
+        with arm:  # the arm's own exit, inside pytest.raises
+            arm.set_torque(True)
+            arm.faults = [1]  # the torque-off write on the way out fails
+            raise LinkLost("servo(s) 1 did not answer on /dev/pts/9")
+    assert not arm.is_connected
+    said = [r.getMessage() for r in caplog.records if r.levelno >= logging.INFO]
+    assert [m for m in said if "torque" in m] == []  # the fault counters' INFO line stays
+    assert error(info.value) == 2
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1
+    assert lines[0].startswith("ergo: error: servo(s) 1 did not answer on /dev/pts/9; ")
+    assert "could not turn torque off on disconnect: torque write failed" in lines[0]
+
+    caplog.clear()
+    arm = ScriptedArm(BASE, np.zeros(6), faults=[])
+    arm.connect()
+    arm.set_torque(True)
+    arm.faults = [1]
+    with caplog.at_level(logging.ERROR, logger="robot.arm"):
+        arm.disconnect()
+    assert [r.getMessage() for r in caplog.records] == [
+        "could not turn torque off on disconnect: torque write failed"
+    ]
 
 
 @settings(max_examples=60, deadline=None)
