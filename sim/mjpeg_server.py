@@ -20,14 +20,13 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
+from sim.loopback import HOST, LISTEN_BACKLOG
+
 if TYPE_CHECKING:
     from sim.twin import Twin
 
 log = logging.getLogger(__name__)
 
-# The only address served: the stream is for this machine (the project never listens on
-# another interface).
-HOST = "127.0.0.1"
 BOUNDARY = "ergoframe"
 # Frame rate and JPEG quality: guesses that keep a 240x240 render cheap on a shared core.
 DEFAULT_FPS = 15.0
@@ -72,6 +71,10 @@ class TwinFrames:
             self._renderer = None
 
 
+class _Server(ThreadingHTTPServer):
+    request_queue_size = LISTEN_BACKLOG  # socketserver's 5 dropped connections (sim.loopback)
+
+
 class MjpegServer:
     """An MJPEG stream of ``grab()`` frames.
 
@@ -101,7 +104,7 @@ class MjpegServer:
         self._seq = 0
         self._cond = threading.Condition()
         self._stop = threading.Event()
-        self._httpd: ThreadingHTTPServer | None = None
+        self._httpd: _Server | None = None
         self._threads: list[threading.Thread] = []
 
     @property
@@ -119,7 +122,7 @@ class MjpegServer:
         if self._httpd is not None:
             return
         try:
-            self._httpd = ThreadingHTTPServer((HOST, self._requested_port), self._handler_class())
+            self._httpd = _Server((HOST, self._requested_port), self._handler_class())
         except OSError as exc:
             raise OSError(f"cannot serve MJPEG on {HOST}:{self._requested_port}: {exc}") from exc
         self._httpd.daemon_threads = True

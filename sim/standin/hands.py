@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from robot.spec import ERGO_JR_JOINTS
+from sim.loopback import HOST, LISTEN_BACKLOG
 from sim.standin.board import BoardError, BoardGeometry
 from sim.standin.scene import (
     BOARD_AWAY,
@@ -53,7 +54,6 @@ from sim.twin import Twin
 
 log = logging.getLogger(__name__)
 
-HOST = "127.0.0.1"  # the only address served (the project never listens on another)
 # How fast a hand turns a joint: about 90 degrees in 1.5 s (guess for a careful person).
 HAND_SPEED_RAD_S = 1.0
 # A held joint counts as there within this (the hand's grip holds it within 0.01 deg under
@@ -505,6 +505,7 @@ class HandsServer:
         class Server(socketserver.ThreadingTCPServer):
             daemon_threads = True
             allow_reuse_address = True
+            request_queue_size = LISTEN_BACKLOG  # socketserver's 5 dropped connections
 
         try:
             self._server = Server((HOST, self._requested_port), Handler)
