@@ -4,7 +4,8 @@ commands in order, typed by ``testkit.standin_owner.Owner`` (its hands move the 
 hold the chessboard): scan, joints, camera (live views), arena, ``calibrate show``, a short
 exploration; on the Dynamixel rig, the arena step first fails with its markers hidden (one
 line, nothing saved lost). What each calibration recovered is checked against the stand-in's hidden
-parameters, and the exploration must track the ball with the calibrations applied.
+parameters, and the exploration must track the ball with the calibrations applied; then step 9:
+a run on the twin warms a short run over the bus, whose report shows the reality gap.
 
 The seed is the test's (``ERGO_TEST_STANDIN_SEED`` picks another); experiments/rehearse_real_arm.py
 measures the same on more seeds and longer runs. No assertion is on durations."""
@@ -17,7 +18,7 @@ import os
 import numpy as np
 import pytest
 
-from explore.runs.layout import RUN_FILE
+from explore.runs.layout import HISTORY_FILE, PRIOR_KEY, REALITY_GAP_FILE, RUN_FILE
 from explore.runs.store import read_history
 from testkit.standin_owner import Owner, ServedRig, read_saved
 from testkit.standin_truth import arena_error_mm, camera_errors, joint_errors, read_hidden
@@ -33,6 +34,10 @@ CENTRE_BOUND_PX = 3.0
 # experiments/rehearse_real_arm.py)
 ARENA_BOUND_MM = 4.0
 EPISODES = 6
+# Step 9 (the arm warmed by its twin): the twin run's episodes, the bootstrap's 100 so that the
+# arm starts on goals from its first episode (docs/warm_start.md), and the warmed bus run's
+WARM_TWIN_EPISODES = 100
+WARM_EPISODES = 4
 
 
 def _seed(bus: str) -> int:
@@ -75,6 +80,14 @@ def test_the_guide_calibrates_a_rig_never_seen_and_explores_with_it(bus, tmp_pat
 
         run = tmp_path / "run"
         explored = owner.explore(run, episodes=EPISODES, seed=0)
+
+        twin, warm = tmp_path / "twin", tmp_path / "warm"  # step 9: warmed by its twin
+        owner.run("explore", "--rig", "sim", "--rig-id", "mine", "--strategy", "rge-efr",
+                  "--episodes", str(WARM_TWIN_EPISODES), "--seed", "0", "--out", str(twin),
+                  "--no-progress")  # fmt: skip
+        owner.explore(warm, episodes=WARM_EPISODES, seed=0, extra=["--warm-start", str(twin)])
+        report = owner.run("report", str(warm))
+    _warmed_by_its_twin(warm, twin, report.stdout)
     history = read_history(run)
     assert len(history.records) == EPISODES
     tracked = [bool(np.isfinite(r.ball).all()) for r in history.records]
@@ -85,6 +98,25 @@ def test_the_guide_calibrates_a_rig_never_seen_and_explores_with_it(bus, tmp_pat
     lower, upper = np.asarray(joints["lower"]), np.asarray(joints["upper"])
     for r in history.records:  # every target inside the calibrated limits
         assert np.all(r.targets >= lower - 1e-9) and np.all(r.targets <= upper + 1e-9)
+
+
+def _warmed_by_its_twin(warm, twin, report: str) -> None:
+    """Step 9 over the bus: the twin's episodes seeded the arm's first goals (rows of the
+    reality gap) without becoming the arm's episodes, and the run names its prior."""
+    import csv
+    import hashlib
+
+    records = read_history(warm).records
+    assert len(records) == WARM_EPISODES  # the prior is not in the arm's history
+    with (warm / REALITY_GAP_FILE).open() as f:
+        rows = list(csv.DictReader(f))
+    # the arm has no episode of its own before its first: the prior answers it
+    assert 1 <= len(rows) <= WARM_EPISODES, rows
+    assert rows[0]["episode"] == str(records[0].episode), (rows, records[0].episode)
+    prior = json.loads((warm / RUN_FILE).read_text())[PRIOR_KEY]
+    assert prior["sha256"] == hashlib.sha256((twin / HISTORY_FILE).read_bytes()).hexdigest()
+    gap = [x for x in report.splitlines() if x.startswith("reality gap:")]
+    assert gap and f"{len(rows)} episodes played the prior's parameters" in gap[0], report
 
 
 def test_every_command_of_the_guide_parses_as_written():
