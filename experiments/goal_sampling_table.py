@@ -1,13 +1,15 @@
 """The goal samplers' table: ball cells per (sampler, strategy) at given episodes, against
 uniform RGE-EFR.
 
-Reads a folder of campaigns, one per sampler, ``ROOT/SAMPLER/STRATEGY/seed-S/metrics.csv``
-(``experiments/goal_sampling_final.sh`` writes them so). Per row: mean ± sd of the ball cells
-over seeds at each checkpoint (the fraction of the 900 cells with ``--fraction``), each seed's
-figure, Welch's p against uniform RGE-EFR's at the same checkpoint, and how many runs ended
-below uniform RGE-EFR's mean at the last checkpoint.
+Reads folders of campaigns, one campaign per sampler,
+``ROOT/SAMPLER/STRATEGY/seed-S/metrics.csv`` (``experiments/goal_sampling_final.sh`` writes them
+so; several ROOTs are read as one). Per row: mean ± sd of the ball cells over seeds at each
+checkpoint (the fraction of the 900 cells with ``--fraction``), each seed's figure, Welch's p
+against uniform RGE-EFR's at the same checkpoint, and how many runs ended below uniform
+RGE-EFR's mean at the last checkpoint.
 
-    .venv/bin/python experiments/goal_sampling_table.py ROOT [--at 1500,5000] [--fraction]
+    .venv/bin/python experiments/goal_sampling_table.py ROOT [ROOT ...] [--at 1500,5000] \\
+        [--fraction]
 """
 
 from __future__ import annotations
@@ -34,20 +36,21 @@ def cells_at(run: Path, at: list[int]) -> list[float] | None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("root", type=Path)
+    ap.add_argument("roots", type=Path, nargs="+")
     ap.add_argument("--at", default="1500,5000", help="checkpoints, episodes")
     ap.add_argument("--fraction", action="store_true", help="fraction of the cells, not counts")
     args = ap.parse_args()
     at = [int(a) for a in args.at.split(",")]
     scale = 1.0 / (N_BINS * N_BINS) if args.fraction else 1.0
     table: dict[tuple[str, str], np.ndarray] = {}
-    for run in sorted(args.root.glob("*/*/seed-*")):
+    for run in sorted(r for root in args.roots for r in root.glob("*/*/seed-*")):
         got = cells_at(run, at)
         if got is not None:
             key = (run.parent.parent.name, run.parent.name)
             table[key] = np.vstack([table.get(key, np.zeros((0, len(at)))), [got]]) * 1.0
     if not table:
-        raise SystemExit(f"ergo: error: {args.root} holds no run of {max(at)} episodes")
+        where = ", ".join(map(str, args.roots))
+        raise SystemExit(f"ergo: error: {where} holds no run of {max(at)} episodes")
     base = table.get(BASELINE)
     head = " | ".join(f"cells at {a} (p vs uniform rge-efr)" for a in at)
     print(f"| sampler | strategy | runs | {head} | below uniform rge-efr's mean |")
