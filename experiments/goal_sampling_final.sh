@@ -11,8 +11,8 @@
 # exploration seeds 0-3). The code's defaults as they are; only goal_sampling changes.
 #
 # 1. The twin, the ball left in place: RGE-EFR and MGE-EFR with every sampler to 5000
-#    episodes (OUT/twin/SAMPLER/STRATEGY/seed-S); RGE-SAE with every sampler to 1500, and with
-#    uniform and sparse (the nearest to uniform at 1500) to 5000 (OUT/twin-sae/SAMPLER/...).
+#    episodes (OUT/twin/SAMPLER/STRATEGY/seed-S); RGE-SAE with every sampler to 1500, then to
+#    5000 (OUT/twin-sae/SAMPLER/...).
 #    The cells at 1500 are read from the same runs' metrics.csv.
 # 2. Arm-2-Balls (--preset corl2018), 10,000 episodes: RGE-EFR, RGE-SAE, MGE-EFR, MGE-SAE with
 #    uniform, sparse and density (OUT/arm2balls/SAMPLER/...).
@@ -62,7 +62,7 @@ for s in "${SAMPLERS[@]}"; do
     twin twin "$s" 5000 rge-efr,mge-efr
     twin twin-sae "$s" 1500 rge-sae --sae "$OUT/models/twin-sae"
 done
-for s in uniform sparse; do
+for s in uniform sparse density frontier; do
     twin twin-sae "$s" 5000 rge-sae --sae "$OUT/models/twin-sae"
 done
 for s in uniform sparse density; do
