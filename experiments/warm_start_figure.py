@@ -70,17 +70,22 @@ def figure(rows: list[tuple[dict, Path]], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    ncols = min(3, len(rows))
+    nrows = -(-len(rows) // ncols)
     fig, axes = plt.subplots(
-        1, len(rows), figsize=(3.2 * len(rows), 3.0), sharey=True, squeeze=False
+        nrows, ncols, figsize=(3.2 * ncols, 2.8 * nrows), sharey=True, squeeze=False
     )
-    for ax, (r, out) in zip(axes[0], rows, strict=True):
+    for ax in axes.flat[len(rows) :]:
+        ax.set_visible(False)
+    for ax, (r, out) in zip(axes.flat, rows, strict=False):
         bus, seed = r["bus"], r["stand-in"]
         for arm, colour in zip(ARMS, ("0.5", "tab:blue", "tab:orange"), strict=True):
             c = curve(out / f"run-{arm}-{bus}-{seed}-e0")
             ax.plot(range(1, len(c) + 1), c, color=colour, label=arm)
         ax.set_title(f"stand-in {seed}, {bus}", fontsize=9)
         ax.set_xlabel("episodes on the arm")
-    axes[0][0].set_ylabel("ball cells")
+    for row in axes:
+        row[0].set_ylabel("ball cells")
     axes[0][0].legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
