@@ -11,17 +11,18 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import sys
 from pathlib import Path
 
+import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from explore.report.reality_gap import read_gap
 from explore.runs.metrics import read_metrics
 
 ARMS = ("scratch", "nominal", "fitted")
 AT = (60, 100, 300)
-GAP = re.compile(r"(\d+) episodes played.*final position (\d+) mm.*displacement (\d+) mm")
 
 
 def curve(run: Path) -> list[int]:
@@ -30,31 +31,44 @@ def curve(run: Path) -> list[int]:
     return [int(c) for c in read_metrics(path)["ball_cells"]] if path.is_file() else []
 
 
-def rows_of(outs: list[Path]) -> list[tuple[dict, Path]]:
+def gap_cell(run: Path) -> str:
+    """The warmed run's episodes answered by the prior; median gap of the ball's final position
+    and of its displacement, mm (its ``reality_gap.csv``, explore/report/reality_gap.py)."""
+    gap = read_gap(run)
+    if gap is None:
+        return ""
+    position, displacement = np.nanmedian(gap.position), np.nanmedian(gap.displacement)
+    return f"{len(gap.episode)}; {position * 1000:.0f} / {displacement * 1000:.0f} mm"
+
+
+def rows_of(outs: list[Path]) -> list[tuple[dict, Path, dict[str, list[int]]]]:
+    """Each bus rig's campaign row, its folder and each arm's ball cells per episode."""
     found = [
         (json.loads(f.read_text()), f.parent.parent) for o in outs for f in o.glob("rows/*.json")
     ]
-    return sorted(
+    rows = sorted(
         (r for r in found if r[0]["bus"] != "hidden"), key=lambda r: (r[0]["bus"], r[0]["stand-in"])
     )
+    return [(r, out, {a: curve(out / run_name(r, a)) for a in ARMS}) for r, out in rows]
 
 
-def table(rows: list[tuple[dict, Path]]) -> str:
+def run_name(row: dict, arm: str) -> str:
+    return f"run-{arm}-{row['bus']}-{row['stand-in']}-e0"
+
+
+def table(rows: list[tuple[dict, Path, dict[str, list[int]]]]) -> str:
     head = ["bus", "stand-in", *(f"{a}: cells at 60 / 100 / 300 (moved)" for a in ARMS)]
     head += ["nominal prior: answered; gap, final / displacement", "fitted prior: the same"]
     head += ["wall s: calibrations, dynamics fit, twin runs (nominal, fitted), bus runs"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for r, out in rows:
+    for r, out, curves in rows:
         bus, seed = r["bus"], r["stand-in"]
         cells = []
         for arm in ARMS:
-            c = curve(out / f"run-{arm}-{bus}-{seed}-e0")
+            c = curves[arm]
             got = " / ".join(str(c[n - 1]) if len(c) >= n else "-" for n in AT)
             cells.append(f"{got} ({round(100 * r.get(f'{arm} moved', 0))} %)")
-        gaps = []
-        for arm in ("nominal", "fitted"):
-            m = GAP.search(r.get(f"{arm} gap", ""))
-            gaps.append(f"{m[1]}; {m[2]} / {m[3]} mm" if m else "")
+        gaps = [gap_cell(out / run_name(r, arm)) for arm in ("nominal", "fitted")]
         wall = [r.get("calibrations s", "-"), r.get("dynamics s", "-")]
         wall += [f"{r.get('nominal twin s', '-')}, {r.get('fitted twin s', '-')}"]
         wall += [", ".join(str(r.get(f"{a} s", "-")) for a in ARMS)]
@@ -64,7 +78,7 @@ def table(rows: list[tuple[dict, Path]]) -> str:
     return "\n".join(lines)
 
 
-def figure(rows: list[tuple[dict, Path]], path: Path) -> None:
+def figure(rows: list[tuple[dict, Path, dict[str, list[int]]]], path: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -77,12 +91,11 @@ def figure(rows: list[tuple[dict, Path]], path: Path) -> None:
     )
     for ax in axes.flat[len(rows) :]:
         ax.set_visible(False)
-    for ax, (r, out) in zip(axes.flat, rows, strict=False):
-        bus, seed = r["bus"], r["stand-in"]
+    for ax, (r, _, curves) in zip(axes.flat, rows, strict=False):
         for arm, colour in zip(ARMS, ("0.5", "tab:blue", "tab:orange"), strict=True):
-            c = curve(out / f"run-{arm}-{bus}-{seed}-e0")
+            c = curves[arm]
             ax.plot(range(1, len(c) + 1), c, color=colour, label=arm)
-        ax.set_title(f"stand-in {seed}, {bus}", fontsize=9)
+        ax.set_title(f"stand-in {r['stand-in']}, {r['bus']}", fontsize=9)
         ax.set_xlabel("episodes on the arm")
     for row in axes:
         row[0].set_ylabel("ball cells")
