@@ -6,7 +6,9 @@ this module is the arm on top of it: configuration, units, the CiA 402 state mac
 torque, the health monitor. At connect:
 
 1. every node answers an SDO read of its device type 0x1000 (low word 402: a drive);
-2. units: increments per revolution from 0x608F (position encoder resolution);
+2. units: increments per revolution from 0x608F (position encoder resolution), and the
+   offsets moved by whole turns to the turn each drive's position actual 0x6064 is in
+   (``units.JointScaling.anchored``, ``robot.angles``);
 3. SDO configuration: mode of operation 0x6060 = 8 (cyclic synchronous position), software
    position limits 0x607D from the arm spec, producer heartbeat 0x1017, the drive's guard of
    the host (``robot.canopen.guard``: the host's heartbeat, which the drive consumes, 0x1016,
@@ -198,7 +200,10 @@ class CanArm(Arm):
                     f"{increments}/{revolutions} increments per revolution"
                 )
             cpr[i] = increments / revolutions
-        self.scaling = JointScaling(cpr, self._directions, self._offsets)
+        # the offsets in the turn each drive counts in now (robot.angles): a single-turn
+        # encoder reads 0..2 pi at power on, a multi-turn one any turn
+        here = np.array([net.sdo_read(i, 0x6064) for i in range(self.spec.n)], dtype=float)
+        self.scaling = JointScaling(cpr, self._directions, self._offsets).anchored(here)
         net.velocity_units = (self.scaling.counts_per_rev, self._directions)
         lo, hi = self.scaling.limits_to_counts(self.spec.lower, self.spec.upper)
         for i in range(self.spec.n):

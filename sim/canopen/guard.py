@@ -38,7 +38,7 @@ from robot.canopen.cia402 import State
 
 
 class EmulatedDrive(Protocol):
-    """What the watch needs of an emulated drive (``sim.canopen.drives.EmulatedDrive``; a
+    """What the watch needs of an emulated drive (``sim.canopen.drive.EmulatedDrive``; a
     protocol, so that this module does not import the drives that import it)."""
 
     node_id: int

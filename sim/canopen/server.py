@@ -34,11 +34,15 @@ import termios
 import threading
 import time
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from plumbing.cli_errors import error
 from sim.canopen.slcan import CanFrame, LineSplitter, SlcanAdapter, SlcanError, encode_frame
 from sim.pty_port import OnPty, PtyPort
+
+if TYPE_CHECKING:
+    from sim.canopen.drives import EmulatedDrives
+    from sim.standin.served import ServedRig
 
 log = logging.getLogger(__name__)
 
@@ -241,6 +245,17 @@ def unanswered_nodes(bridge: SlcanPtyBridge, ids: Sequence[int]) -> list[int]:
     return silent
 
 
+def drives_for(rig: ServedRig, bus: str, **options: Any) -> EmulatedDrives:
+    """The served rig's six drives on ``bus`` (``INTERFACE:CHANNEL``), mounted as its hidden
+    mounting says (their zero marks ``rig.can_offsets``); ``options`` go to
+    ``EmulatedDrives`` (faults)."""
+    from sim.canopen.drives import EmulatedDrives
+
+    # the drives' convention: joint = offset + direction * drive angle (robot.canopen.units)
+    offsets = -rig.directions * rig.can_offsets
+    return EmulatedDrives(rig.twin, bus, directions=rig.directions, offsets=offsets, **options)
+
+
 def serve(args: argparse.Namespace) -> int:
     """Serve until interrupted (SIGINT/SIGTERM); returns the exit code. Prints the pty path and
     the camera URL, one line each, flushed, so that a parent process can read them."""
@@ -248,7 +263,6 @@ def serve(args: argparse.Namespace) -> int:
 
     import can
 
-    from sim.canopen.drives import EmulatedDrives
     from sim.realtime import RealtimeLoop
     from sim.standin.served import (
         SERVED_IDS,
@@ -284,12 +298,9 @@ def serve(args: argparse.Namespace) -> int:
     previous = signal.signal(signal.SIGTERM, _terminate)
     channel = f"ergo-canopen-{os.getpid()}"
     twin = rig.twin
-    # the drives' convention: joint = offset + direction * drive angle (robot.canopen.units)
-    drives = EmulatedDrives(
-        twin,
+    drives = drives_for(
+        rig,
         f"virtual:{channel}",
-        directions=rig.directions,
-        offsets=-rig.directions * rig.offsets,
         drop_rate=drop_rate,
         tpdo_delay_s=delay_ms / 1000.0,
         seed=int(getattr(args, "seed", 0) or 0),
@@ -332,6 +343,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--hands-port", type=int, default=0)
     p.add_argument("--stand-in", type=int, default=None, metavar="SEED")
     p.add_argument("--hidden", default=None, metavar="PATH")
+    p.add_argument("--zero-marks", default="horn", choices=("horn", "anywhere"))
     return serve(p.parse_args(argv))
 
 
