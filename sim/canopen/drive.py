@@ -37,6 +37,13 @@ ABORT_DEVICE_STATE = 0x08000022
 # Error register bits set while in fault (generic + device profile; see robot.canopen.emcy).
 FAULT_REGISTER = emcy.FOLLOWING_ERROR_REGISTER
 SUPPORTED_MODES = (CSP,)
+# Quick stop option codes 0x605A after which a drive stays in QUICK STOP ACTIVE, holding its
+# position (CiA 402-2: 5..8; 0..4 end in SWITCH ON DISABLED). The emulated drive's default is
+# 6 (its EDS; CiA 402-2's is 2): a drive that stays powered in quick stop is the case a host
+# must handle, so the emulator shows it.
+QUICK_STOP_STAYS = (5, 6, 7, 8)
+# The states in which the motor holds torque.
+HOLDING = (State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE)
 
 
 class EmulatedDrive:
@@ -75,6 +82,7 @@ class EmulatedDrive:
         #: counts on; a multi-turn one keeps its count
         self.single_turn = single_turn
         self.turns = 0  # whole turns the encoder added at power on
+        self.quick_stop_input = False  # the drive's own quick-stop input, active
         self.node = canopen.LocalNode(node_id, canopen.import_od(str(eds), node_id))
         self.state = State.NOT_READY_TO_SWITCH_ON
         self.controlword = 0
@@ -156,7 +164,7 @@ class EmulatedDrive:
             self._mode = mode
         elif index == 0x6040:
             self.apply_controlword(int.from_bytes(data[:2], "little"))
-        elif index == 0x607A:
+        elif index == 0x607A and self.state is not State.QUICK_STOP_ACTIVE:  # it holds
             self.demand = self._limit(int.from_bytes(data[:4], "little", signed=True))
 
     def _limit(self, counts: int) -> int:
@@ -165,21 +173,44 @@ class EmulatedDrive:
         return min(max(counts, lo), hi) if lo < hi else counts
 
     # ---- state machine ---------------------------------------------------------------------
+    @property
+    def holds_torque(self) -> bool:
+        """Whether the motor holds torque: OPERATION ENABLED (following its demand) or QUICK
+        STOP ACTIVE (holding where it stopped), in CSP."""
+        return self.state in HOLDING and self.mode == CSP
+
     def apply_controlword(self, cw: int) -> None:
-        """Run the CiA 402 state machine on a new controlword."""
-        before = self.state
-        self.state = cia402.next_state(self.state, cw, self.controlword)
+        """Run the CiA 402 state machine on a new controlword (its quick stop bit 2 active,
+        i.e. 0, while the quick-stop input is: ``set_quick_stop_input``)."""
+        effective = cw & ~cia402.CW_QUICK_STOP_BIT if self.quick_stop_input else cw
+        before, holding = self.state, self.holds_torque
+        self.state = cia402.next_state(self.state, effective, self.controlword)
         self.controlword = cw
         if before is State.FAULT and self.state is not State.FAULT:
             self.error_code = 0
             self.node.emcy.reset(0)  # EMCY 0x0000: error reset
+        if self.state is State.QUICK_STOP_ACTIVE and before is not State.QUICK_STOP_ACTIVE:
+            # the quick stop: no deceleration ramp emulated, the motor stops where it is; then
+            # the quick stop option code 0x605A says whether it stays, holding (5..8), or goes
+            # on to SWITCH ON DISABLED (0..4, transition 12, automatic) (CiA 402-2)
+            self.demand = self.actual
+            if self.od_int(0x605A) not in QUICK_STOP_STAYS:
+                self.state = State.SWITCH_ON_DISABLED
         if self.state is State.OPERATION_ENABLED and before is not State.OPERATION_ENABLED:
             self.demand = self.actual  # CSP: take over where the joint is, no jump
             self.enabled_since = time.monotonic()
         elif self.state is not State.OPERATION_ENABLED:
             self.enabled_since = None
-            if before is State.OPERATION_ENABLED:
-                self.disabled_at = time.monotonic()
+        if holding and not self.holds_torque:
+            self.disabled_at = time.monotonic()
+
+    def set_quick_stop_input(self, active: bool) -> None:
+        """The drive's own quick-stop input (a switch wired to it): while active, every
+        controlword counts with its quick stop bit active, so OPERATION ENABLED goes to QUICK
+        STOP ACTIVE (transition 11) and nothing but "disable voltage" (transition 12) leaves
+        it; released, the host's next controlword applies as sent."""
+        self.quick_stop_input = active
+        self.apply_controlword(self.controlword)
 
     def trip(self, code: int = emcy.FOLLOWING_ERROR, register: int = FAULT_REGISTER) -> None:
         """Fault (transition 13 then 14): FAULT state, error code 0x603F and an EMCY frame."""

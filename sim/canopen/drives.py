@@ -23,9 +23,9 @@ samples its position at the SYNC; it waits at most ``SYNC_LOCK_WAIT_S`` for the 
 else the TPDOs carry the latest positions of a pump thread, which exchanges with the twin
 between SYNCs (every 5 ms: for SDO reads and state changes between SYNCs).
 
-The twin has one torque switch for the whole arm: it is on only while all six drives are in
-OPERATION ENABLED (a drive out of it, e.g. in FAULT, leaves the whole arm limp). Joints whose
-drive is not enabled hold their current position as target.
+Each joint has its torque while its drive holds it (OPERATION ENABLED, or QUICK STOP ACTIVE
+holding where it stopped); a joint whose drive does not is limp (its target its current
+position).
 
 Fault injection (for tests and ``ergo twin serve``): a rate of lost PDO/SYNC frames (in both
 directions; heartbeats and SDOs are not dropped), a node that stops its heartbeat (and,
@@ -52,7 +52,7 @@ from robot.canopen import cia402, emcy
 from robot.canopen.bus import open_bus
 from robot.canopen.cia402 import State
 from robot.canopen.config import EDS_PATH
-from sim.canopen.drive import CSP, FAULT_REGISTER, EmulatedDrive
+from sim.canopen.drive import FAULT_REGISTER, EmulatedDrive
 from sim.canopen.faulty import SYNC_COB_ID, FaultyNetwork
 from sim.canopen.guard import HostGuard
 from sim.twin import Twin
@@ -241,12 +241,13 @@ class EmulatedDrives:
 
     # ---- the cycle -------------------------------------------------------------------------
     def _plan(self) -> tuple[np.ndarray, np.ndarray]:
-        """Which joints are driven (OPERATION ENABLED in CSP) and their targets, shape (6,)
-        each (bool, rad). Call under ``self._lock``."""
+        """Which joints are driven (their drive holds torque: OPERATION ENABLED or QUICK STOP
+        ACTIVE, in CSP) and their targets, shape (6,) each (bool, rad). Call under
+        ``self._lock``."""
         enabled = np.zeros(6, dtype=bool)
         targets = np.zeros(6)
         for d in self.drives:
-            enabled[d.joint] = d.state is State.OPERATION_ENABLED and d.mode == CSP
+            enabled[d.joint] = d.holds_torque
             targets[d.joint] = d.joint_target(d.counts_per_rev)
         return enabled, targets
 
@@ -258,8 +259,8 @@ class EmulatedDrives:
             self.twin.catch_up()  # the physics at the wall time (a no-op without a real-time loop)
             q = self.twin.joint_positions_now()
             self.twin.set_targets(np.where(enabled, targets, q))
-            if self.twin.torque_enabled() != bool(enabled.all()):
-                self.twin.set_torque(bool(enabled.all()))
+            if not np.array_equal(self.twin.torque_mask(), enabled):
+                self.twin.set_joint_torque(enabled)
             if step_s:
                 self.twin.step(step_s)
                 q = self.twin.joint_positions()
@@ -381,6 +382,12 @@ class EmulatedDrives:
         drive (CiA 301 / CiA 402 error codes, see ``robot.canopen.emcy``)."""
         with self._lock:
             self.drive(node_id).trip(code, register)
+
+    def quick_stop(self, node_id: int, active: bool = True) -> None:
+        """The node's own quick-stop input, pressed (``active``) or released
+        (``EmulatedDrive.set_quick_stop_input``)."""
+        with self._lock:
+            self.drive(node_id).set_quick_stop_input(active)
 
     def following_error(self, node_id: int) -> None:
         """Trip a following-error fault on the node now (EMCY 0x8611, FAULT)."""
