@@ -13,9 +13,12 @@ offsets=...)``, whose convention is the one used here::
 
 Whole turns follow ``robot.angles``, the rule every arm and emulator shares: differences of
 angles are wrapped to (-pi, pi], so a servo whose reading wraps between its zero and a limit
-(lerobot issue #3586) still calibrates correctly, and each offset is saved as the zero mark
-reads (0..2 pi, past pi, or beyond one turn on a multi-turn encoder), never wrapped: an arm
-moves it by whole turns to the turn its drive reads (``robot.angles.anchor``).
+(lerobot issue #3586) still calibrates correctly, and each offset is saved in the turn the arm
+reports the zero mark in (its readings' circular mean, not wrapped again). Any turn of an
+offset is the same offset: an arm reads joint angles modulo whole turns and moves the offset
+to the turn its servo or drive reads before it reckons goals and limits in the drive's own
+units (``robot.angles.anchor``), so a zero mark past pi or beyond one turn calibrates and
+drives like any other.
 
 The procedure is a plain function driven by a ``prompt(step)`` callback: interactive on the
 command line (``input()``), scripted in tests (the callback moves the twin's joint). Nothing is
