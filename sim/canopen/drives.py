@@ -90,6 +90,8 @@ class EmulatedDrives:
         eds: the drives' EDS.
         single_turn: single-turn absolute encoders (each reads 0..2 pi at power on, then
             counts on) instead of multi-turn ones (the count the offsets give, any turn).
+        heartbeats: who produces the nodes' heartbeats (``HeartbeatProducer.task``; None:
+            python-can's periodic tasks on ``bus``).
     """
 
     def __init__(
@@ -106,6 +108,7 @@ class EmulatedDrives:
         seed: int = 0,
         eds: Path = EDS_PATH,
         single_turn: bool = False,
+        heartbeats: Callable[[int, bytes, float], Any] | None = None,
     ) -> None:
         if len(node_ids) != 6 or len(set(node_ids)) != 6:
             raise ValueError(f"need six distinct node ids, got {list(node_ids)}")
@@ -129,6 +132,7 @@ class EmulatedDrives:
         self._owns_bus = isinstance(bus, str)
         self._bus = open_bus(bus) if isinstance(bus, str) else bus
         self.network = FaultyNetwork(self._bus, drop_rate, seed)
+        self.network.heartbeats = heartbeats
         self._lock = threading.RLock()
         self._scheduled_faults: dict[int, float] = {}
         self.syncs = 0

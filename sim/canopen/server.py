@@ -37,6 +37,7 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 from plumbing.cli_errors import error
+from sim.canopen.heartbeats import HeartbeatProducer
 from sim.canopen.slcan import CanFrame, LineSplitter, SlcanAdapter, SlcanError, encode_frame
 from sim.pty_port import OnPty, PtyPort
 
@@ -68,11 +69,19 @@ class SlcanPtyBridge(OnPty):
         link: path of a symbolic link to the current pty (None: no link).
     """
 
-    def __init__(self, bus: Any, link: str | os.PathLike[str] | None = None) -> None:
+    def __init__(
+        self,
+        bus: Any,
+        link: str | os.PathLike[str] | None = None,
+        heartbeats: HeartbeatProducer | None = None,
+    ) -> None:
         self.bus = bus
+        self.heartbeats = heartbeats
         self.adapter = SlcanAdapter()
         self._splitter = LineSplitter()
         self.pty = PtyPort(link, on_open=self._power_on)
+        if heartbeats is not None:
+            heartbeats.set_port(self.pty.master)
         self._write_lock = threading.Lock()
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
@@ -83,6 +92,21 @@ class SlcanPtyBridge(OnPty):
     def _power_on(self) -> None:
         self.adapter = SlcanAdapter()  # a freshly plugged adapter starts closed
         self._splitter = LineSplitter()
+        if self.heartbeats is not None:
+            self.heartbeats.set_open(False)
+
+    def unplug(self) -> None:
+        """Close the pty, as an adapter pulled out of its USB socket (the heartbeat producer's
+        copy of it first)."""
+        if self.heartbeats is not None:
+            self.heartbeats.set_port(None)
+        self.pty.unplug()
+
+    def replug(self) -> None:
+        """Open a new pty (a new path; the link, if any, follows it)."""
+        self.pty.replug()
+        if self.heartbeats is not None and self.pty.master is not None:
+            self.heartbeats.set_port(self.pty.master)
 
     # ---- lifecycle -------------------------------------------------------------------------
     def start(self) -> None:
@@ -102,6 +126,8 @@ class SlcanPtyBridge(OnPty):
 
     def close(self) -> None:
         self.stop()
+        if self.heartbeats is not None:
+            self.heartbeats.set_port(None)
         self.pty.close()
 
     def __enter__(self) -> SlcanPtyBridge:
@@ -158,6 +184,8 @@ class SlcanPtyBridge(OnPty):
             for line in self._splitter.feed(chunk):
                 was_open = self.adapter.is_open
                 reply, frame = self.adapter.handle(line)
+                if self.heartbeats is not None and self.adapter.is_open != was_open:
+                    self.heartbeats.set_open(self.adapter.is_open)
                 if was_open and line is not None and line[:1] == b"C":
                     # A client opening the port sends C first (python-can's slcanBus does, before
                     # it reads anything): frames queued for a client that died with the channel
@@ -298,9 +326,11 @@ def serve(args: argparse.Namespace) -> int:
     previous = signal.signal(signal.SIGTERM, _terminate)
     channel = f"ergo-canopen-{os.getpid()}"
     twin = rig.twin
+    producer = HeartbeatProducer()  # the drives' heartbeats on time (sim.canopen.heartbeats)
     drives = drives_for(
         rig,
         f"virtual:{channel}",
+        heartbeats=producer.task,
         drop_rate=drop_rate,
         tpdo_delay_s=delay_ms / 1000.0,
         seed=int(getattr(args, "seed", 0) or 0),
@@ -313,7 +343,7 @@ def serve(args: argparse.Namespace) -> int:
         with (
             RealtimeLoop(twin, speed=float(getattr(args, "speed", 1.0) or 1.0)),
             drives,
-            SlcanPtyBridge(bridge_bus, link=getattr(args, "link", None)) as bridge,
+            SlcanPtyBridge(bridge_bus, getattr(args, "link", None), producer) as bridge,
         ):
             drives.host_backlog = bridge.backlog
             announce = [f"canopen bus (slcan) on {bridge.path}"]
@@ -323,6 +353,8 @@ def serve(args: argparse.Namespace) -> int:
                 rig, args, announce, lambda: unanswered_nodes(bridge, SERVED_IDS)
             )
     finally:
+        log.info("%s", producer.summary())
+        producer.stop()
         bridge_bus.shutdown()
         signal.signal(signal.SIGTERM, previous)
 
