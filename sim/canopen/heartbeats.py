@@ -22,6 +22,10 @@ before). Heartbeats go out only while the host has the adapter open, as the brid
 The producer keeps, per node: heartbeats written, dropped (the pty full: the host not
 reading), late (a gap over ``LATE_FACTOR`` x the period) and the longest gap, in a shared
 memory block that ``summary`` reads (``ergo twin serve``'s last log line).
+
+``ergo twin serve --heartbeats threads`` leaves them to the serving process's threads (the
+``canopen`` library's periodic tasks), for comparison; ``BridgeRecord`` then keeps the same
+record of the heartbeats the bridge writes, with the gaps as produced and the wait between.
 """
 
 from __future__ import annotations
@@ -35,6 +39,8 @@ import struct
 import subprocess
 import sys
 import threading
+import time
+from collections.abc import Callable
 
 log = logging.getLogger(__name__)
 
@@ -266,3 +272,54 @@ class HeartbeatProducer:
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
+
+
+class BridgeRecord:
+    """The record of the heartbeats the SLCAN bridge writes to the host (``--heartbeats
+    threads``): per node, written gaps over ``late_factor`` x its period, the longest gap as
+    written and as produced (python-can's stamp on the drives' bus), the longest wait in
+    between.
+
+    Args:
+        period_s: the heartbeat time a node produces now, s, by node id.
+        late_factor: a written gap over this times the period counts as late.
+    """
+
+    def __init__(self, period_s: Callable[[int], float], late_factor: float = LATE_FACTOR) -> None:
+        self.period_s = period_s
+        self.late_factor = late_factor
+        self.last: dict[int, tuple[float, float]] = {}  # node -> (produced, written), wall s
+        self.written = self.late = 0
+        self.longest = self.longest_produced = self.wait = 0.0
+        self._lock = threading.Lock()
+
+    def reset(self) -> None:
+        """No client: the next one's gaps start afresh."""
+        with self._lock:
+            self.last.clear()
+
+    def record(self, can_id: int, produced_at: float) -> None:
+        """A frame written to the host now; counted if it is a heartbeat (``produced_at``:
+        its stamp on the drives' bus, wall s)."""
+        node = can_id - HEARTBEAT_BASE
+        if not 1 <= node <= 127:
+            return
+        now = time.time()
+        with self._lock:
+            self.written += 1
+            self.wait = max(self.wait, now - produced_at)
+            if node in self.last:
+                produced, written = self.last[node]
+                gap = now - written
+                self.longest = max(self.longest, gap)
+                self.longest_produced = max(self.longest_produced, produced_at - produced)
+                self.late += gap > self.late_factor * self.period_s(node)
+            self.last[node] = (produced_at, now)
+
+    def summary(self) -> str:
+        return (
+            f"drives' heartbeats (the serving process's threads): {self.written} written to the "
+            f"host, {self.late} late (a gap over {self.late_factor} x the heartbeat time); "
+            f"longest gap {self.longest:.3f} s as written, {self.longest_produced:.3f} s as "
+            f"produced; longest wait in the emulator {self.wait:.3f} s"
+        )

@@ -37,7 +37,7 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 from plumbing.cli_errors import error
-from sim.canopen.heartbeats import HeartbeatProducer
+from sim.canopen.heartbeats import BridgeRecord, HeartbeatProducer
 from sim.canopen.slcan import CanFrame, LineSplitter, SlcanAdapter, SlcanError, encode_frame
 from sim.pty_port import OnPty, PtyPort
 
@@ -74,9 +74,11 @@ class SlcanPtyBridge(OnPty):
         bus: Any,
         link: str | os.PathLike[str] | None = None,
         heartbeats: HeartbeatProducer | None = None,
+        record: BridgeRecord | None = None,
     ) -> None:
         self.bus = bus
         self.heartbeats = heartbeats
+        self.record = record
         self.adapter = SlcanAdapter()
         self._splitter = LineSplitter()
         self.pty = PtyPort(link, on_open=self._power_on)
@@ -217,6 +219,8 @@ class SlcanPtyBridge(OnPty):
                 continue
             if not self.adapter.is_open:
                 self.frames_dropped += 1
+                if self.record is not None:
+                    self.record.reset()
                 continue
             try:
                 frame = CanFrame(
@@ -231,6 +235,8 @@ class SlcanPtyBridge(OnPty):
                 continue
             if self._write(encode_frame(frame), drop_if_full=True):
                 self.frames_out += 1
+                if self.record is not None:
+                    self.record.record(msg.arbitration_id, msg.timestamp)
             else:
                 self.frames_dropped += 1
 
@@ -326,11 +332,13 @@ def serve(args: argparse.Namespace) -> int:
     previous = signal.signal(signal.SIGTERM, _terminate)
     channel = f"ergo-canopen-{os.getpid()}"
     twin = rig.twin
-    producer = HeartbeatProducer()  # the drives' heartbeats on time (sim.canopen.heartbeats)
+    # the drives' heartbeats on time (sim.canopen.heartbeats); "threads": the serving process's
+    threads = getattr(args, "heartbeats", "process") == "threads"
+    producer = None if threads else HeartbeatProducer()
     drives = drives_for(
         rig,
         f"virtual:{channel}",
-        heartbeats=producer.task,
+        heartbeats=None if producer is None else producer.task,
         drop_rate=drop_rate,
         tpdo_delay_s=delay_ms / 1000.0,
         seed=int(getattr(args, "seed", 0) or 0),
@@ -339,11 +347,14 @@ def serve(args: argparse.Namespace) -> int:
         after = float(getattr(args, "overload_after_s", DEFAULT_OVERLOAD_AFTER_S))
         drives.schedule_following_error(int(overload), after)
     bridge_bus = can.Bus(interface="virtual", channel=channel)
+    record = (
+        BridgeRecord(lambda node: drives.drive(node).od_int(0x1017) / 1000) if threads else None
+    )
     try:
         with (
             RealtimeLoop(twin, speed=float(getattr(args, "speed", 1.0) or 1.0)),
             drives,
-            SlcanPtyBridge(bridge_bus, getattr(args, "link", None), producer) as bridge,
+            SlcanPtyBridge(bridge_bus, getattr(args, "link", None), producer, record) as bridge,
         ):
             drives.host_backlog = bridge.backlog
             announce = [f"canopen bus (slcan) on {bridge.path}"]
@@ -353,8 +364,11 @@ def serve(args: argparse.Namespace) -> int:
                 rig, args, announce, lambda: unanswered_nodes(bridge, SERVED_IDS)
             )
     finally:
-        log.info("%s", producer.summary())
-        producer.stop()
+        if producer is not None:
+            log.info("%s", producer.summary())
+            producer.stop()
+        if record is not None:
+            log.info("%s", record.summary())
         bridge_bus.shutdown()
         signal.signal(signal.SIGTERM, previous)
 
@@ -376,6 +390,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--stand-in", type=int, default=None, metavar="SEED")
     p.add_argument("--hidden", default=None, metavar="PATH")
     p.add_argument("--zero-marks", default="horn", choices=("horn", "anywhere"))
+    p.add_argument("--heartbeats", default="process", choices=("process", "threads"))
     return serve(p.parse_args(argv))
 
 

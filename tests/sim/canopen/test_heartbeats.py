@@ -19,7 +19,7 @@ import pytest
 from robot import SafetyStop
 from robot.canopen.arm import CanArm, CanArmConfig
 from sim.canopen.drives import EmulatedDrives
-from sim.canopen.heartbeats import HeartbeatProducer
+from sim.canopen.heartbeats import BridgeRecord, HeartbeatProducer
 from sim.canopen.server import SlcanPtyBridge
 from sim.twin import Twin
 
@@ -183,3 +183,20 @@ def test_a_can_arm_over_the_bridge_hears_them_and_a_stopped_one_is_a_lost_node()
     finally:
         producer.stop()
         bus.shutdown()
+
+
+def test_the_bridges_record_of_heartbeats_from_the_serving_process():
+    """``--heartbeats threads``: the bridge keeps the record (late gaps, the longest as
+    written and as produced, the wait in between); other frames are not counted."""
+    record = BridgeRecord(lambda node: 0.05)
+    stamp = time.time()
+    record.record(0x701, stamp)
+    record.record(0x181, stamp)  # a TPDO: not a heartbeat
+    time.sleep(0.1)  # two periods: late
+    record.record(0x701, stamp + 0.09)
+    record.reset()  # a new client
+    time.sleep(0.1)
+    record.record(0x701, time.time())
+    assert record.written == 3 and record.late == 1
+    assert 0.09 < record.longest < 0.5 and record.longest_produced == pytest.approx(0.09)
+    assert "3 written to the host, 1 late" in record.summary()
