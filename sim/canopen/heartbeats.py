@@ -5,9 +5,9 @@ because the host, or anything else on the host's machine, is busy. The emulated 
 one Python process with the twin, its camera and its hands: their heartbeats, produced by the
 ``canopen`` library (one python-can thread per node, ``send_periodic``) and written to the
 pty by the SLCAN bridge's thread, need the process's GIL and its share of the CPU. On a
-loaded machine both were late: at load 12-20 on 2 cores, heartbeats of 0.5 s came out up to
-1.36 s apart as produced (1.43 s as written), and the host stopped on "no heartbeat" (0.75 s)
-in its first episodes (``tests/stress/can_heartbeat.py``; docs/canopen.md has the figures).
+loaded machine both were late: at load 16-21 on 2 cores, heartbeats of 0.5 s came out up to
+0.91 s apart as produced (0.93 s as written) and the host stopped on "no heartbeat" (0.75 s)
+(``tests/stress/can_heartbeat.py ... -- --heartbeats threads``; docs/canopen_heartbeats.md).
 
 So ``ergo twin serve --bus canopen`` produces them in a small process (``HeartbeatProducer``:
 ``python -S``, the standard library only, real-time priority where allowed, as the torque
