@@ -111,6 +111,37 @@ def test_the_readme_says_how_to_reach_ergo_after_make_run():
     assert "source .venv/bin/activate" in readme and ".venv/bin/ergo" in readme
 
 
+# Terms the README uses, and the words that say what each is: they must come near its first use
+# (a newcomer reads on, and no term is left for a search engine).
+README_TERMS = {
+    "MuJoCo": "physics engine",
+    "EGL": "OpenGL without a window",
+    "ChArUco": "a chessboard with an ArUco marker",
+    "ArUco": "a square code OpenCV finds and",
+    "rig id": "names one arm and its camera",
+    "Ray": "spreads Python work over a cluster",
+    "learning progress": "how fast the arm gets better at reaching",
+    "Arm-2-Balls": "a simulated 2-D arm",
+    "700-707": "kept apart while the code was developed",
+    "CiA 402": "CANopen's drive profile",
+    "DMP": "dynamic movement primitive",
+    "pty": "a virtual serial port",
+}
+NEAR = 400  # characters: the definition is in the term's sentence or the next one
+
+
+@pytest.mark.parametrize("term, definition", README_TERMS.items(), ids=list(README_TERMS))
+def test_the_readme_says_what_each_term_is_where_it_first_uses_it(term, definition):
+    import re
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    text = " ".join(readme.split())  # lines joined: a definition may wrap
+    first = re.search(rf"(?<![\w-]){re.escape(term)}(?![\w-])", text, re.I)
+    assert first, term
+    said = text.find(" ".join(definition.split()), max(0, first.start() - NEAR))
+    assert said >= 0 and abs(said - first.start()) <= NEAR, (term, text[first.start() :][:200])
+
+
 def _readme_commands() -> list[str]:
     """Every ``ergo ...`` command of the README's sh blocks (continuations joined, comments and
     ``;`` split off), but those with placeholders (``...``, ``[runs/B ...]``)."""
