@@ -61,6 +61,13 @@ def owner_frame(cam: SimCamera) -> np.ndarray:
     return cv2.imdecode(jpeg, cv2.IMREAD_COLOR)
 
 
+def say(request: pytest.FixtureRequest, capsys: pytest.CaptureFixture, line: str) -> None:
+    """Print a measured figure, with ``pytest -s`` only."""
+    if request.config.getoption("capture") == "no":
+        with capsys.disabled():
+            print(f"\n{line}")
+
+
 @pytest.fixture(params=list(FLOORS), ids=list(FLOORS))
 def floor_twin(request, tmp_path):
     rgb = FLOORS[request.param]
@@ -70,7 +77,9 @@ def floor_twin(request, tmp_path):
     twin.close()
 
 
-def test_calibrate_arena_finds_the_ball_on_a_floor_of_any_colour(floor_twin, tmp_path, capsys):
+def test_calibrate_arena_finds_the_ball_on_a_floor_of_any_colour(
+    floor_twin, tmp_path, capsys, request
+):
     from explore.cli import main
 
     name, twin = floor_twin
@@ -105,9 +114,8 @@ def test_calibrate_arena_finds_the_ball_on_a_floor_of_any_colour(floor_twin, tmp
             1000 * float(np.linalg.norm(np.subtract(obs.xy, twin.ball_position()[:2])))
         )
     ranges = data["ball_hsv_ranges"]
-    with capsys.disabled():
-        print(f"\n{name} floor: ball found {error_mm:.2f} mm from the truth; tracker with its "
-              f"colour {max(tracked_mm):.2f} mm at most; ranges {ranges}")  # fmt: skip
+    say(request, capsys, f"{name} floor: ball found {error_mm:.2f} mm from the truth; tracker "
+        f"with its colour {max(tracked_mm):.2f} mm at most; ranges {ranges}")  # fmt: skip
     assert error_mm < 5.0 and max(tracked_mm) < 5.0
 
 
@@ -172,7 +180,9 @@ STANDIN_SEED = 301  # a development stand-in: its own camera pose, lens and ball
 
 
 @pytest.mark.parametrize("name", ["grey", "white"])
-def test_calibrate_arena_live_on_a_stand_in_with_a_grey_or_white_floor(name, tmp_path, capsys):
+def test_calibrate_arena_live_on_a_stand_in_with_a_grey_or_white_floor(
+    name, tmp_path, capsys, request
+):
     """`ergo twin serve --stand-in SEED --floor-rgb R G B` in process: the stand-in's hidden
     camera pose and lens, its frames over MJPEG; `ergo calibrate arena --camera URL` finds the
     ball within 5 mm of where it lies. Its camera.json is the hidden camera (standing in for
@@ -205,10 +215,7 @@ def test_calibrate_arena_live_on_a_stand_in_with_a_grey_or_white_floor(name, tmp
     error_mm = float(
         np.hypot(float(m.group(1)) - 1000 * truth[0], float(m.group(2)) - 1000 * truth[1])
     )
-    with capsys.disabled():
-        print(
-            f"\nstand-in {STANDIN_SEED}, {name} floor: ball found {error_mm:.2f} mm from the truth"
-        )
+    say(request, capsys, f"stand-in {STANDIN_SEED}, {name} floor: ball found {error_mm:.2f} mm")
     assert error_mm < 5.0
 
 
