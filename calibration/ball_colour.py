@@ -2,7 +2,7 @@
 
 - ``floor_colour``: the floor as the frame's dominant colour, of any colour, saturated or
   grey, white or black-ish, lit unevenly: a colour and every shade of it (a line through black
-  in RGB), with the spread of its pixels about that line (``FloorColour``);
+  in BGR), with the spread of its pixels about that line (``FloorColour``);
 - ``find_saturated_blob``: the ball, a compact round blob of a saturated colour off the
   floor's line, of a ball's size where a ball can lie;
 - ``sample_ball_hsv``: the ball's HSV range(s), sampled around a pixel on it.
@@ -40,7 +40,9 @@ RIM_PX = 2
 # of this many levels (16 per channel: a floor's noise and JPEG's ripple stay within a bin or
 # two, and a lighting gradient spreads it over a few; guess checked on the twin).
 FLOOR_BIN = 16
-# Pixels sampled for the floor's model, at most (every k-th pixel of the region).
+# Pixels sampled for the floor's model, about (every k-th pixel of the region; a choice, for
+# speed: the ring of a 640 x 480 frame, every other row and column of it (``ring_region``), is
+# about 26 000 pixels, all taken).
 FLOOR_SAMPLES = 60_000
 # A shade of the floor is within this many standard deviations of the floor's line (the
 # Mahalanobis distance of its offset from the line, 2-D): 3.5 keeps 99.8 % of a Gaussian spread
