@@ -170,9 +170,16 @@ class EpisodeRecord:
         except zlib.error as exc:
             raise _unreadable(exc) from exc
         if len(raw) != size or not inflate.eof:
+            found = (
+                f"{len(raw)} stored"
+                if inflate.eof
+                else "more stored"
+                if len(raw) > size
+                else f"a stream cut short after {len(raw)}"
+            )
             raise RecordError(
                 "episode record is not readable: its arrays do not match the header "
-                f"({size} bytes declared, {len(raw)}{'' if inflate.eof else ' or more'} stored)"
+                f"({size} bytes declared, {found})"
             )
         offset = 0
         for name, dt, shape, count in layout:

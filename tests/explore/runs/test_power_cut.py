@@ -33,7 +33,7 @@ from explore.runs.layout import (
     frame,
 )
 from explore.runs.record import EpisodeRecord
-from explore.runs.repair import survey, survey_bytes
+from explore.runs.repair import survey
 from explore.runs.store import RunStore, RunStoreError, read_synced
 
 N = 4  # records in each history
@@ -352,7 +352,7 @@ def test_any_history_opens_or_checks_to_records_or_one_line(tmp_path_factory, ca
     def opens_or_one_line(data: bytes, synced: int | bytes | None) -> None:
         seen["examples"] += 1
         reset(run, data, synced)
-        s = survey_bytes(data, read_synced(run))
+        s = survey(run)
         try:
             reader = RunStore.read(run)
         except RunStoreError as exc:
