@@ -196,11 +196,7 @@ def describe(run: Path, s: Survey) -> list[str]:
             f"history.bin: {s.size} bytes, {len(s.good)} good record(s), {len(dmg)} damaged "
             f"span(s){': ' + where if dmg else ''}"
             + (f"{'...' if len(dmg) > 3 else ''}" if dmg else "")
-            + (
-                f", a torn tail of {s.torn.size} bytes{_unsynced(s)} (cut on resume)"
-                if s.torn
-                else ""
-            )
+            + (f", a torn tail of {s.torn.size} bytes ({_torn(s)}cut on resume)" if s.torn else "")
         )
     lines.append(f"resumable history: episodes {_episodes(s.good[: s.prefix])} ({s.prefix})")
     if s.beyond:
@@ -249,11 +245,12 @@ def describe(run: Path, s: Survey) -> list[str]:
     return lines
 
 
-def _unsynced(s: Survey) -> str:
+def _torn(s: Survey) -> str:
+    """Why the torn tail is cut, for a tail past ``history.synced``."""
     torn = s.torn
     if torn is None or s.synced is None or torn.start < s.synced:
         return ""
-    return " past the length known on disk (history.synced: a power cut's unsynced tail)"
+    return "past history.synced, the length known on disk: a power cut's unsynced tail, "
 
 
 def _list(episodes: list[int]) -> str:

@@ -165,7 +165,7 @@ def test_runs_check_honours_history_synced_as_the_resume_does(tmp_path, capsys, 
     assert s.torn is not None and (s.torn.start, s.torn.end) == (synced, len(disk))
     rc, out = check(run, capsys)
     assert rc == 0 and "ok: resumable as it is" in out, out
-    assert f"a torn tail of {len(disk) - synced} bytes past the length known on disk" in out
+    assert f"a torn tail of {len(disk) - synced} bytes (past history.synced" in out
     with RunStore.open(run) as store:  # the resume agrees
         assert records(store) == PAYLOADS[: N - 2]
         for k in range(N - 2, N):
