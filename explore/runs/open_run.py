@@ -108,7 +108,8 @@ class OpenRun:
         if self.store.truncated_bytes:
             out.append(
                 f"{self.path}: moved a torn last record ({self.store.truncated_bytes} bytes: a "
-                f"crash mid-append) aside to {self.store.moved_aside}; that episode is run again"
+                f"crash or a power cut mid-append) aside to {self.store.moved_aside}; that "
+                "episode is run again"
             )
         if self.missing:
             out.append(
