@@ -24,7 +24,7 @@ PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 # The results pages: findings with their statistics, which the manual pages link to.
 RESULTS = re.compile(r"results(_\w+)?\.md")
 # docs/reliability.md is kept by the run store's and the CAN safety's owners, who are changing
-# its rows; its notebook marks ("no longer" x2, "other jobs") go with their change.
+# its rows; its notebook marks (two "no longer", three "other jobs") go with their change.
 NOT_YET = {"reliability.md"}
 MANUAL_PAGES = [p for p in PAGES if not RESULTS.fullmatch(p.name) and p.name not in NOT_YET]
 MAX_LINES = {"README.md": 150}
