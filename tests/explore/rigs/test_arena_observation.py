@@ -13,27 +13,13 @@ from explore.rigs.arena import TWIN_VIEW
 from explore.rigs.ball import CameraSensor, camera_sensor
 from explore.rigs.rig import RigConfig
 from sim.models.make_scene import BALL_RADIUS
+from testkit.standin_views import ball_centroid
+from testkit.standin_views import pixel_correlation as correlation
 from vision.camera import Camera, Frame
 from vision.observation import ArenaObservation, OverheadView, square_observation
 from vision.rectify import ArenaModel, fit_homography, undistort_points
 
 RING = [(0.15, 0.0), (0.0, 0.15), (-0.1, -0.1), (0.12, -0.09)]  # ball centres, m
-
-
-def ball_centroid(image: np.ndarray) -> np.ndarray:
-    """The ball's (column, row) in a BGR image: the centroid of its saturated yellow-green
-    pixels, weighted by saturation (the twin's ball colour), px."""
-    import cv2
-
-    hsv = cv2.cvtColor(image, cv2.COLOR_BGR2HSV).astype(float)
-    weight = np.clip((hsv[..., 1] - 60) / 195, 0, 1) * ((hsv[..., 0] > 25) & (hsv[..., 0] < 50))
-    rows, cols = np.mgrid[: image.shape[0], : image.shape[1]]
-    assert weight.sum() > 0, "no ball in the image"
-    return np.array([(weight * cols).sum(), (weight * rows).sum()]) / weight.sum()
-
-
-def correlation(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.corrcoef(a.ravel().astype(float), b.ravel().astype(float))[0, 1])
 
 
 def exact_model(camera) -> ArenaModel:
