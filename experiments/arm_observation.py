@@ -4,7 +4,9 @@ physical rig made it (the frame's centre square) and as it makes it now (the fra
 through the rig's calibrations onto the twin's overhead view, ``vision.observation.
 ArenaObservation``), beside the twin's own render of the same scene (the arm at rest, the ball
 at the same place). Prints the pixel correlation of their median images and per scene, and how
-far the ball lies from the twin's (px of the 64 px image); writes the figure.
+far the ball lies from the twin's (px of the 64 px image); for scale, the twin's own render at 8
+times the side, area averaged as the arena view is, against its 64 px render; writes the
+figure.
 
 The stand-in is calibrated as the guide says (docs/real_arm.md: ``ergo calibrate camera``, then
 ``ergo calibrate arena``), typed by ``testkit.standin_owner.Owner``, whose hands hold the arm at
@@ -85,6 +87,8 @@ def main() -> int:
     ap.add_argument("--run-episodes", type=int, default=0, help="also an rpe run of N episodes")
     ap.add_argument("--reuse", action="store_true", help="read WORK/views.npz, serve nothing")
     args = ap.parse_args()
+    import cv2
+
     from calibration.store import load_arena_file
     from explore.rigs.ball import locator_from_calibration, observer_from_calibration
     from explore.rigs.sim_dataset import ring_positions
@@ -126,6 +130,12 @@ def main() -> int:
             f"| {name} | {corr:.3f} | {np.median(each):.3f}, {np.min(each):.3f} | "
             f"{np.nanmedian(gap):.2f}, {np.nanmax(gap):.2f} |"
         )
+    fine = twin_renders(places, SIDE * 8)  # the twin's own render, area averaged: a reference
+    fine = np.stack([cv2.resize(f, (SIDE, SIDE), interpolation=cv2.INTER_AREA) for f in fine])
+    print(
+        f"| the twin at {SIDE * 8} px, area averaged (reference) | "
+        f"{pixel_correlation(median_image(fine), median_image(twin)):.3f} | | |"
+    )
     err = np.linalg.norm(tracked - places, axis=1) * 1000
     print(
         f"tracker against the places: median {np.nanmedian(err):.1f} mm, max "
