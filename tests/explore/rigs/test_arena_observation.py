@@ -144,3 +144,29 @@ def test_a_physical_rig_sees_through_its_arena_calibration(tmp_path, monkeypatch
         assert isinstance(seeing, CameraSensor) and seeing.blind is None
         want = ArenaObservation(model, TWIN_VIEW, plane_height=BALL_RADIUS)(frame, 64)
         np.testing.assert_array_equal(seeing.locate(64).image, want)
+
+
+@pytest.mark.parametrize("strategy", ["rge-sae", "rge-vae", "rge-online"])
+def test_learned_goal_spaces_are_refused_without_an_arena_calibration(
+    strategy, tmp_path, monkeypatch
+):
+    """Without an arena calibration a physical rig would observe the raw centre square: a
+    learned goal space is refused as the engineered one is, in one line naming the command."""
+    from explore.rigs.rig import RigError
+    from explore.runs.config import RunConfig, StrategyConfig
+    from explore.runs.open_run import open_run
+    from testkit.untrained_models import save_untrained_models
+
+    monkeypatch.setenv("ERGO_CALIBRATION_DIR", str(tmp_path / "calibration"))
+    models = save_untrained_models(tmp_path / "models")
+    options = {"sae": {"sae": models["sae"]}, "vae": {"vae": models["vae"]}}.get(
+        strategy.split("-")[1], {}
+    )
+    rig = RigConfig("dynamixel", "nocal", {"port": "/dev/null-ergo-test"})  # never opened
+    config = RunConfig(rig=rig, strategy=StrategyConfig(strategy, options), episodes=2)
+    with pytest.raises(RigError) as caught:
+        open_run(tmp_path / "run", config, mode="new")
+    message = str(caught.value)
+    assert "\n" not in message and "cannot locate the ball" in message
+    assert "ergo calibrate arena --rig-id nocal" in message
+    assert not (tmp_path / "run").exists()
