@@ -99,6 +99,7 @@ def warm_prior(owner: Owner, rig_id: str, work: Path, args: argparse.Namespace) 
 def one_rig(bus: str, seed: int, args: argparse.Namespace) -> dict[str, object]:
     """Every arm on one served stand-in; its row."""
     work = args.out / f"{bus}-{seed}"
+    work.mkdir(parents=True, exist_ok=True)
     rig_id, cal = f"s{seed}", work / "cal"
     row: dict[str, object] = {"bus": bus, "stand-in": seed}
     t0 = time.monotonic()
