@@ -170,3 +170,26 @@ def test_learned_goal_spaces_are_refused_without_an_arena_calibration(
     assert "\n" not in message and "cannot locate the ball" in message
     assert "ergo calibrate arena --rig-id nocal" in message
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize(
+    ("rig", "bus"),
+    [("dynamixel", {"port": "/dev/null-ergo-test"}), ("canopen", {"can": "slcan:/dev/pts/99"})],
+)
+def test_both_buses_observe_and_film_the_twin_view(rig, bus, tmp_path, monkeypatch):
+    """The physical rigs as built (unconnected): their sensor's observation and their
+    ``record_video`` frames are the twin's view of the camera's frame."""
+    from calibration.store import save
+    from explore.rigs.rig import make_rig
+    from sim.standin.hidden import draw_hidden
+
+    model = exact_model(draw_hidden(302).camera)
+    monkeypatch.setenv("ERGO_CALIBRATION_DIR", str(tmp_path))
+    save("arena", "s302", {**model.to_dict(), "ball_radius_m": BALL_RADIUS, "source": "test"})
+    options = {**bus, "camera": "0", "record_video": 32, "joint_calibration": "none"}
+    built = make_rig(RigConfig(rig, "s302", options))
+    frame = np.random.default_rng(1).integers(0, 255, (480, 640, 3), dtype=np.uint8)
+    monkeypatch.setattr(built.camera, "read", lambda: Frame(frame, 0.0))
+    view = ArenaObservation(model, TWIN_VIEW, plane_height=BALL_RADIUS)
+    np.testing.assert_array_equal(built.sensor.locate(64).image, view(frame, 64))
+    np.testing.assert_array_equal(built.video_frame(), view(frame, 32))
