@@ -18,10 +18,10 @@ arm also ``ergo calibrate dynamics``), then the arms asked by ``--arms``:
 Resumable: everything is kept under ``--out``; calibrations that exist are kept, a finished run
 is not run again, an unfinished one is resumed (``--resume-or-new``), a safety stop is resumed
 as the guide says (``--resumes``); a stand-in is served again from its seed (the same rig). Each
-rig's row (ball cells at ``--at`` and at the end, wall times) goes to ``OUT/rows/BUS-SEED.json``
-as it ends, the table to ``OUT/table.md``; ``--figure PNG`` draws the ball cells against
-episodes, a panel per rig (the paper's layout), from the runs' ``metrics.csv`` (``--figure``
-with ``--report-only`` redraws from what is there, serving nothing).
+rig's wall times go to ``OUT/rows/BUS-SEED.json`` as it ends (added to an earlier call's), the
+table of ball cells at ``--at``, read from the runs, to ``OUT/table.md``; ``--figure PNG`` draws
+the ball cells against episodes, a panel per rig (the paper's layout), from the runs'
+``metrics.csv`` (``--report-only``: the table and figure from what is there, serving nothing).
 
     # development (stand-ins 300-399, exploration seeds 0-99), a few episodes
     .venv/bin/python experiments/arm_paper_campaign.py --buses dynamixel --seeds 301 \\
@@ -128,21 +128,27 @@ def one_rig(bus: str, seed: int, args: argparse.Namespace) -> dict[str, object]:
                 owner.explore(run, args.episodes, args.explore_seed, STRATEGY[arm], extra,
                               resumes=args.resumes)  # fmt: skip
             row[f"{arm} s"] = round(time.monotonic() - t, 1)
-            cells = curve(run)
-            for n in (*args.at, len(cells)):
-                row[f"{arm} @{n}"] = cells[n - 1] if 0 < n <= len(cells) else None
         row["stops resumed"] = len(owner.stops)
     row["total s"] = round(time.monotonic() - t0, 1)
     return row
 
 
+def rig_folders(args: argparse.Namespace) -> list[Path]:
+    """The rig folders under OUT (BUS-SEED, with calibrations)."""
+    return sorted(p for p in args.out.iterdir() if (p / "cal").is_dir())
+
+
 def table(args: argparse.Namespace) -> str:
-    """Ball cells at each checkpoint, an arm per column group, a rig per row."""
-    head = ["bus", "stand-in", *(f"{a} @{n}" for a in args.arms for n in args.at)]
+    """Ball cells at each checkpoint, read from the runs' ``metrics.csv``: an arm per column
+    group (those any rig has), a rig per row; a blank where a run is shorter."""
+    rigs = rig_folders(args)
+    arms = [a for a in ARMS if any((r / f"{a}-e{args.explore_seed}").is_dir() for r in rigs)]
+    head = ["rig", *(f"{a} @{n}" for a in arms for n in args.at)]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for path in sorted((args.out / "rows").glob("*.json")):
-        r = json.loads(path.read_text())
-        lines.append("| " + " | ".join(str(r.get(h, "")) for h in head) + " |")
+    for rig in rigs:
+        cells = {a: curve(rig / f"{a}-e{args.explore_seed}") for a in arms}
+        values = [cells[a][n - 1] if n <= len(cells[a]) else "" for a in arms for n in args.at]
+        lines.append("| " + " | ".join(map(str, [rig.name, *values])) + " |")
     return "\n".join(lines)
 
 
@@ -154,7 +160,7 @@ def figure(args: argparse.Namespace) -> None:
     import matplotlib.pyplot as plt
     from script_helpers import save_figure
 
-    rigs = sorted(p for p in args.out.iterdir() if (p / "cal").is_dir())
+    rigs = rig_folders(args)
     fig, axes = plt.subplots(1, max(len(rigs), 1), figsize=(4.2 * max(len(rigs), 1), 3.6),
                              squeeze=False)  # fmt: skip
     for ax, rig in zip(axes[0], rigs, strict=False):
@@ -197,8 +203,10 @@ def main() -> None:
     if not args.report_only:
         for bus in args.buses:
             for seed in args.seeds:
-                row = one_rig(bus, seed, args)
-                (args.out / "rows" / f"{bus}-{seed}.json").write_text(json.dumps(row, indent=2))
+                path = args.out / "rows" / f"{bus}-{seed}.json"
+                before = json.loads(path.read_text()) if path.is_file() else {}
+                row = {**before, **one_rig(bus, seed, args)}  # another call's arms kept
+                path.write_text(json.dumps(row, indent=2))
                 print(json.dumps(row), flush=True)
     (args.out / "table.md").write_text(table(args) + "\n")
     print(table(args))
