@@ -193,3 +193,17 @@ def test_both_buses_observe_and_film_the_twin_view(rig, bus, tmp_path, monkeypat
     view = ArenaObservation(model, TWIN_VIEW, plane_height=BALL_RADIUS)
     np.testing.assert_array_equal(built.sensor.locate(64).image, view(frame, 64))
     np.testing.assert_array_equal(built.video_frame(), view(frame, 32))
+
+
+def test_without_the_cameras_position_the_view_goes_through_the_floor():
+    """An arena calibration that could not place the camera (no intrinsics) maps through the
+    floor (height 0), the one plane its homography knows; the view is still made."""
+    from dataclasses import replace
+
+    from sim.standin.hidden import draw_hidden
+
+    model = replace(exact_model(draw_hidden(301).camera), camera_position=None)
+    observe = ArenaObservation(model, TWIN_VIEW, plane_height=BALL_RADIUS)
+    assert observe.plane_height == 0.0
+    frame = np.full((480, 640, 3), 200, np.uint8)
+    assert observe(frame, 64).shape == (64, 64, 3)
