@@ -19,6 +19,10 @@ Printed per stand-in and over all of them:
   the 10 twin outcomes nearest in code: the goal space's own kind of inverse model) beside the
   affine one, and the affine readout of the code of the frame's centre square (the image a
   physical rig observed before the arena view) against the tracker.
+With ``--markers``, also the code gap the arena's four markers alone make: the nominal served
+twin (``ergo twin serve`` without ``--stand-in``: the twin's camera and lens, the markers on its
+floor) against the committed twin, on the same scenes (the places of the first WORK folder).
+
 Goal (issue 54): the affine readout of the arm's code within 1 cell of the tracker (median) and
 2 cells at the 90th percentile.
 
@@ -124,6 +128,7 @@ def main() -> int:
     ap.add_argument("--model", type=Path, required=True, help="a twin-trained SAE or VAE folder")
     ap.add_argument("--data", type=Path, required=True, help="the twin dataset for the readout")
     ap.add_argument("--figure", type=Path, default=None)
+    ap.add_argument("--markers", action="store_true", help="the markers' own code gap too")
     args = ap.parse_args()
     model = load_model(args.model)
     with np.load(args.data) as z:
@@ -155,9 +160,37 @@ def main() -> int:
             f"| {name} | {len(r['places'])} | {q(r['gap'])} | {q(dist)} | {q(cheb)} | {q(nn)} | "
             f"{q(own)} | {q(mm)} | {q(raw)} |"
         )
+    if args.markers:
+        with np.load(args.work[0] / "views.npz") as z:
+            places = z["places"]
+        marked, plain = marked_views(places), twin_renders(places, 64)
+        gap = np.linalg.norm(model.encode_bgr(marked) - model.encode_bgr(plain), axis=1) / spread
+        print(
+            f"code gap of the markers alone (nominal served twin, {len(places)} scenes): {q(gap)}"
+        )
     if args.figure is not None:
         figure(args.figure, rows[-1][1])
     return 0
+
+
+def marked_views(places: np.ndarray) -> np.ndarray:
+    """The nominal served twin's 64 px views (the twin's camera, the markers on the floor)."""
+    from sim.standin.hidden import nominal_rig
+    from sim.standin.lens import ServedFrames
+    from sim.standin.served import served_twin
+    from vision.observation import square_observation
+
+    twin, plan = served_twin(nominal_rig())
+    frames = ServedFrames(twin, plan)
+    try:
+        out = []
+        for xy in places:
+            twin.reset((float(xy[0]), float(xy[1])))
+            out.append(square_observation(frames(), 64))
+        return np.stack(out)
+    finally:
+        frames.close()
+        twin.close()
 
 
 def figure(path: Path, r: dict[str, np.ndarray]) -> None:
