@@ -177,6 +177,7 @@ def _learned_goal_spaces(owner: Owner, tmp_path, run) -> None:
     owner.run("report", str(learned))
     assert (learned / "report" / "summary.md").exists()
     owner.run("export", "lerobot", str(learned), "--out", str(tmp_path / "lerobot"))
+    assert "recording-2.rrd" in owner.run("replay", str(learned), "--print").stdout
     balls = np.stack([r.ball for r in records])
     assert np.isfinite(balls).all()
     twin = twin_renders(balls)  # the twin's view of the same scenes: the arm at rest, the ball
