@@ -141,10 +141,10 @@ def main() -> int:
     print(f"affine readout on its own fit: {q(fit)} cells (median / 90th percentile)")
     print(
         "| stand-in | scenes | code gap | arm code -> tracker: cells | cell index | 10-NN: cells "
-        "| twin code -> place: cells | tracker -> place, mm | centre square's code -> tracker: "
-        "cells |"
+        "| twin code -> place: cells | 10-NN | tracker -> place, mm | centre square's code -> "
+        "tracker: cells |"
     )
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     results = {}
     for work in args.work:
         results[work.name] = r = measure(work, model, affine, neighbours, spread)
@@ -154,11 +154,12 @@ def main() -> int:
         dist, cheb = cell_errors(r["arm"], r["tracked"])
         nn, _ = cell_errors(r["arm_nn"], r["tracked"])
         own, _ = cell_errors(r["twin"], r["places"])
+        own_nn, _ = cell_errors(r["twin_nn"], r["places"])
         mm = np.linalg.norm(r["tracked"] - r["places"], axis=1) * 1000
         raw, _ = cell_errors(r["raw"], r["tracked"])
         print(
             f"| {name} | {len(r['places'])} | {q(r['gap'])} | {q(dist)} | {q(cheb)} | {q(nn)} | "
-            f"{q(own)} | {q(mm)} | {q(raw)} |"
+            f"{q(own)} | {q(own_nn)} | {q(mm)} | {q(raw)} |"
         )
     if args.markers:
         with np.load(args.work[0] / "views.npz") as z:
