@@ -347,7 +347,7 @@ def _arena(args: argparse.Namespace) -> int:
     import numpy as np
 
     from calibration import arena as ar
-    from calibration import store
+    from calibration import ball_colour, store
 
     if args.print_markers is not None:
         _print_markers(args)
@@ -383,8 +383,8 @@ def _arena(args: argparse.Namespace) -> int:
         if args.ball_pixel:
             pixel = _pair(args.ball_pixel, "--ball-pixel")
         else:
-            pixel = ar.find_saturated_blob(image, fit.model, args.ball_radius)
-        ranges = ar.sample_ball_hsv(image, pixel)
+            pixel = ball_colour.find_saturated_blob(image, fit.model, args.ball_radius)
+        ranges = ball_colour.sample_ball_hsv(image, pixel)
         xy = ar.ball_position_check(fit.model, pixel, args.ball_radius)
         print(
             f"ball at pixel ({pixel[0]:.0f}, {pixel[1]:.0f}) -> arena ({xy[0] * 1000:+.1f}, "

@@ -8,7 +8,7 @@ use it (docs/architecture.md)."""
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import Any, NoReturn
 
 from plumbing.registry import did_you_mean
@@ -45,6 +45,9 @@ class Fields:
         path: the object's own path in the document ("config", "config.rig"; "" for the top:
             the fields are then named alone).
         name: what the object is called when it is not an object at all (default ``path``).
+        label: how the line names a field from its full path (default ``field 'PATH'``): a
+            command line names its flags instead (``explore.runs.config.flag_of``). With an
+            empty ``where`` the line starts with the label.
     """
 
     def __init__(
@@ -54,16 +57,19 @@ class Fields:
         error: type[Exception] = ValueError,
         path: str = "",
         name: str | None = None,
+        label: Callable[[str], str] | None = None,
     ) -> None:
         self.where = where
         self.error = error
         self.path = path
+        self.label = label or (lambda full: f"field '{full}'")
         if not isinstance(data, dict):
             self._raise(name or path, f"must be an object, got {type(data).__name__}")
         self.data: dict[str, Any] = data
 
     def _raise(self, full: str, why: str) -> NoReturn:
-        raise self.error(f"{self.where}: field '{full}' {why}")
+        where = f"{self.where}: " if self.where else ""
+        raise self.error(f"{where}{self.label(full)} {why}")
 
     def name_of(self, name: str) -> str:
         """The full path of the field ``name``."""
@@ -93,7 +99,7 @@ class Fields:
         v = self.get(name)
         if not isinstance(v, dict):
             self.fail(name, f"must be an object, got {type(v).__name__} {v!r}")
-        return Fields(self.where, v, self.error, self.name_of(name))
+        return Fields(self.where, v, self.error, self.name_of(name), label=self.label)
 
     def number(
         self, name: str, lo: float = -math.inf, hi: float = math.inf, optional: bool = False

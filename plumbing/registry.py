@@ -36,16 +36,22 @@ INSTALL: dict[str, str] = {
 }
 
 
-def did_you_mean(name: object, choices: Iterable[object]) -> str:
-    """`` (did you mean 'X'?)`` for the known name closest to a mistyped one (difflib's
-    similarity ratio at least 0.6, its default), or "" when none is close: the hint every
-    "must be one of" message of the project appends (strategies, rigs, presets, options, the
-    choices of ``ergo``'s flags)."""
+def nearest(name: object, choices: Iterable[object]) -> str | None:
+    """The known name closest to a mistyped one (difflib's similarity ratio at least 0.6, its
+    default), or None when none is close. Case is ignored: ``RGE-EFR`` gives ``rge-efr``."""
     import difflib
 
-    names = [str(c) for c in choices]
-    close = difflib.get_close_matches(str(name), names, n=1)
-    return f" (did you mean {close[0]!r}?)" if close else ""
+    names = {str(c).casefold(): str(c) for c in reversed(list(choices))}
+    close = difflib.get_close_matches(str(name).casefold(), names, n=1)
+    return names[close[0]] if close else None
+
+
+def did_you_mean(name: object, choices: Iterable[object]) -> str:
+    """`` (did you mean 'X'?)`` for ``nearest(name, choices)``, or "" when none is close: the
+    hint every "must be one of" message of the project appends (strategies, rigs, presets,
+    options, the choices of ``ergo``'s flags, run folders, CAN interfaces)."""
+    close = nearest(name, choices)
+    return f" (did you mean {close!r}?)" if close is not None else ""
 
 
 class RegistryError(LookupError):

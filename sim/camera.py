@@ -215,11 +215,13 @@ def write_marker_scene(
     dictionary: int | None = None,
     scene: str | Path | None = None,
     texture_px: int = 2048,
+    floor_rgb: tuple[float, float, float] | None = None,
 ) -> Path:
     """A copy of the twin's scene whose floor shows ArUco markers (for calibration tests).
 
-    The floor keeps its blue colour; each marker is drawn with a white quiet zone of one cell
-    into the floor's texture, which MuJoCo maps once over the whole floor plane.
+    The floor keeps its colour (the twin's blue, or ``floor_rgb``); each marker is drawn with
+    a white quiet zone of one cell into the floor's texture, which MuJoCo maps once over the
+    whole floor plane.
 
     Args:
         out_dir: folder to write the scene, its included model files and the texture into.
@@ -228,9 +230,14 @@ def write_marker_scene(
         dictionary: ``cv2.aruco`` predefined dictionary id (default ``DICT_4X4_50``).
         scene: the scene to copy (default: the twin's ``scene.xml``).
         texture_px: side of the floor texture, pixels (2048 over 1 m: 0.5 mm per texel).
+        floor_rgb: the floor's and the kerb's colour, (r, g, b) in 0..1
+            (``sim.models.make_scene.scene_xml``); only with the twin's own scene.
 
     Returns:
         path of the new scene file, to pass as ``Twin(scene=...)``.
+
+    Raises:
+        ValueError: ``floor_rgb`` with another ``scene``, or not three numbers in 0..1.
     """
     import re
     import shutil
@@ -240,12 +247,19 @@ def write_marker_scene(
     from sim.twin import SCENE
 
     scene = Path(scene or SCENE)
+    if floor_rgb is None:
+        text = scene.read_text()
+    elif scene == SCENE:
+        from sim.models.make_scene import scene_xml
+
+        text = scene_xml(floor_rgb=floor_rgb)
+    else:
+        raise ValueError("floor_rgb recolours the twin's own scene only")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     for xml in scene.parent.glob("*.xml"):
         if xml != scene:
             shutil.copy(xml, out_dir / xml.name)
-    text = scene.read_text()
     match = re.search(r'<geom name="floor" type="plane" size="([\d.]+) ([\d.]+)', text)
     if match is None:
         raise ValueError(f"{scene} has no floor plane geom named 'floor'")

@@ -80,6 +80,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "dynamics`; ERGO_CALIBRATION_DIR); without the file, the nominal servos (docs/dynamics.md)",
     )  # fmt: skip
     serve.add_argument(
+        "--floor-rgb", type=float, nargs=3, default=None, metavar=("R", "G", "B"),
+        help="the arena's floor (and kerb) in this colour, each 0..1 (default: the twin's blue; "
+        "docs/calibration.md)",
+    )  # fmt: skip
+    serve.add_argument(
         "--hands-port", type=int, default=0,
         help="port of the hands' control channel on 127.0.0.1 (0: any free; docs/standin.md)",
     )  # fmt: skip

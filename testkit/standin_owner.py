@@ -519,6 +519,47 @@ class Owner:
             step = self.run("explore", "--resume", str(out), check=False, timeout=bound)
         return self._finish_checked(step, check)
 
+    def kill_explore(
+        self,
+        out: Path,
+        episodes: int,
+        after: int,
+        seed: int = 0,
+        strategy: str = "rge-efr",
+        extra: Sequence[str] = (),
+    ) -> Step:
+        """``ergo explore`` as in ``explore``, SIGKILLed (``kill -9 PID``: no handler runs)
+        once ``after`` of its episodes are stored; its ``Step`` (rc -9). Resume it with
+        ``ergo explore --resume OUT`` (``run``)."""
+        import signal
+
+        from explore.runs.store import RunStoreError, read_history
+
+        rig = "dynamixel" if self.rig.bus_kind == "dynamixel" else "canopen"
+        args = [
+            "explore", "--rig", rig, "--rig-id", self.rig_id, *self.rig.bus_flags(),
+            "--camera", self.rig.camera_url, "--strategy", strategy, "--episodes", str(episodes),
+            "--seed", str(seed), "--out", str(out), "--no-progress", *extra,
+        ]  # fmt: skip
+        t0 = time.monotonic()
+        proc = subprocess.Popen(
+            [*ERGO, *args], env=self.env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        stored = 0
+        while proc.poll() is None and stored < after:
+            if time.monotonic() - t0 > max(STEP_BOUND_S, EPISODE_BOUND_S * episodes):
+                proc.kill()
+                raise OwnerError(f"ergo explore stored {stored} of {after} episodes in time")
+            time.sleep(0.2)
+            with contextlib.suppress(RunStoreError, FileNotFoundError):
+                stored = len(read_history(out).records)
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGKILL)
+        stdout, stderr = proc.communicate(timeout=STEP_BOUND_S)
+        step = Step(args, proc.returncode, stdout, stderr, time.monotonic() - t0)
+        return self._finish(step, check=False)
+
     def interrupt_explore(self, out: Path, after_s: float, seed: int = 0) -> Step:
         """``ergo explore`` as in ``explore``, stopped with Ctrl-C (SIGINT) ``after_s`` wall
         seconds after it started, as a person stops a run."""

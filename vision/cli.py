@@ -195,8 +195,11 @@ def _vae_train(args: argparse.Namespace) -> int:
     return 0
 
 
-def _explained(value: float) -> str:
-    """The held-out explained pixel variance in words (vision.representation_quality)."""
+def _explained(value: float | None) -> str:
+    """The held-out explained pixel variance in words (vision.representation_quality); None:
+    none was measured (a dataset too small for a held-out image)."""
+    if value is None:
+        return "no image held out to judge it (too few images in the dataset)"
     what = f"held-out explained pixel variance {value:.3f}"
     if value < 0:
         return (

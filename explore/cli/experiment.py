@@ -89,20 +89,29 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_rig_arguments(p)
     p.set_defaults(func=run_experiment)
 
-    d = sub.add_parser("dataset", help="datasets rendered on a simulated rig")
+    d = sub.add_parser("dataset", help="outcome datasets: rendered on a simulated rig, or a run's")
     dsub = d.add_subparsers(dest="dataset_command", metavar="COMMAND")
     dsub.required = True
     o = dsub.add_parser(
         "outcomes", help="render scenes as episodes see them (representation training data)",
         description="The twin (--rig sim, the default): the ball placed over its ring; "
         "ArmBalls (--rig armballs or arm2balls): the ball, and the distractor, uniform over "
-        "the square [-1, 1]^2, as in the CoRL 2018 campaign's database.",
+        "the square [-1, 1]^2, as in the CoRL 2018 campaign's database. --run RUN: the "
+        "outcome images a run recorded, on any rig (a physical arm's camera view, say); the "
+        "run is read, never changed.",
     )  # fmt: skip
     o.add_argument(
         "--rig", choices=DATASET_RIGS, default="sim",
         help="the simulated rig whose scenes to render (default sim: the twin)",
     )  # fmt: skip
-    o.add_argument("--n", type=int, default=10000, help="number of scenes (default 10000)")
+    o.add_argument(
+        "--n", type=int, default=None,
+        help="number of scenes (default 10000); with --run, its first N episodes (default all)",
+    )  # fmt: skip
+    o.add_argument(
+        "--run", type=Path, default=None, metavar="RUN",
+        help="the outcome images of this run's episodes instead of rendered scenes",
+    )  # fmt: skip
     o.add_argument("--out", type=Path, required=True, help="output .npz")
     o.add_argument("--seed", type=int, default=0, help="random seed")
     o.add_argument(
@@ -178,10 +187,36 @@ def run_experiment(args: argparse.Namespace) -> int:
 def run_dataset_outcomes(args: argparse.Namespace) -> int:
     from explore.rigs.sim_dataset import make_outcome_dataset, save_dataset
 
-    if args.n < 1:
+    if args.n is not None and args.n < 1:
         raise CliError(f"--n must be at least 1, got {args.n}")
     if args.out.suffix != ".npz":
         raise CliError(f"--out {args.out}: expected a .npz file name")
+    if args.run is not None:
+        import numpy as np
+
+        from explore.runs.outcome_dataset import run_outcome_dataset
+        from explore.runs.store import RunStoreError
+
+        rendering = [
+            flag for flag, given in (
+                ("--rig", args.rig != "sim"), ("--arm random", args.arm != "rest"),
+                ("--distractor", args.distractor), ("--seed", args.seed != 0),
+            ) if given
+        ]  # fmt: skip
+        if rendering:
+            raise CliError(f"{', '.join(rendering)}: render scenes; --run takes a run's images")
+        try:
+            data = run_outcome_dataset(args.run, args.n)
+        except RunStoreError as exc:
+            raise CliError(str(exc)) from None
+        save_dataset(args.out, data)
+        seen = int(np.isfinite(data["ball"]).all(axis=1).sum())
+        print(
+            f"{args.out}: {len(data['images'])} images {data['images'].shape[1:]} from "
+            f"{args.run} (ball tracked in {seen})"
+        )
+        return 0
+    args.n = 10000 if args.n is None else args.n
     if args.rig != "sim":
         twin_only = [
             flag for flag, given in (

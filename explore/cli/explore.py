@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from explore.cli.rerun_flags import add_rerun_arguments, check_viewer
+from explore.cli.run_paths import existing_run
 from explore.rigs.rig import RIGS
 from explore.runs.layout import METRICS_FILE
 from plumbing.cli_errors import CliError
@@ -128,17 +129,46 @@ def _strategy_options(args: argparse.Namespace, strategy: str) -> dict[str, Any]
 
 
 def _new_config(args: argparse.Namespace) -> Any:
-    """A new run's ``RunConfig`` from the flags (defaults where none is given)."""
-    from explore.runs.config import DEFAULT_EPISODES, DEFAULT_SEED, RunConfig, StrategyConfig
+    """A new run's ``RunConfig`` from the flags (defaults where none is given), checked: a bad
+    value is one ``CliError`` line naming its flag."""
+    from explore.runs.config import (
+        DEFAULT_EPISODES,
+        DEFAULT_SEED,
+        RunConfig,
+        RunConfigError,
+        StrategyConfig,
+        flag_of,
+    )
 
     name = args.strategy or StrategyConfig.name
-    return RunConfig(
+    options = _strategy_options(args, name)
+    config = RunConfig(
         rig=rig_of(args),
-        strategy=StrategyConfig(name, _strategy_options(args, name)),
+        strategy=StrategyConfig(name, options),
         seed=DEFAULT_SEED if args.seed is None else args.seed,
         episodes=DEFAULT_EPISODES if args.episodes is None else args.episodes,
         warm_start=None if args.warm_start is None else str(args.warm_start.resolve()),
     )
+    try:  # a bad field named by the flag that set it
+        config = config.checked(label=flag_of)
+    except RunConfigError as exc:
+        raise CliError(str(exc)) from None
+    _check_model(name, options)
+    return config
+
+
+def _check_model(strategy: str, options: dict[str, Any]) -> None:
+    """A strategy that needs a trained model (a VAE, an SAE) and was given none: one line
+    naming the flag that gives it and the commands that make one (the entry's ``Model``)."""
+    from explore.learner.strategies import STRATEGIES
+
+    entry = STRATEGIES.get(strategy)  # an unknown name is the config check's line
+    model = entry.model if entry is not None else None
+    if model is not None and not options.get(model.option):
+        raise CliError(
+            f"--strategy {strategy} needs {model.what}: give --strategy-option "
+            f"{model.option}=PATH (make one with: {model.recipe})"
+        )
 
 
 def _refuse_changes(args: argparse.Namespace) -> Any:
@@ -187,6 +217,8 @@ def run_explore(args: argparse.Namespace) -> int:
     if args.resume_or_new and not args.out:
         raise CliError("--resume-or-new needs --out DIR")
     check_viewer(args)  # before any run folder is made
+    if args.resume is not None:
+        existing_run(args.resume, "--resume")
     try:
         if args.resume is not None:
             run = open_run(

@@ -38,17 +38,28 @@ def run_export_lerobot(args: argparse.Namespace) -> int:
     except ModuleNotFoundError as exc:
         hint = INSTALL.get(exc.name or "", "pip install 'ergo-explore[export]'")
         raise CliError(f"ergo export lerobot needs the Python package {exc.name}: {hint}") from None
+    from explore.cli.run_paths import existing_run
     from explore.export.episodes import ExportError
     from explore.export.lerobot import export_lerobot
     from explore.runs.store import RunStoreError
 
+    for run in args.runs:
+        existing_run(run)
     try:
         summary = export_lerobot(args.runs, args.out, video=not args.no_video)
     except (ExportError, RunStoreError) as exc:
         raise CliError(str(exc)) from exc
     for line in summary.warnings:
         print(f"ergo: warning: {line}", file=sys.stderr)
-    video = f", video {summary.video_side} px" if summary.video_side else ", no video"
+    if summary.video_side:
+        video = f", video {summary.video_side} px"
+    elif args.no_video:
+        video = ", no video (--no-video)"
+    else:
+        video = (
+            ", no video: the runs kept no camera frames (explore with --rig-option "
+            "record_video=128 to keep them; docs/ecosystem.md)"
+        )
     print(
         f"{summary.out}: LeRobotDataset v3.0, {summary.episodes} episodes, {summary.frames} "
         f"frames, {len(summary.tasks)} tasks{video}"

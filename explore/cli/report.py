@@ -52,11 +52,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run_report(args: argparse.Namespace) -> int:
+    from explore.cli.run_paths import existing_run
     from explore.report.summary import report
     from explore.runs.store import RunStore, RunStoreError
 
-    if not args.path.is_dir():
-        raise CliError(f"{args.path} is not a folder")
+    existing_run(args.path, runs_only=False)  # a run or a campaign
     try:
         written = report(args.path, args.out, args.scatter)
     except RunStoreError as exc:
@@ -82,9 +82,11 @@ def viewer_command(files: list[Path]) -> list[str]:
 
 def run_replay(args: argparse.Namespace) -> int:
     from explore.cli.rerun_flags import make_recorder
+    from explore.cli.run_paths import existing_run
     from explore.report.recorder import has_display, recording_paths
     from explore.runs.store import RunStore, RunStoreError
 
+    existing_run(args.run)
     if not RunStore.is_run(args.run):
         raise CliError(f"{args.run} is not a run folder (no run.json)")
     files = recording_paths(args.run)

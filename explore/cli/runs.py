@@ -36,10 +36,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run_check(args: argparse.Namespace) -> int:
+    from explore.cli.run_paths import existing_run
     from explore.runs.lock import describe_holder, holder_of
     from explore.runs.repair import describe, survey
     from explore.runs.store import RunStoreError
 
+    existing_run(args.run)
     try:
         s = survey(args.run)
         holder = holder_of(args.run)  # a writer.lock that is not a plain file: RunStoreError
@@ -54,8 +56,11 @@ def run_check(args: argparse.Namespace) -> int:
 
 
 def run_salvage(args: argparse.Namespace) -> int:
+    from explore.cli.run_paths import existing_run
     from explore.runs.repair import salvage
     from explore.runs.store import RunStoreError
+
+    existing_run(args.run)
 
     try:
         r = salvage(args.run)

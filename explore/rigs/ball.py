@@ -9,7 +9,11 @@ image, and the scene's state a resumed run restores:
   between episodes (the ball put back, the distractor's walk);
 - ``CameraSensor``: a physical rig: the tracker on the camera's frames with the rig's arena
   calibration; without one it reports the ball unknown (NaN), never guessed, and says why
-  (``blind``). Nothing of a real arena can be snapshot or restored: those are no-ops.
+  (``blind``). Nothing of a real arena can be snapshot or restored: those are no-ops. Its
+  observation image is the twin's: the frame mapped through the arena calibration onto the
+  twin's overhead view (``TWIN_VIEW``, ``vision.observation.ArenaObservation``), so that a
+  model trained on the twin's renders sees the same picture; without an arena calibration, the
+  frame's centre square (goal strategies are refused then: ``explore.runs.open_run``).
 
 A ball locator maps a BGR frame (H, W, 3) uint8 to the ball's centre (x, y) on the arena,
 metres, shape (2,), NaN when the tracker did not see it (hidden by the arm, ambiguous).
@@ -26,12 +30,15 @@ from typing import Any, Protocol
 import numpy as np
 
 from explore.learner.experience import Observation
+from explore.rigs.arena import TWIN_VIEW
 from vision.camera import Camera
-from vision.observation import square_observation
+from vision.observation import ArenaObservation, square_observation
 
 log = logging.getLogger(__name__)
 
 BallLocator = Callable[[np.ndarray], np.ndarray]
+#: a camera frame (H, W, 3) BGR uint8 and a side -> the observation image (side, side, 3)
+Observer = Callable[[np.ndarray, int], np.ndarray]
 UNKNOWN = np.full(2, np.nan)  # a position not seen, (2,)
 NO_STATE = np.zeros(0)  # the state of a scene nothing can restore
 
@@ -113,22 +120,39 @@ def locator_from_calibration(data: dict[str, Any]) -> BallLocator:
     return tracker_locator(ArenaModel.from_dict(data), tracker_config_from_arena(data))
 
 
+def observer_from_calibration(data: dict[str, Any]) -> ArenaObservation:
+    """The twin's view (``TWIN_VIEW``) of a physical camera's frames from an ``arena``
+    calibration's data, mapped through the plane of the ball's centre (its radius above the
+    floor: the tracker's ``ball_radius_m``)."""
+    from vision.rectify import ArenaModel
+    from vision.tracker import tracker_config_from_arena
+
+    height = tracker_config_from_arena(data).ball_radius_m
+    return ArenaObservation(ArenaModel.from_dict(data), TWIN_VIEW, plane_height=height)
+
+
 def camera_sensor(config: Any, camera: Camera) -> CameraSensor:
-    """The ball sensor of a physical rig (``config``, a ``RigConfig``) on ``camera``."""
-    locator, why = rig_ball_locator(config)
-    return CameraSensor(camera, locator, why)
+    """The ball sensor of a physical rig (``config``, a ``RigConfig``) on ``camera``: the
+    tracker and the twin's view from its arena calibration (``RigConfig.resolved``: found by
+    ``rig_id``, or the file named by the rig option ``arena_calibration``). Without one, ball
+    positions are recorded as unknown (NaN), never guessed, and ``open_run`` warns once, or
+    refuses a run whose strategy needs the ball (``CameraSensor.blind``); a damaged or foreign
+    file is a ``RigError``."""
+    data, why = rig_arena_data(config)
+    if data is None:
+        return CameraSensor(camera, None, why)
+    return CameraSensor(
+        camera, locator_from_calibration(data), observe=observer_from_calibration(data)
+    )
 
 
-def rig_ball_locator(config: Any) -> tuple[BallLocator | None, str | None]:
-    """The tracker for a physical rig from its arena calibration (``RigConfig.resolved``: found by
-    ``rig_id``, or the file named by the rig option ``arena_calibration``), and None; without one,
-    (None, why): ball positions are then recorded as unknown (NaN), never guessed, and ``open_run``
-    warns once, or refuses a run whose strategy needs the ball (``CameraSensor.blind``)."""
+def rig_arena_data(config: Any) -> tuple[dict[str, Any] | None, str | None]:
+    """A physical rig's arena calibration data and None, or (None, why) without one."""
     from calibration.store import CalibrationError, CalibrationMissing, load_arena_file
     from explore.rigs.errors import RigError
 
     try:
-        return locator_from_calibration(load_arena_file(config.resolved().calibration.arena)), None
+        return load_arena_file(config.resolved().calibration.arena), None
     except (CalibrationMissing, FileNotFoundError) as exc:
         return None, str(exc)
     except CalibrationError as exc:  # a file that is there but wrong: never run without it
@@ -201,14 +225,20 @@ class TwinSensor:
 
 class CameraSensor:
     """A physical rig's camera and tracker (``locator``, from its arena calibration), or no
-    tracker (``blind`` says why): the ball unknown (NaN) then, and always still."""
+    tracker (``blind`` says why): the ball unknown (NaN) then, and always still. ``observe``
+    makes the observation image from a frame (default: its centre square)."""
 
     def __init__(
-        self, camera: Camera, locator: BallLocator | None, blind: str | None = None
+        self,
+        camera: Camera,
+        locator: BallLocator | None,
+        blind: str | None = None,
+        observe: Observer = square_observation,
     ) -> None:
         self.camera = camera
         self.locator = locator
         self.blind = None if locator is not None else (blind or "no ball locator")
+        self.observe = observe
         self._previous = UNKNOWN
 
     def _ball(self, frame: np.ndarray) -> np.ndarray:
@@ -219,7 +249,7 @@ class CameraSensor:
         ball = self._ball(frame)
         if image_side is None:
             return Observation(ball=ball)
-        return Observation(ball=ball, image=square_observation(frame, image_side), frame=frame)
+        return Observation(ball=ball, image=self.observe(frame, image_side), frame=frame)
 
     def watch(self) -> None:
         if self.locator is not None:

@@ -87,8 +87,9 @@ def make_rig(config: RigConfig, options: Options) -> Rig:
     except (CanBusError, ValueError) as exc:
         raise RigError(f"rig 'canopen': {exc}") from exc
     arm.on_crash = options.on_crash
+    sensor = camera_sensor(config, camera)
     return Rig(
         arm=arm, camera=camera, clock=RealClock(), config=config,
-        sensor=camera_sensor(config, camera),
-        video_frame=camera_video_frame(camera, options.record_video),
+        sensor=sensor,
+        video_frame=camera_video_frame(camera, options.record_video, sensor.observe),
     )  # fmt: skip

@@ -4,9 +4,12 @@ movement, as square frames, for datasets at the control rate (``ergo export lero
 Every rig takes it (the twin and the physical rigs). ``record_video=SIDE`` keeps, for each
 episode, the frames (T, SIDE, SIDE, 3) BGR uint8 in ``RUN/frames/`` (``explore.runs.store``),
 the frame of tick i taken just before that tick's command, when the joints were last read.
-The square is the centre square of the camera's view, as the 64 px observation
-(``vision.observation.square_observation``). A live camera gives its latest frame at each tick:
-a camera slower than the control rate (30 fps against 40 Hz) repeats a frame now and then.
+The square is the view the 64 px observation is made of: on the twin and on a physical rig
+without an arena calibration the centre square of the camera's view
+(``vision.observation.square_observation``), on a physical rig with one the twin's view of its
+frame (``explore.rigs.ball.CameraSensor.observe``). A live camera gives its latest frame at
+each tick: a camera slower than the control rate (30 fps against 40 Hz) repeats a frame now and
+then.
 """
 
 from __future__ import annotations
@@ -45,9 +48,13 @@ class VideoOptions:
             raise BadOption("record_video", f"must be {VIDEO_EXPECTED}, got {side}")
 
 
-def camera_video_frame(camera: Camera, side: int) -> Callable[[], np.ndarray] | None:
-    """() -> the centre square of ``camera``'s latest frame at (side, side), BGR uint8; None
-    when ``side`` is 0."""
+def camera_video_frame(
+    camera: Camera,
+    side: int,
+    observe: Callable[[np.ndarray, int], np.ndarray] = square_observation,
+) -> Callable[[], np.ndarray] | None:
+    """() -> ``observe`` of ``camera``'s latest frame at (side, side), BGR uint8 (default its
+    centre square); None when ``side`` is 0."""
     if side == 0:
         return None
-    return lambda: square_observation(camera.read().image, side)
+    return lambda: observe(camera.read().image, side)

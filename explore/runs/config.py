@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -55,6 +56,38 @@ CHANGED_STRATEGY_DEFAULTS: dict[str, Any] = {
 
 class RunConfigError(RunStoreError):
     """A run config field is missing, of the wrong type or out of range (one line)."""
+
+
+# The flags of ``ergo explore`` that set a field of a new run's config, by the field's path:
+# a command line's error names the flag the user typed, not the field of run.json.
+FLAGS = {
+    "config.rig.name": "--rig",
+    "config.rig.rig_id": "--rig-id",
+    "config.rig.options": "--rig-option",
+    "config.strategy.name": "--strategy",
+    "config.strategy.options": "--strategy-option",
+    "config.seed": "--seed",
+    "config.episodes": "--episodes",
+    "config.warm_start": "--warm-start",
+}
+# Rig options that have a flag of their own (``robot/bus_flags.py``, ``--camera``).
+OPTION_FLAGS = {"port": "--port", "baud": "--baud", "can": "--can", "bitrate": "--bitrate",
+                "camera": "--camera"}  # fmt: skip
+
+
+def flag_of(path: str) -> str:
+    """How ``ergo explore``'s error names a new run's field at ``path``: the flag that sets it
+    (``config.strategy.name`` -> ``--strategy``, ``config.rig.options.render_size`` ->
+    ``--rig-option render_size``, ``config.rig.options.port`` -> ``--port``), else the field
+    (``field 'config.episode.rate_hz'``: no flag sets it)."""
+    if path in FLAGS:
+        return FLAGS[path]
+    parent, _, key = path.rpartition(".")
+    if parent == "config.rig.options" and key in OPTION_FLAGS:
+        return OPTION_FLAGS[key]
+    if parent in ("config.rig.options", "config.strategy.options"):
+        return f"{FLAGS[parent]} {key}"
+    return f"field {path!r}"
 
 
 @dataclass(frozen=True)
@@ -154,18 +187,30 @@ class RunConfig:
         made with, whatever today's defaults are. Raises ``RunConfigError`` as ``from_dict``."""
         return cls.from_dict(config, where).as_made()
 
-    def checked(self, where: str = "command line") -> RunConfig:
-        """Itself, checked as ``from_dict`` checks a ``run.json`` (``RunConfigError``)."""
-        return RunConfig.from_dict(self.to_dict(), where)
+    def checked(
+        self, where: str = "command line", label: Callable[[str], str] | None = None
+    ) -> RunConfig:
+        """Itself, checked as ``from_dict`` checks a ``run.json`` (``RunConfigError``).
+
+        Args:
+            label: how the line names a bad field; with one, the line starts with it (``ergo
+                explore`` gives ``flag_of``: the flag that set the field).
+        """
+        return RunConfig.from_dict(self.to_dict(), "" if label else where, label=label)
 
     @classmethod
-    def from_dict(cls, config: Any, where: Any = "run.json") -> RunConfig:
+    def from_dict(
+        cls, config: Any, where: Any = "run.json", label: Callable[[str], str] | None = None
+    ) -> RunConfig:
         """Check ``config`` (``run.json``'s ``config`` object, or a new run's) and build it.
+
+        Args:
+            label: how the line names a bad field (``plumbing.fields.Fields``'s ``label``).
 
         Raises:
             RunConfigError: naming the first bad field, in one line.
         """
-        top = Fields(str(where), config, RunConfigError, "config")
+        top = Fields(str(where), config, RunConfigError, "config", label=label)
         top.only(TOP_LEVEL)
         rig = top.sub("rig")
         rig_name = rig.one_of("name", RIGS)

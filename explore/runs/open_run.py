@@ -108,7 +108,8 @@ class OpenRun:
         if self.store.truncated_bytes:
             out.append(
                 f"{self.path}: moved a torn last record ({self.store.truncated_bytes} bytes: a "
-                f"crash mid-append) aside to {self.store.moved_aside}; that episode is run again"
+                f"crash or a power cut mid-append) aside to {self.store.moved_aside}; that "
+                "episode is run again"
             )
         if self.missing:
             out.append(
@@ -150,7 +151,10 @@ def _check_sees_ball(config: RunConfig, rig: Rig, strategy: Strategy) -> None:
             f"on ({why}): run '{calibrate}' first (docs/calibration.md), or give "
             "--rig-option arena_calibration=FILE"
         )
-    log.warning("no ball tracking for rig %r (%s): run '%s'", rig_id, why, calibrate)
+    log.warning(
+        "no ball tracking for rig %r (%s): this run will count 0 ball cells; run '%s' first "
+        "(docs/calibration.md)", rig_id, why, calibrate,
+    )  # fmt: skip
 
 
 def _with_calibration(config: RunConfig) -> RunConfig:

@@ -1,12 +1,13 @@
 """Checking and salvaging a run's history (``ergo runs check RUN``, ``ergo runs salvage RUN``).
 
-``survey`` walks ``history.bin`` without trusting it (the framing is in
-``explore/runs/store.py``): at each offset, a record whose marker and checksum hold and whose
-payload decodes is good; anything else is damaged, up to the next offset where a good record
-starts (found by its marker, then its checksum: a payload holding the marker by chance fails
-its own checksum there). A damaged last record that runs to the end of the file is a torn
-tail (a crash mid-append), which opening the run cuts anyway. The run can resume from its
-longest prefix of good records numbered 0, 1, 2, ...
+``survey`` walks ``history.bin`` without trusting it, by the rule that opening the run uses
+(``explore/runs/walk.py``, honouring ``history.synced`` as a resume does): at each offset, a
+record whose marker and checksum hold and whose payload decodes is good; anything else is
+damaged, up to the next offset where a good record starts (found by its marker, then its
+checksum: a payload holding the marker by chance fails its own checksum there). A bad last
+record (no good record after it), or a bad record past ``history.synced``, starts the torn
+tail (a crash mid-append, a power cut), which opening the run cuts by itself. The run can
+resume from its longest prefix of good records numbered 0, 1, 2, ...
 
 ``salvage`` (under the run's writer lock) keeps that prefix as the history and moves
 everything after it, without losing a byte, to ``RUN/salvage/N/`` (N = 1, 2, ...: a later
@@ -35,22 +36,18 @@ import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
 
 from explore.runs.layout import (
     DAMAGED_FILE,
     FRAMES_DIR,
-    HEADER,
     HISTORY_FILE,
     KEPT_FILE,
     RUN_FILE,
     SALVAGE_REPORT,
-    frame_at,
-    next_frame,
 )
 from explore.runs.lock import run_lock
 from explore.runs.metrics import recorded_episodes
-from explore.runs.record import EpisodeRecord, RecordError
+from explore.runs.record import EpisodeRecord
 from explore.runs.store import (
     RunStore,
     RunStoreError,
@@ -59,25 +56,9 @@ from explore.runs.store import (
     fsync_write,
     new_salvage_folder,
     read_frames,
+    read_synced,
 )
-
-Kind = Literal["record", "damaged", "torn"]
-
-
-@dataclass(frozen=True)
-class Piece:
-    """A span of ``history.bin``: ``start``/``end`` byte offsets; ``episode`` of a good record;
-    ``why`` a damaged span is damaged."""
-
-    start: int
-    end: int
-    kind: Kind
-    episode: int | None = None
-    why: str = ""
-
-    @property
-    def size(self) -> int:
-        return self.end - self.start
+from explore.runs.walk import Piece, walk
 
 
 @dataclass
@@ -89,6 +70,8 @@ class Survey:
         pieces: the file cut into good records and damaged spans, in order, covering it all.
         prefix: episodes 0..prefix-1 stored in order from the start, with nothing between.
         prefix_end: byte offset where that prefix ends.
+        synced: the length of the history known to be on disk (``history.synced``), None for
+            a run that fsyncs every append.
         recorded: episodes the run had stored as ``metrics.csv`` says, None without it.
         exists: whether ``history.bin`` exists.
         config_error: why ``run.json``'s config cannot be run (None: it can).
@@ -102,6 +85,7 @@ class Survey:
     pieces: list[Piece] = field(default_factory=list)
     prefix: int = 0
     prefix_end: int = 0
+    synced: int | None = None
     recorded: int | None = None
     exists: bool = True
     config_error: str | None = None
@@ -143,51 +127,21 @@ class Survey:
         return bool(self.damaged or self.beyond)
 
 
-def _record_at(data: bytes, pos: int) -> tuple[int, int | None, str]:
-    """(end, episode, why) of the record at ``pos``: episode None and ``why`` when it is not
-    a good record; end is then where its header says it ends (may be past the data)."""
-    start, end, why = frame_at(data, pos)
-    if why == "bad record marker":
-        return pos + 1, None, why
-    if why:
-        return end, None, why
-    try:
-        rec = EpisodeRecord.from_bytes(data[start:end])
-    except RecordError as exc:
-        return end, None, f"undecodable record ({exc})"
-    return end, rec.episode, ""
-
-
-def _next_good(data: bytes, pos: int) -> int:
-    """Offset of the next good record after ``pos``, or ``len(data)``."""
-    at = pos
-    while (at := next_frame(data, at)) is not None:
-        if _record_at(data, at)[1] is not None:
-            return at
-    return len(data)
-
-
-def survey_bytes(data: bytes) -> Survey:
-    """Cut ``data`` (a ``history.bin``'s bytes) into pieces; no witness (see ``survey``)."""
-    s = Survey(size=len(data))
-    pos = 0
+def survey_bytes(data: bytes, synced: int | None = None) -> Survey:
+    """Cut ``data`` (a history's bytes) into pieces by the rule of ``explore/runs/walk.py``;
+    ``synced``: the length known to be on disk (``history.synced``); no witness (see
+    ``survey``)."""
+    s = Survey(size=len(data), synced=synced)
     in_prefix = True
-    while pos < len(data):
-        end, episode, why = _record_at(data, pos)
-        if episode is not None:
-            s.pieces.append(Piece(pos, end, "record", episode))
-            if in_prefix and episode == s.prefix:
-                s.prefix += 1
-                s.prefix_end = end
-            else:
-                in_prefix = False
-            pos = end
-            continue
-        nxt = _next_good(data, pos)
-        torn = nxt == len(data) and why != "bad record marker" and end >= len(data)
-        s.pieces.append(Piece(pos, nxt, "torn" if torn else "damaged", why=why))
-        in_prefix = in_prefix and torn
-        pos = nxt
+    for piece, _ in walk(data, synced):
+        s.pieces.append(piece)
+        if piece.kind == "torn":
+            break
+        if in_prefix and piece.kind == "record" and piece.episode == s.prefix:
+            s.prefix += 1
+            s.prefix_end = piece.end
+        else:
+            in_prefix = False
     return s
 
 
@@ -200,7 +154,7 @@ def survey(run: str | Path) -> Survey:
     path = run / HISTORY_FILE
     try:
         data = path.read_bytes()
-        s = survey_bytes(data)
+        s = survey_bytes(data, read_synced(run))
     except FileNotFoundError:
         s = Survey(size=0, exists=False)
     except OSError as exc:
@@ -242,7 +196,7 @@ def describe(run: Path, s: Survey) -> list[str]:
             f"history.bin: {s.size} bytes, {len(s.good)} good record(s), {len(dmg)} damaged "
             f"span(s){': ' + where if dmg else ''}"
             + (f"{'...' if len(dmg) > 3 else ''}" if dmg else "")
-            + (f", a torn tail of {s.torn.size} bytes (cut on resume)" if s.torn else "")
+            + (f", a torn tail of {s.torn.size} bytes ({_torn(s)}cut on resume)" if s.torn else "")
         )
     lines.append(f"resumable history: episodes {_episodes(s.good[: s.prefix])} ({s.prefix})")
     if s.beyond:
@@ -291,6 +245,14 @@ def describe(run: Path, s: Survey) -> list[str]:
     return lines
 
 
+def _torn(s: Survey) -> str:
+    """Why the torn tail is cut, for a tail past ``history.synced``."""
+    torn = s.torn
+    if torn is None or s.synced is None or torn.start < s.synced:
+        return ""
+    return "past history.synced, the length known on disk: a power cut's unsynced tail, "
+
+
 def _list(episodes: list[int]) -> str:
     return ", ".join(map(str, episodes[:8])) + (", ..." if len(episodes) > 8 else "")
 
@@ -316,7 +278,7 @@ def salvage(run: str | Path) -> SalvageResult:
         check_own_files(run)
         path = run / HISTORY_FILE
         data = path.read_bytes() if path.exists() else b""
-        s = survey_bytes(data)
+        s = survey_bytes(data, read_synced(run))
         s.recorded = recorded_episodes(run)
         rest = [p for p in s.pieces if p.start >= s.prefix_end]
         if not rest:
@@ -372,6 +334,6 @@ def salvage(run: str | Path) -> SalvageResult:
 def iter_records(path: str | Path) -> Iterator[EpisodeRecord]:
     """The good records of a file framed as ``history.bin`` (e.g. a salvage's ``kept.bin``),
     skipping anything damaged."""
-    data = Path(path).read_bytes()
-    for p in survey_bytes(data).good:
-        yield EpisodeRecord.from_bytes(data[p.start + HEADER.size : p.end])
+    for _, rec in walk(Path(path).read_bytes()):
+        if rec is not None:
+            yield rec

@@ -8,7 +8,8 @@ Layout of ``RUN/``:
   an ``EpisodeRecord`` (``explore.runs.record``: packed, or npz before 2026-12-02). Each append
   is flushed before the episode counts as done, so a SIGKILL loses at most the episode in
   flight (the rest is in the kernel's page cache), and fsync'ed (by default after every
-  episode: ``sync_interval_s`` = 0), so that a crash of the machine loses no more either. A rig
+  episode: ``sync_interval_s`` = 0), so that a crash of the machine loses no more either (it
+  may leave that record in any shape: cut short, zeros in it; below). A rig
   whose episodes cost well under the 2 ms an fsync takes (ArmBalls) syncs at most every
   ``sync_interval_s`` seconds (``Rig.sync_interval_s``) and on close: a power cut can then cost
   it the episodes of the last interval, which a resume detects and runs again (below).
@@ -16,7 +17,7 @@ Layout of ``RUN/``:
   be on disk, u64 little endian, written and fsync'ed after each fsync of the history returned
   (so it may lag the history, never lead it). After a power cut, whatever the disk kept of the
   bytes past it (nothing, zeros, a prefix, records with holes) is the unsynced tail and is cut;
-  damage before it is corruption.
+  damage before it is corruption, unless it is the last record (below).
 - ``frames/episode-NNNNNN.npz`` (with the rig option ``record_video``): the overhead camera at
   every control tick of episode N, ``frames`` (T, side, side, 3) BGR uint8, written atomically
   (fsync'ed) before the episode's record is appended; a file past the last record is what a
@@ -28,14 +29,14 @@ Layout of ``RUN/``:
   resume).
 - ``coverage.png`` and whatever later stages write (models, figures, recordings).
 
-On open, a torn last record (a crash mid-write) is moved aside to ``RUN/salvage/N/`` (the
-bytes kept, never deleted; the episode is run again), and so is everything from the first bad
-record on when it lies past ``history.synced`` (a power cut's unsynced tail). A bad record is
-only taken for a torn tail when no good record follows it: a damaged length field makes a
-record look as if it ran past the end of the file, so the rest of the file is searched for a
-frame whose marker and checksum hold (``next_frame``); one found means damage, not a tear.
-Damage raises ``RunStoreError`` naming the offset, without touching the file (``ergo runs
-salvage`` keeps what can be kept).
+On open, a torn tail is moved aside to ``RUN/salvage/N/`` (the bytes kept, never deleted; its
+episodes are run again) and cut from the history: a bad record with no good record anywhere
+after it (the last record, in whatever shape a crash or a power cut left it: cut short, zeros,
+a zeroed length), and everything from the first bad record on when it lies past
+``history.synced`` (a power cut's unsynced tail). Any other bad record is damage: it raises
+``RunStoreError`` naming the offset and the good record after it, without touching the file
+(``ergo runs salvage`` keeps what can be kept). The rule, shared with ``ergo runs check``:
+``explore/runs/walk.py``.
 
 A run folder may come from someone else: the writer refuses one whose files it would write
 are symbolic links, hard links or not regular files (``check_own_files``), and opens them
@@ -63,6 +64,7 @@ import numpy as np
 
 from explore.runs.layout import (
     DAMAGED_FILE,
+    HEADER,
     HISTORY_FILE,
     RUN_FILE,
     SALVAGE_DIR,
@@ -72,11 +74,10 @@ from explore.runs.layout import (
     WRITER_FILES,
     WRITER_LOCK_FILE,
     frame,
-    frame_at,
     frames_path,
-    next_frame,
 )
-from explore.runs.record import EpisodeRecord, RecordError
+from explore.runs.record import EpisodeRecord
+from explore.runs.walk import walk
 from plumbing.files import NOFOLLOW, atomic_write
 
 RUN_FORMAT = 1
@@ -144,54 +145,44 @@ def salvage_hint(run: Path) -> str:
 
 
 def _scan(
-    data: bytes, durable: int | None = None, hint: str = ""
+    data: bytes,
+    synced: int | None = None,
+    hint: str = "",
+    keep: list[EpisodeRecord] | None = None,
 ) -> tuple[list[tuple[int, int]], int]:
-    """Find record payload spans in ``data``.
+    """The records of ``data`` (a history's bytes) that a run resumes from, by the one rule of
+    ``explore/runs/walk.py``.
 
-    ``durable``: the length known to be on disk (``history.synced``; None: all of it): a bad
-    record starting at or past it is an unsynced tail that a power cut damaged.
+    Args:
+        synced: the length known to be on disk (``history.synced``; None: the run fsyncs every
+            append).
+        hint: the end of an error line (what to do about it).
+        keep: gets the decoded records, in order.
 
     Returns:
-        spans: (start, end) of each valid payload, in order.
-        good_end: offset just after the last valid record (where a torn tail starts).
-    Raises RunStoreError when an invalid record is followed by more data that is not just a
-    torn tail (a good frame follows it), i.e. real corruption.
+        spans: (start, end) of each record's payload, episodes 0, 1, 2... in order.
+        good_end: where a torn tail starts (``len(data)`` if none).
+    Raises RunStoreError (one line) on damage (a bad record that is not the torn tail) or a
+    record out of order.
     """
     spans: list[tuple[int, int]] = []
-    pos = 0
-    n = len(data)
-    durable = n if durable is None else durable
-    while pos < n:
-        start, end, why = frame_at(data, pos)
-        if why == "torn header":
-            break
-        if why and pos >= durable:
-            break  # past what was synced: what a power cut left of the unsynced tail
-        if why == "bad record marker":
-            raise RunStoreError(f"{HISTORY_FILE} is corrupt at byte {pos}: {why}{hint}")
-        if why:
-            good = next_frame(data, pos)
-            if good is None and end >= n:
-                break  # the last record, incomplete on disk: a torn tail
-            after = f", and a good record follows at byte {good}" if good is not None else ""
-            raise RunStoreError(f"{HISTORY_FILE} is corrupt at byte {pos}: {why}{after}{hint}")
-        spans.append((start, end))
-        pos = end
-    return spans, pos
-
-
-def _decode(data: bytes, spans: list[tuple[int, int]], hint: str) -> Iterator[EpisodeRecord]:
-    """The records of ``spans``, each checked to be the next episode (0, 1, 2...)."""
-    for i, (a, b) in enumerate(spans):
-        try:
-            rec = EpisodeRecord.from_bytes(data[a:b])
-        except RecordError as exc:
-            raise RunStoreError(f"{HISTORY_FILE} record {i}: {exc}{hint}") from exc
-        if rec.episode != i:
+    for piece, rec in walk(data, synced):
+        if piece.kind == "torn":
+            return spans, piece.start
+        if rec is None:
             raise RunStoreError(
-                f"{HISTORY_FILE} record {i} is episode {rec.episode}: missing or duplicated{hint}"
+                f"{HISTORY_FILE} is corrupt at byte {piece.start}: {piece.why}, and a good "
+                f"record follows at byte {piece.end}{hint}"
             )
-        yield rec
+        if rec.episode != len(spans):
+            raise RunStoreError(
+                f"{HISTORY_FILE} record {len(spans)} is episode {rec.episode}: missing or "
+                f"duplicated{hint}"
+            )
+        spans.append((piece.start + HEADER.size, piece.end))
+        if keep is not None:
+            keep.append(rec)
+    return spans, len(data)
 
 
 class RunStore:
@@ -312,8 +303,9 @@ class RunStore:
         data = self.history_path.read_bytes()
         self._synced_length = read_synced(self.path)
         hint = f" in {self.path}: {salvage_hint(self.path)}"
-        spans, good_end = _scan(data, self._synced_length, hint)
-        self.records = list(_decode(data, spans, hint))
+        records: list[EpisodeRecord] = []
+        _, good_end = _scan(data, self._synced_length, hint, keep=records)
+        self.records = records
         self.torn_bytes = len(data) - good_end
         if self.torn_bytes and repair:
             # a crash during the last append (the episode in flight), or a power cut's unsynced
@@ -548,7 +540,8 @@ def iter_history(run: Path, left_out: list[int] | None = None) -> Iterator[Episo
         return
     data = path.read_bytes()
     hint = f" in {run}: {salvage_hint(Path(run))}"
-    spans, good_end = _scan(data, read_synced(run), hint)
+    spans, good_end = _scan(data, read_synced(run), hint)  # the whole file checked first
     if left_out is not None:
         left_out.append(len(data) - good_end)
-    yield from _decode(data, spans, hint)
+    for a, b in spans:  # decoded again, one at a time: a long run is not held in memory
+        yield EpisodeRecord.from_bytes(data[a:b])

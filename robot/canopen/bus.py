@@ -12,8 +12,10 @@ from __future__ import annotations
 import os
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
+from plumbing.registry import nearest
 from robot.errors import BusError
 
 # Interfaces that take a bitrate argument when the bus is opened (python-can docs, per
@@ -79,12 +81,15 @@ MAX_SLCAN_LINE = 1 + 8 + 1 + 128 + 1
 # next send, within a control period).
 PORT_ERROR_PAUSE_S = 0.1
 
-# What to try when an interface fails to open (python-can and Linux SocketCAN docs).
+# What to try when an interface fails to open (python-can and Linux SocketCAN docs); socketcan's
+# names the interfaces that exist (``socketcan_hint``).
 HINTS = {
-    "socketcan": " (is the adapter plugged in and up? sudo ip link set can0 up type can bitrate"
-    " 1000000)",
     "slcan": " (is the adapter plugged in? is another program using the port?)",
 }
+# Where Linux lists the network interfaces, SocketCAN's channels among them, and the type a CAN
+# interface has there (``ARPHRD_CAN``, linux/if_arp.h).
+SYS_CLASS_NET = Path("/sys/class/net")
+ARPHRD_CAN = 280
 
 EXAMPLES = "e.g. socketcan:can0, slcan:/dev/ttyACM0, virtual:test"
 
@@ -182,11 +187,51 @@ def open_bus(spec: CanBusSpec | str, bitrate: int | None = DEFAULT_BITRATE) -> A
             bus = can.Bus(**spec.bus_kwargs())
     except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as exc:
         detail = " ".join(str(exc).split()) or type(exc).__name__
-        hint = HINTS.get(spec.interface, "")
+        hint = socketcan_hint(spec.channel) if spec.interface == "socketcan" else ""
+        hint = hint or HINTS.get(spec.interface, "")
         raise CanBusError(f"cannot open CAN bus {spec}: {detail}{hint}") from exc
     if spec.interface == "slcan" and is_pty(spec.channel):
         _await_opening_answers(bus)
     return bus
+
+
+def can_interfaces(root: Path | None = None) -> list[str]:
+    """The CAN network interfaces of this machine (SocketCAN's channels: ``can0``, ``vcan0``),
+    sorted: those of ``root`` (default ``SYS_CLASS_NET``) whose ``type`` is ``ARPHRD_CAN``."""
+    root = SYS_CLASS_NET if root is None else root
+    found = []
+    try:
+        entries = list(root.iterdir())
+    except OSError:
+        return []
+    for entry in entries:
+        try:
+            if int((entry / "type").read_text().strip()) == ARPHRD_CAN:
+                found.append(entry.name)
+        except (OSError, ValueError):
+            continue
+    return sorted(found)
+
+
+def socketcan_hint(channel: str) -> str:
+    """What to try when ``socketcan:CHANNEL`` fails to open, in parentheses: bring it up when
+    it exists; else the CAN interfaces that do (the nearest first), or that there is none."""
+    found = can_interfaces()
+    up = "sudo ip link set {} up type can bitrate " + str(DEFAULT_BITRATE)
+    if channel in found:
+        return f" (is {channel} up? {up.format(channel)})"
+    if not found:
+        return (
+            f" (no CAN interface {channel!r}: this machine has none; is the adapter plugged in "
+            "and its driver loaded? `ip link` lists them; a USB adapter that speaks SLCAN is "
+            "slcan:/dev/ttyACM0)"
+        )
+    near = nearest(channel, found)
+    hint = "" if near is None else f" (did you mean socketcan:{near}?)"
+    return (
+        f" (no CAN interface {channel!r}: this machine has {', '.join(found)}{hint}; bring "
+        f"one up with: {up.format(near or found[0])})"
+    )
 
 
 def _await_opening_answers(bus: Any) -> None:

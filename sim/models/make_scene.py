@@ -60,6 +60,13 @@ SHADOW_SIZE = 0  # px: no shadow map (no light casts shadows)
 OFFSCREEN_SAMPLES = 0  # no multisample anti-aliasing
 LIGHT_CASTS_SHADOW = False
 FLOOR_GRID = 0.5  # m, spacing of the floor's render grid (rendering only; see the scene)
+# The floor's and the kerb's colours (r, g, b in 0..1; chosen): a blue floor, HSV hue about
+# 115 in OpenCV units, away from the ball's yellow-green and the tool's orange, and a lighter
+# blue kerb. ``scene_xml(floor_rgb=...)`` draws the floor, and the kerb with it, in another
+# colour, as an owner's arena may be (tests/calibration/test_arena_floors.py); the committed
+# scenes keep these.
+FLOOR_RGB = (0.12, 0.22, 0.7)
+KERB_RGB = (0.2, 0.3, 0.75)
 
 
 def wall_boxes() -> str:
@@ -103,9 +110,33 @@ def distractor_body() -> str:
     </body>"""
 
 
-def scene_xml(distractor: bool = False) -> str:
-    """The scene's MJCF text; ``distractor``: with the second ball."""
+def rgb_text(rgb: tuple[float, ...]) -> str:
+    """An MJCF colour, "r g b", from (r, g, b) in 0..1.
+
+    Raises:
+        ValueError: not three numbers in 0..1.
+    """
+    values = tuple(float(c) for c in rgb)
+    if len(values) != 3 or not all(0.0 <= c <= 1.0 for c in values):
+        raise ValueError(f"a colour is three numbers in 0..1 (r, g, b), got {rgb!r}")
+    return " ".join(f"{c:g}" for c in values)
+
+
+def scene_xml(distractor: bool = False, floor_rgb: tuple[float, float, float] | None = None) -> str:
+    """The scene's MJCF text; ``distractor``: with the second ball; ``floor_rgb``: the floor
+    and the kerb in that colour (r, g, b in 0..1; default: ``FLOOR_RGB`` and ``KERB_RGB``, the
+    committed scenes' text to the byte).
+
+    Raises:
+        ValueError: ``floor_rgb`` is not three numbers in 0..1.
+    """
     extra = distractor_body() if distractor else ""
+    if floor_rgb is None:
+        floor, kerb = rgb_text(FLOOR_RGB), rgb_text(KERB_RGB)
+        floor_note = "blue arena floor (HSV hue about 115 in OpenCV units)"
+    else:
+        floor = kerb = rgb_text(floor_rgb)
+        floor_note = "arena floor, and the kerb, of another colour than the twin's blue"
     mpos = (
         f'\n         mpos="{DISTRACTOR_START[0]} {DISTRACTOR_START[1]} {DISTRACTOR_RADIUS}"'
         if distractor
@@ -137,21 +168,21 @@ def scene_xml(distractor: bool = False) -> str:
   </default>
 
   <asset>
-    <texture name="floor_tex" type="2d" builtin="flat" rgb1="0.12 0.22 0.7" width="64" height="64"/>
+    <texture name="floor_tex" type="2d" builtin="flat" rgb1="{floor}" width="64" height="64"/>
     <material name="floor_mat" texture="floor_tex"/>
   </asset>
 
   <worldbody>
     <light name="top" pos="0 0 1.2" dir="0 0 -1" diffuse="0.5 0.5 0.5" directional="true"
            castshadow="{str(LIGHT_CASTS_SHADOW).lower()}"/>
-    <!-- blue arena floor (HSV hue about 115 in OpenCV units); the third size is the spacing of
+    <!-- {floor_note}; the third size is the spacing of
          the grid it is drawn with (rendering only): 0.5 m, 2 x 2 quads, draws the same pixels as
          the 100 x 100 of 0.01 m in half the time of a 64 x 64 frame (measured 2026-12-01) -->
     <geom name="floor" type="plane" size="0.5 0.5 {FLOOR_GRID}" material="floor_mat" contype="0" conaffinity="1"
           friction="0.8 0.005 0.0001"/>
     <!-- kerb around the base: keeps the ball on its ring, collides with the ball only -->
     <geom name="kerb" type="cylinder" size="{INNER_RADIUS} {KERB_HEIGHT / 2}" pos="0 0 {KERB_HEIGHT / 2}"
-          contype="0" conaffinity="2" rgba="0.2 0.3 0.75 1"/>
+          contype="0" conaffinity="2" rgba="{kerb} 1"/>
 {wall_boxes()}
     <!-- yellow-green ball; condim 6 with rolling friction so that it stops (measured, README.md) -->
     <body name="ball" pos="{BALL_START[0]} {BALL_START[1]} {BALL_RADIUS}">

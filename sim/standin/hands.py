@@ -42,6 +42,7 @@ import numpy as np
 
 from robot.spec import ERGO_JR_JOINTS
 from sim.loopback import HOST, LISTEN_BACKLOG
+from sim.models.make_scene import BALL_RADIUS, OUTER_RADIUS
 from sim.standin.board import BoardError, BoardGeometry
 from sim.standin.scene import (
     BOARD_AWAY,
@@ -392,6 +393,27 @@ class Hands:
             self._held_board = None
         return {"did": "put the board away" if was else "held no board"}
 
+    # ---- the ball ----------------------------------------------------------------------------
+    def place_ball(self, position: Any) -> dict[str, Any]:
+        """Put the ball down at rest with its centre above ``position`` (x, y) m, inside the
+        wall (its centre at most the wall's radius less its own from the centre)."""
+        try:
+            xy = np.asarray(position, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            xy = np.zeros(0)
+        if xy.shape != (2,) or not np.all(np.isfinite(xy)):
+            raise HandsError(
+                f"ball: position must be two finite numbers (x, y) m, got {position!r}"
+            )
+        limit = OUTER_RADIUS - BALL_RADIUS
+        if float(np.hypot(*xy)) > limit + 1e-9:
+            raise HandsError(
+                f"ball: ({xy[0]:.3f}, {xy[1]:.3f}) m is outside the wall (the ball's centre "
+                f"lies within {limit:.2f} m of the arm's base)"
+            )
+        self.twin.place_ball((float(xy[0]), float(xy[1])))
+        return {"did": f"put the ball at ({xy[0]:+.3f}, {xy[1]:+.3f}) m", "position": xy.tolist()}
+
     # ---- the protocol ----------------------------------------------------------------------
     def status(self) -> dict[str, Any]:
         """What the hands hold now (their grips brought up to date first), and the notes of
@@ -414,6 +436,7 @@ class Hands:
                 "release": {"joints"},
                 "board": {"board", "position", "euler_deg"},
                 "board_away": set(),
+                "ball": {"position"},
                 "status": set(),
             }
             if cmd not in allowed:
@@ -436,6 +459,8 @@ class Hands:
                 )
             elif cmd == "board_away":
                 reply = self.put_board_away()
+            elif cmd == "ball":
+                reply = self.place_ball(fields.get("position"))
             else:
                 reply = self.status()
         except HandsError as exc:

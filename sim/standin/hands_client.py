@@ -66,6 +66,10 @@ class HandsClient:
     def put_board_away(self) -> dict[str, Any]:
         return self.request("board_away")
 
+    def place_ball(self, position: Sequence[float]) -> dict[str, Any]:
+        """Put the ball down at rest at ``position`` (x, y) m, inside the wall."""
+        return self.request("ball", position=[float(v) for v in position])
+
     def status(self) -> dict[str, Any]:
         """What the hands hold, and what they did on their own since the last status."""
         return self.request("status")

@@ -51,18 +51,27 @@ def hand_name(joint: str) -> str:
     return f"hand_{joint}"
 
 
-def write_served_scene(out_dir: str | Path, rig: HiddenRig, plan: RenderPlan) -> Path:
+def write_served_scene(
+    out_dir: str | Path,
+    rig: HiddenRig,
+    plan: RenderPlan,
+    floor_rgb: tuple[float, float, float] | None = None,
+) -> Path:
     """Write the served scene of ``rig`` into ``out_dir``; returns the scene file's path.
 
     Args:
         out_dir: a folder (created) for the scene, the arm's model and the floor's texture.
         rig: the served rig (its camera pose and the ball's start are used).
         plan: the camera's render (its size and ``fovy``).
+        floor_rgb: the floor's and the kerb's colour, (r, g, b) in 0..1 (default: the twin's
+            blue floor; ``sim.models.make_scene.scene_xml``).
     """
     import cv2
 
     dictionary = getattr(cv2.aruco, ARENA_MARKER_DICTIONARY)
-    scene = write_marker_scene(out_dir, ARENA_MARKERS, ARENA_MARKER_SIZE, dictionary)
+    scene = write_marker_scene(
+        out_dir, ARENA_MARKERS, ARENA_MARKER_SIZE, dictionary, floor_rgb=floor_rgb
+    )
     text = scene.read_text()
     h, w = plan.size
     side = max(640, h, w)

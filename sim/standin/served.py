@@ -32,6 +32,7 @@ import numpy as np
 from plumbing.cli_errors import error
 from robot.spec import ergo_jr_spec
 from sim.mjpeg_server import MjpegServer
+from sim.models.make_scene import rgb_text
 from sim.servo_model import ServoModel, fitted_servos
 from sim.standin.hands import HOST, Hands, HandsServer
 from sim.standin.hidden import (
@@ -82,11 +83,12 @@ def open_served_rig(args: argparse.Namespace) -> ServedRig:
     """The rig ``ergo twin serve`` serves: the nominal twin, with ``args.rig_id`` the twin with
     that rig's fitted servos (its dynamics.json; the nominal ones without it, said in the
     rig's line), or with ``args.stand_in`` a stand-in rig whose hidden parameters are written
-    to ``args.hidden`` (default: a file per seed in the temporary folder).
+    to ``args.hidden`` (default: a file per seed in the temporary folder); its floor of colour
+    ``args.floor_rgb`` ((r, g, b) in 0..1; None: the twin's blue).
 
     Raises:
-        StandinError: a bad seed, an unwritable hidden file, a damaged dynamics.json, or
-            ``--rig-id`` with ``--stand-in`` (one line).
+        StandinError: a bad seed, an unwritable hidden file, a damaged dynamics.json,
+            ``--rig-id`` with ``--stand-in``, or a colour out of 0..1 (one line).
     """
     seed = getattr(args, "stand_in", None)
     rig_id = getattr(args, "rig_id", None)
@@ -98,6 +100,12 @@ def open_served_rig(args: argparse.Namespace) -> ServedRig:
     if seed is None and zero_marks != "horn":
         raise StandinError("--zero-marks: a stand-in's hidden mounting (give --stand-in SEED)")
     rig = nominal_rig() if seed is None else draw_hidden(seed, zero_marks)
+    floor_rgb = getattr(args, "floor_rgb", None)
+    if floor_rgb is not None:
+        try:
+            rgb_text(floor_rgb)
+        except ValueError as exc:
+            raise StandinError(f"--floor-rgb: {exc}") from None
     lines = []
     servos = None
     if seed is not None:
@@ -110,7 +118,7 @@ def open_served_rig(args: argparse.Namespace) -> ServedRig:
     elif rig_id is not None:
         servos, line = rig_servos(rig_id)
         lines.append(line)
-    twin, plan = served_twin(rig, servos)
+    twin, plan = served_twin(rig, servos, floor_rgb)
     return ServedRig(twin, rig.directions.copy(), rig.offsets.copy(), rig.can_offsets, plan, lines)
 
 
@@ -136,14 +144,19 @@ def rig_servos(rig_id: str) -> tuple[ServoModel | None, str]:
     )
 
 
-def served_twin(rig: HiddenRig, servos: ServoModel | None = None) -> tuple[Twin, RenderPlan]:
+def served_twin(
+    rig: HiddenRig,
+    servos: ServoModel | None = None,
+    floor_rgb: tuple[float, float, float] | None = None,
+) -> tuple[Twin, RenderPlan]:
     """The twin of a served rig (its scene written to a temporary folder, compiled, removed)
     and how its camera's frames are made; its servos are a stand-in's hidden ones, else
-    ``servos`` (None: the nominal ones)."""
+    ``servos`` (None: the nominal ones); its floor and kerb of colour ``floor_rgb`` ((r, g, b)
+    in 0..1; None: the twin's blue)."""
     plan = render_plan(rig.camera)
     folder = tempfile.mkdtemp(prefix="ergo-served-")
     try:
-        scene = write_served_scene(folder, rig, plan)
+        scene = write_served_scene(folder, rig, plan, floor_rgb)
         twin = Twin(scene=scene, servos=servos if rig.seed is None else rig.servos)
     finally:
         shutil.rmtree(folder, ignore_errors=True)  # the model is compiled: files not needed

@@ -17,10 +17,9 @@ from calibration.arena import (
     arena_from_markers,
     arena_from_points,
     ball_position_check,
-    find_saturated_blob,
     parse_markers,
-    sample_ball_hsv,
 )
+from calibration.ball_colour import find_saturated_blob, sample_ball_hsv
 from calibration.store import CalibrationError
 from sim.camera import SimCamera, ideal_camera_matrix, write_marker_scene
 from sim.twin import Twin

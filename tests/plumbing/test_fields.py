@@ -53,3 +53,14 @@ def test_the_predicates_refuse_bools_and_non_finite_numbers():
     assert is_number(2.5) and not is_number(False) and not is_number(float("inf"))
     assert is_matrix([[1, 2]], (1, 2)) and is_matrix([1, 2, 3], (-1,))
     assert not is_matrix([], (-1,)) and not is_matrix([[1, True]], (1, 2))
+
+
+def test_a_label_names_the_field_as_the_caller_does_down_every_sub_object():
+    """A command line names its flags (``explore.runs.config.flag_of``); with no ``where``
+    the line starts with the label."""
+    top = Fields("", {"rig": {"options": {"size": 0}}}, Bad, "config", label=lambda p: f"<{p}>")
+    rig = top.sub("rig").sub("options")
+    assert (
+        _line(lambda: rig.integer("size", 1))
+        == "<config.rig.options.size> must be an integer >= 1, got 0"
+    )

@@ -207,7 +207,7 @@ def test_resuming_with_another_rig_is_refused(good_run, tmp_path, capsys):
     [
         (["explore", "--episodes", "ten"], "--episodes: invalid int value"),
         (["explore", "--rig", "ur5"], "--rig: invalid choice"),
-        (["explore", "--resume", "no/such/run"], "no such directory"),
+        (["explore", "--resume", "no/such/run"], "--resume no/such/run: no such run folder"),
         (["explore", "--resume", "x", "--out", "y"], "not both"),
         (["explore", "--resume-or-new"], "needs --out"),
     ],
@@ -222,11 +222,11 @@ def test_bad_flags_get_one_line(tmp_path, capsys, monkeypatch, args, message):
 @pytest.mark.parametrize(
     "args, field",
     [
-        (["--seed", "-1"], "config.seed"),
-        (["--rig-option", "render_size=5"], "config.rig.options.render_size"),
-        (["--rig-option", "render_sise=[64,64]"], "config.rig.options.render_sise"),
-        (["--strategy", "rge-efr", "--strategy-option", "sigma=lots"], "options.sigma"),
-        (["--strategy", "rpe", "--strategy-option", "bootstrap=5"], "options.bootstrap"),
+        (["--seed", "-1"], "--seed must be"),
+        (["--rig-option", "render_size=5"], "--rig-option render_size must be"),
+        (["--rig-option", "render_sise=[64,64]"], "--rig-option render_sise is unknown"),
+        (["--strategy", "rge-efr", "--strategy-option", "sigma=lots"], "--strategy-option sigma"),
+        (["--strategy", "rpe", "--strategy-option", "bootstrap=5"], "--strategy-option bootstrap"),
     ],
 )
 def test_bad_values_of_a_new_run_get_one_line_and_no_folder(

@@ -82,7 +82,11 @@ def test_random_exploration_on_that_rig_starts_with_one_warning(tmp_path, monkey
     with caplog.at_level(logging.WARNING), open_run(tmp_path / "run", _hardware_config("rpe")):
         pass
     warnings = [r for r in caplog.records if "no ball tracking" in r.getMessage()]
-    assert len(warnings) == 1 and "ergo calibrate arena --rig-id nocal" in warnings[0].getMessage()
+    assert len(warnings) == 1 and warnings[0].getMessage() == (
+        f"no ball tracking for rig 'nocal' (no calibration file {tmp_path}/calibration/nocal/"
+        "arena.json): this run will count 0 ball cells; run 'ergo calibrate arena --rig-id "
+        "nocal --camera ...' first (docs/calibration.md)"
+    )
 
 
 def test_a_resume_with_nothing_to_do_writes_no_new_recording(tmp_path):
@@ -105,6 +109,37 @@ def test_a_resume_with_nothing_to_do_writes_no_new_recording(tmp_path):
 def test_the_readme_says_how_to_reach_ergo_after_make_run():
     readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
     assert "source .venv/bin/activate" in readme and ".venv/bin/ergo" in readme
+
+
+# Terms the README uses, and the words that say what each is: they must come near its first use
+# (a newcomer reads on, and no term is left for a search engine).
+README_TERMS = {
+    "MuJoCo": "physics engine",
+    "EGL": "OpenGL without a window",
+    "ChArUco": "a chessboard with an ArUco marker",
+    "ArUco": "a square code OpenCV finds and",
+    "rig id": "names one arm and its camera",
+    "Ray": "spreads Python work over a cluster",
+    "learning progress": "how fast the arm gets better at reaching",
+    "Arm-2-Balls": "a simulated 2-D arm",
+    "700-707": "kept apart while the code was developed",
+    "CiA 402": "CANopen's drive profile",
+    "DMP": "dynamic movement primitive",
+    "pty": "a virtual serial port",
+}
+NEAR = 400  # characters: the definition is in the term's sentence or the next one
+
+
+@pytest.mark.parametrize("term, definition", README_TERMS.items(), ids=list(README_TERMS))
+def test_the_readme_says_what_each_term_is_where_it_first_uses_it(term, definition):
+    import re
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    text = " ".join(readme.split())  # lines joined: a definition may wrap
+    first = re.search(rf"(?<![\w-]){re.escape(term)}(?![\w-])", text, re.I)
+    assert first, term
+    said = text.find(" ".join(definition.split()), max(0, first.start() - NEAR))
+    assert said >= 0 and abs(said - first.start()) <= NEAR, (term, text[first.start() :][:200])
 
 
 def _readme_commands() -> list[str]:
@@ -230,35 +265,208 @@ def test_no_hint_for_a_name_close_to_nothing(capsys):
     assert code == 2 and "did you mean" not in err
 
 
-def test_the_emulated_bus_demo_report_says_why_its_cells_are_empty(tmp_path):
-    """The README's hardware-in-the-loop demo without an arena calibration: its report counts
-    0 ball and 0 end-effector cells, and says why and what to run (summary and stderr)."""
-    serve = subprocess.Popen(
-        [*ERGO, "twin", "serve", "--bus", "dynamixel"],
-        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-    )  # fmt: skip
-    try:
-        port = serve.stdout.readline().split()[-1]
-        camera = serve.stdout.readline().split()[-1]
-        run = tmp_path / "hil"
-        explore = subprocess.run(
-            [*ERGO, "explore", "--rig", "dynamixel", "--rig-id", "hil", "--port", port,
-             "--camera", camera, "--episodes", "1", "--out", str(run), "--no-progress",
-             "--rerun", "off"],
-            capture_output=True, text=True, timeout=180,
+def _readme_served_twin_commands() -> list[str]:
+    """The README's commands for a run on the served twin, in order (``ergo twin serve``, the
+    arena's calibration, the run), with its placeholders ``N`` and ``P`` as written."""
+    block = next(b for b in _readme_sh_blocks() if "ergo twin serve --bus dynamixel" in b)
+    return [line.split("#")[0].strip() for line in block.splitlines() if line.startswith("ergo ")]
+
+
+def _readme_sh_blocks() -> list[str]:
+    import re
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    return re.findall(r"```sh\n(.*?)```", readme, re.S)
+
+
+def test_the_emulated_bus_demo_counts_ball_cells_once_calibrated_as_the_readme_says(
+    tmp_path, monkeypatch
+):
+    """The README's hardware-in-the-loop demo. Without the arena calibration its report counts
+    0 ball and 0 end-effector cells and says why and what to run (summary and stderr); with the
+    README's calibration line first, the same run counts the ball."""
+    import shlex
+
+    monkeypatch.setenv("ERGO_CALIBRATION_DIR", str(tmp_path / "calibration"))  # subprocesses too
+    serve_cmd, calibrate_cmd, explore_cmd = _readme_served_twin_commands()[:3]
+    assert serve_cmd == "ergo twin serve --bus dynamixel"
+    assert calibrate_cmd.startswith("ergo calibrate arena --rig-id hil")
+    assert explore_cmd.startswith("ergo explore --rig dynamixel --rig-id hil")
+    log = tmp_path / "serve.log"  # what the server said, shown if it does not start
+    with log.open("w") as server_stderr:
+        serve = subprocess.Popen(
+            [*ERGO, *shlex.split(serve_cmd)[1:]],
+            stdout=subprocess.PIPE, stderr=server_stderr, text=True,
         )  # fmt: skip
+    try:
+        first = serve.stdout.readline()
+        assert first.startswith("dynamixel bus on "), (first, log.read_text()[-2000:])
+        port = first.split()[-1]  # dynamixel bus on /dev/pts/N
+        camera = serve.stdout.readline().split()[-1]  # camera on URL
+        url = "http://127.0.0.1:P/stream.mjpg"
+        assert camera.endswith("/stream.mjpg") and url in explore_cmd and url in calibrate_cmd
+
+        def typed(command: str, *extra: str) -> subprocess.CompletedProcess:
+            words = shlex.split(command.replace("/dev/pts/N", port).replace(url, camera))
+            return subprocess.run(
+                [*ERGO, *words[1:], *extra], capture_output=True, text=True, timeout=180
+            )
+
+        quick = ["--episodes", "1", "--no-progress", "--rerun", "off"]
+        blind = tmp_path / "blind"
+        explore = typed(explore_cmd, *quick, "--out", str(blind))
         assert explore.returncode == 0, explore.stderr[-2000:]
+        assert "this run will count 0 ball cells" in explore.stderr
+        assert explore.stdout.strip().endswith("1 episodes, 0 ball cells reached")
+        calibrate = typed(calibrate_cmd)
+        assert calibrate.returncode == 0, calibrate.stderr[-2000:]
+        seen = tmp_path / "seen"
+        explore = typed(explore_cmd, *quick, "--out", str(seen))
+        assert explore.returncode == 0, explore.stderr[-2000:]
+        assert "no ball tracking" not in explore.stderr
+        assert not explore.stdout.strip().endswith(" 0 ball cells reached"), explore.stdout
     finally:
         serve.terminate()
         serve.wait(timeout=30)
     report = subprocess.run(
-        [*ERGO, "report", str(run)], capture_output=True, text=True, timeout=120
+        [*ERGO, "report", str(blind)], capture_output=True, text=True, timeout=120
     )
     assert report.returncode == 0, report.stderr
-    md = (run / "report" / "summary.md").read_text()
+    md = (blind / "report" / "summary.md").read_text()
     assert "| ball cells reached | 0 of 900 |" in md
     assert "| end-effector cells reached | 0 of 900 |" in md
     for text in (md, report.stderr):
         assert "had no arena calibration" in text
         assert "`ergo calibrate arena --rig-id hil --camera ...`" in text
         assert "camera tracks the ball only" in text
+
+
+# ---- the newcomer's mistakes: one line naming the flag and the near miss ---------------------
+def _strategies_line(typed: str) -> str:
+    return (
+        f"ergo: error: --strategy must be one of {', '.join(sorted(STRATEGIES))}, got "
+        f"{typed!r} (did you mean 'rge-efr'?)"
+    )
+
+
+@pytest.mark.parametrize("typed", ["rge-erf", "RGE-EFR"])
+def test_a_mistyped_strategy_names_the_flag_and_the_strategy_meant(typed, tmp_path, capsys):
+    out = tmp_path / "run"
+    code, _, err = _cli(
+        ["explore", "--strategy", typed, "--episodes", "1", "--out", str(out)], capsys
+    )
+    assert code == 2 and err == _strategies_line(typed)
+    assert not out.exists()
+
+
+def test_a_bad_option_of_a_new_run_is_named_by_its_flag(tmp_path, capsys):
+    out = tmp_path / "run"
+    code, _, err = _cli(
+        ["explore", "--rig-option", "render_sise=[64,64]", "--out", str(out)], capsys
+    )
+    assert code == 2 and err.startswith(
+        "ergo: error: --rig-option render_sise is unknown (did you mean 'render_size'?); known: "
+    )
+    code, _, err = _cli(["explore", "--seed", "-3", "--out", str(out)], capsys)
+    assert err == "ergo: error: --seed must be an integer in [0, 2**63-1], got -3"
+    assert not out.exists()
+
+
+def test_a_near_miss_of_a_run_folder_gets_the_run_meant(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "runs" / "rge-efr-s0").mkdir(parents=True)
+    (tmp_path / "runs" / "rge-efr-s0" / "run.json").write_text("{}")  # what marks a run folder
+    (tmp_path / "runs" / "rge-efr-s").with_name("rge-efr-sx").mkdir()  # not a run: not offered
+    code, _, err = _cli(["explore", "--resume", "runs/rge-efr-s", "--episodes", "2"], capsys)
+    assert code == 2 and err == (
+        "ergo: error: --resume runs/rge-efr-s: no such run folder (did you mean 'runs/rge-efr-s0'?)"
+    )
+    for args in (["replay", "runs/rge-efr-s"], ["runs", "check", "runs/rge-efr-s"],
+                 ["export", "lerobot", "runs/rge-efr-s", "--out", "datasets/x"]):  # fmt: skip
+        code, _, err = _cli(args, capsys)
+        assert code == 2 and err == (
+            "ergo: error: runs/rge-efr-s: no such run folder (did you mean 'runs/rge-efr-s0'?)"
+        ), args
+    code, _, err = _cli(["explore", "--resume", "runs/zzzz"], capsys)
+    assert err == "ergo: error: --resume runs/zzzz: no such run folder"  # nothing near
+    assert sorted(p.name for p in (tmp_path / "runs").iterdir()) == ["rge-efr-s0", "rge-efr-sx"]
+    assert not (tmp_path / "datasets").exists()
+
+
+def test_a_strategy_without_its_model_names_the_flag_that_gives_it(tmp_path, capsys):
+    from explore.learner.strategies.registry import SAE, VAE
+
+    for strategy, model in (("rge-vae", VAE), ("mge-sae", SAE)):
+        out = tmp_path / strategy
+        code, _, err = _cli(["explore", "--strategy", strategy, "--out", str(out)], capsys)
+        assert code == 2 and err == (
+            f"ergo: error: --strategy {strategy} needs {model.what}: give --strategy-option "
+            f"{model.option}=PATH (make one with: {model.recipe})"
+        )
+        assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "interfaces, hint",
+    [
+        (
+            {"lo": 772, "eth0": 1, "can0": 280, "vcan1": 280},
+            " (no CAN interface 'can9': this machine has can0, vcan1 (did you mean "
+            "socketcan:can0?); bring one up with: sudo ip link set can0 up type can bitrate "
+            "1000000)",
+        ),
+        (
+            {"lo": 772, "eth0": 1},
+            " (no CAN interface 'can9': this machine has none; is the adapter plugged in and its "
+            "driver loaded? `ip link` lists them; a USB adapter that speaks SLCAN is "
+            "slcan:/dev/ttyACM0)",
+        ),
+        ({"can9": 280}, " (is can9 up? sudo ip link set can9 up type can bitrate 1000000)"),
+    ],
+    ids=["others", "none", "down"],
+)
+def test_a_socketcan_channel_that_fails_names_the_can_interfaces_there(
+    interfaces, hint, tmp_path, capsys, monkeypatch
+):
+    """The hint names what this machine has (``/sys/class/net``, type 280 = ``ARPHRD_CAN``),
+    not a fixed ``can0``."""
+    import errno
+
+    import can
+
+    import robot.canopen.bus as can_bus
+
+    net = tmp_path / "net"
+    net.mkdir()
+    for name, kind in interfaces.items():
+        (net / name).mkdir()
+        (net / name / "type").write_text(f"{kind}\n")
+    monkeypatch.setattr(can_bus, "SYS_CLASS_NET", net)
+
+    def no_such_device(**kwargs):
+        raise OSError(errno.ENODEV, "No such device")
+
+    monkeypatch.setattr(can, "Bus", no_such_device)
+    code, _, err = _cli(["bus", "scan", "--can", "socketcan:can9"], capsys)
+    assert code == 2 and err == (
+        "ergo: error: cannot open CAN bus socketcan:can9: [Errno 19] No such device" + hint
+    )
+
+
+def test_an_export_without_video_says_how_to_keep_the_frames(tmp_path, capsys):
+    pytest.importorskip("pyarrow")
+    pytest.importorskip("av")
+    run = tmp_path / "run"
+    assert _cli([*_explore_spawn(run, "--rerun", "off"), "--rig-option", "render_size=[64,64]"],
+                capsys)[0] == 0  # fmt: skip
+    code, out, err = _cli(["export", "lerobot", str(run), "--out", str(tmp_path / "ds")], capsys)
+    assert code == 0, err
+    assert out.splitlines()[-1] == (
+        f"{tmp_path / 'ds'}: LeRobotDataset v3.0, 2 episodes, 80 frames, 1 tasks, no video: the "
+        "runs kept no camera frames (explore with --rig-option record_video=128 to keep them; "
+        "docs/ecosystem.md)"
+    )
+    code, out, _ = _cli(
+        ["export", "lerobot", str(run), "--out", str(tmp_path / "ds2"), "--no-video"], capsys
+    )
+    assert code == 0 and out.splitlines()[-1].endswith(", no video (--no-video)")

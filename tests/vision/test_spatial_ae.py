@@ -186,3 +186,17 @@ def test_sae_train_command_says_which_features_move_in_words(tmp_path, capsys):
     else:
         assert "none of its 3 features moves" in printed, printed
     assert "held-out explained pixel variance" in printed and printed.count("\n") == 1
+
+
+def test_sae_train_on_a_few_images_says_none_was_held_out(tmp_path, capsys):
+    """A dataset too small for a held-out image (a short run's outcomes) trains, and the
+    command says the model was not judged, in words (no traceback)."""
+    from explore.cli import main
+
+    data = tmp_path / "few.npz"
+    np.savez(data, images=disc_images(4)[0])
+    out = tmp_path / "sae"
+    assert main(["sae", "train", "--data", str(data), "--out", str(out), "--iterations", "2",
+                 "--device", "cpu", "--no-progress"]) == 0  # fmt: skip
+    assert "no image held out to judge it" in capsys.readouterr().out
+    assert load_sae(out).config.heldout_explained_variance is None

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -63,13 +64,17 @@ def dataset(runs, tmp_path_factory) -> Path:
 
 def test_the_docs_headless_snippet_reads_the_export(dataset, tmp_path):
     """docs/ecosystem.md's snippet, as written but for the dataset's path, run without a
-    display."""
-    doc = (Path(__file__).parents[3] / "docs" / "ecosystem.md").read_text()
+    display; it reads the dataset the README's export command writes."""
+    root = Path(__file__).parents[3]
+    doc = (root / "docs" / "ecosystem.md").read_text()
     section = doc.split("### Reading it back without a display", 1)[1]
     snippet = section.split("```python\n", 1)[1].split("```", 1)[0]
-    assert 'Path("datasets/A")' in snippet
+    readme_out = re.search(r"ergo export lerobot \S+ --out (\S+)", (root / "README.md").read_text())
+    assert readme_out, "the README's export command"
+    named = f'Path("{readme_out.group(1)}")'
+    assert named in snippet and f"--out {readme_out.group(1)}" in doc
     script = tmp_path / "read_back.py"
-    script.write_text(snippet.replace('Path("datasets/A")', f"Path({str(dataset)!r})"))
+    script.write_text(snippet.replace(named, f"Path({str(dataset)!r})"))
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     done = subprocess.run(
         [sys.executable, str(script)], capture_output=True, text=True, timeout=120, env=env

@@ -161,7 +161,7 @@ def test_ball_reset_start_puts_the_ball_back_before_every_episode(tmp_path, caps
     bad = ["explore", "--episodes", "1", "--out", str(tmp_path / "b"), "--rig-option"]
     assert ergo(*bad, "ball_reset=sometimes") == 2
     err = capsys.readouterr().err
-    assert "options.ball_reset' must be one of 'none', 'start', got 'sometimes'" in err
+    assert "--rig-option ball_reset must be one of 'none', 'start', got 'sometimes'" in err
 
 
 def test_cell_counter_on_hand_made_points():
@@ -185,7 +185,7 @@ def test_cell_counter_on_hand_made_points():
     "args, message",
     [
         (["explore", "--episodes", "0"], "--episodes must be at least 1"),
-        (["explore", "--strategy", "nope", "--episodes", "1"], "config.strategy.name"),
+        (["explore", "--strategy", "nope", "--episodes", "1"], "--strategy must be one of"),
         (["explore", "--bogus"], "unrecognized arguments: --bogus"),
         (["explore", "--rig", "sim", "--rig-option", "novalue"], "expected KEY=VALUE"),
     ],

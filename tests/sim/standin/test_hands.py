@@ -96,6 +96,14 @@ def test_a_powered_joint_is_refused_in_one_line(limp):
     assert hands.move({"m2": 0.3})["held"] == {"m2": 0.3}  # the limp one is fine
 
 
+def test_the_hands_put_the_ball_down_where_asked(limp):
+    twin, *_, port = limp
+    with HandsClient(port) as client:
+        assert client.place_ball((-0.1, 0.12))["position"] == [-0.1, 0.12]
+    np.testing.assert_allclose(twin.ball_position()[:2], (-0.1, 0.12), atol=1e-3)
+    assert twin.ball_speed() < 0.05
+
+
 def test_the_hands_let_go_when_torque_comes_on(limp):
     twin, hands, *_ = limp
     hands.move({"m5": 0.5})
@@ -129,6 +137,8 @@ def test_the_hands_let_go_when_torque_comes_on(limp):
         ({"cmd": "board", "board": {**CHESSBOARD, "square_m": 1e-300}, "position": [0, 0, 0.3]},
          "square_m 1e-300: must be in [0.002, 0.2] m"),
         ({"cmd": "release", "joints": "m1"}, "must be a list"),
+        ({"cmd": "ball", "position": [0.3, 0.0]}, "outside the wall"),
+        ({"cmd": "ball", "position": [0.1]}, "two finite numbers"),
         ([1, 2], "a request is a JSON object"),
     ],
 )  # fmt: skip
