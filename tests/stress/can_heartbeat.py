@@ -5,8 +5,8 @@ processes; every stop resumed.
     python tests/stress/can_heartbeat.py --episodes 300 --load 8
     python tests/stress/can_heartbeat.py --episodes 30 --busy 0
 
-Printed: the episodes stored, the stops and why (the last line of each failed run; a
-"no heartbeat" stop is a heartbeat the host missed), the served drives' heartbeats as the
+Printed: each stop as it comes and why (the last line of the failed run; a "no heartbeat"
+stop is a heartbeat the host missed), then the episodes stored, the served drives' heartbeats as the
 emulator wrote them to the pty (``ergo twin serve``'s log line: how many, how many late, the
 longest gaps as produced and as written, the longest wait inside the emulator), the load
 average during the run (mean, max) and the wall time. No fault is injected: every late
@@ -85,6 +85,7 @@ def main() -> int:
                     break
                 lines = (done.stderr or done.stdout).strip().splitlines() or ["(no output)"]
                 stops.append(f"rc {done.returncode}: {lines[-1]}")
+                print(f"  stopped ({time.monotonic() - t0:.0f} s): {stops[-1]}", flush=True)
                 if len(stops) > args.max_resumes:
                     break
                 cmd = resume if (run / RUN_FILE).exists() else new  # a first session stopped
@@ -104,8 +105,6 @@ def main() -> int:
     for line in serve_log.read_text().splitlines():
         if "drives' heartbeats" in line or "emulated drives:" in line:
             print(f"  served: {line}")
-    for line in stops:
-        print(f"  stopped: {line}")
     return 0 if stored == args.episodes and not missed else 1
 
 
