@@ -6,10 +6,10 @@ processes; every stop resumed.
     python tests/stress/can_heartbeat.py --episodes 30 --busy 0
 
 Printed: each stop as it comes and why (the last line of the failed run; a "no heartbeat"
-stop is a heartbeat the host missed), then the episodes stored, the served drives' heartbeats as the
-emulator wrote them to the pty (``ergo twin serve``'s log line: how many, how many late, the
-longest gaps as produced and as written, the longest wait inside the emulator), the load
-average during the run (mean, max) and the wall time. No fault is injected: every late
+stop is a heartbeat the host missed), then the episodes stored, the served drives' heartbeats
+as the emulator wrote them to the pty (``ergo twin serve``'s log line: how many, dropped, how
+many late, the longest gap), the load average during the run (mean, max) and the wall time.
+``-- --heartbeats threads`` serves them from the server's own threads, for comparison. No fault is injected: every late
 heartbeat is the emulator's or the host's lateness.
 """
 
