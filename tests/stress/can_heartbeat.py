@@ -9,8 +9,8 @@ Printed: each stop as it comes and why (the last line of the failed run; a "no h
 stop is a heartbeat the host missed), then the episodes stored, the served drives' heartbeats
 as the emulator wrote them to the pty (``ergo twin serve``'s log line: how many, dropped, how
 many late, the longest gap), the load average during the run (mean, max) and the wall time.
-``-- --heartbeats threads`` serves them from the server's own threads, for comparison. No fault is injected: every late
-heartbeat is the emulator's or the host's lateness.
+``-- --heartbeats threads`` serves them from the server's own threads, for comparison. No
+fault is injected: every late heartbeat is the emulator's or the host's lateness.
 """
 
 from __future__ import annotations
