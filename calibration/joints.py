@@ -11,8 +11,14 @@ offsets=...)``, whose convention is the one used here::
 
     servo_angle = direction * joint_angle + offset       joint_angle = direction * (servo - offset)
 
-Differences of angles are wrapped to (-pi, pi], so a servo whose reading wraps between its
-zero and a limit (lerobot issue #3586) still calibrates correctly.
+Whole turns follow ``robot.angles``, the rule every arm and emulator shares: differences of
+angles are wrapped to (-pi, pi], so a servo whose reading wraps between its zero and a limit
+(lerobot issue #3586) still calibrates correctly, and each offset is saved in the turn the arm
+reports the zero mark in (its readings' circular mean, not wrapped again). Any turn of an
+offset is the same offset: an arm reads joint angles modulo whole turns and moves the offset
+to the turn its servo or drive reads before it reckons goals and limits in the drive's own
+units (``robot.angles.anchor``), so a zero mark past pi or beyond one turn calibrates and
+drives like any other.
 
 The procedure is a plain function driven by a ``prompt(step)`` callback: interactive on the
 command line (``input()``), scripted in tests (the callback moves the twin's joint). Nothing is
@@ -34,6 +40,7 @@ from typing import Any, Literal
 import numpy as np
 
 from calibration.store import CalibrationError, load_file
+from robot.angles import joint_angle, mean_angle, spread
 from robot.arm import Arm
 from robot.spec import ArmSpec
 
@@ -91,11 +98,11 @@ class JointCalibration:
     upper: np.ndarray
 
     def to_joint(self, servo: np.ndarray) -> np.ndarray:
-        """Raw servo angles (n,) rad -> joint angles (n,) rad."""
-        return self.directions * _wrap(np.asarray(servo, float) - self.offsets)
+        """Raw servo angles (n,) rad -> joint angles (n,) rad, in (-pi, pi]."""
+        return joint_angle(servo, self.offsets, self.directions)
 
     def to_servo(self, joint: np.ndarray) -> np.ndarray:
-        """Joint angles (n,) rad -> raw servo angles (n,) rad."""
+        """Joint angles (n,) rad -> raw servo angles (n,) rad, in each offset's turn."""
         return self.directions * np.asarray(joint, float) + self.offsets
 
     def apply_to(self, spec: ArmSpec) -> ArmSpec:
@@ -121,12 +128,6 @@ class JointCalibration:
             np.asarray(d["lower"], float),
             np.asarray(d["upper"], float),
         )
-
-
-def _wrap(angle: np.ndarray | float) -> np.ndarray:
-    """Angles to (-pi, pi]."""
-    a = np.asarray(angle, float)
-    return np.pi - np.mod(np.pi - a, 2 * np.pi)
 
 
 def _joint_indices(spec: ArmSpec, joints: Sequence[str] | None) -> list[int]:
@@ -171,19 +172,19 @@ def steps_for(spec: ArmSpec, joints: Sequence[str] | None = None) -> list[Step]:
 
 
 def _read_still(arm: Arm, indices: Sequence[int], samples: int) -> np.ndarray | str:
-    """Circular means of ``samples`` readings of the joints ``indices``, shape (len,), rad; or,
-    when one of them moved while being read, what to tell the user."""
+    """Circular means of ``samples`` readings of the joints ``indices``, shape (len,), rad, in
+    the turn the servos read (not wrapped: ``robot.angles.mean_angle``); or, when one of them
+    moved while being read, what to tell the user."""
     idx = list(indices)
     vals = np.array([arm.read().positions[idx] for _ in range(samples)], float)  # (samples, k)
-    d = _wrap(vals - vals[0])
-    spread = np.ptp(d, axis=0)
-    if np.any(spread > MAX_JITTER_RAD):
-        k = int(np.argmax(spread))
+    moved = spread(vals, axis=0)
+    if np.any(moved > MAX_JITTER_RAD):
+        k = int(np.argmax(moved))
         return (
-            f"joint {arm.spec.names[idx[k]]} moved by {math.degrees(spread[k]):.1f} deg while "
+            f"joint {arm.spec.names[idx[k]]} moved by {math.degrees(moved[k]):.1f} deg while "
             "being read: hold it still, then press Enter"
         )
-    return _wrap(vals[0] + d.mean(axis=0))
+    return mean_angle(vals, axis=0)
 
 
 def _check_joint(
@@ -192,8 +193,8 @@ def _check_joint(
     """A joint's readings (raw servo angles, rad) -> (direction, lower, upper) in the joint
     frame, or (what is wrong with the fix, whether its zero mark must be taken again)."""
     name = spec.names[i]
-    d_lo = float(_wrap(lower - zero))
-    d_hi = float(_wrap(upper - zero))
+    d_lo = float(joint_angle(lower, zero))
+    d_hi = float(joint_angle(upper, zero))
     if abs(d_hi - d_lo) < MIN_RANGE_RAD:
         return (
             f"joint {name}: its limits are only {math.degrees(abs(d_hi - d_lo)):.0f} deg apart "

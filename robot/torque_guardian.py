@@ -10,7 +10,8 @@ of the arm's process but a pipe and the bytes to write.
 - The arm keeps the bytes that cut torque, exactly as its own torque-off would send them first,
   in a shared buffer (``EmergencyPayload``, a memfd with a sequence lock): constant for a
   Dynamixel bus (a broadcast WRITE of Torque Enable = 0), refreshed every cycle for CANopen
-  (RPDO1 with "disable operation" and the current targets, then a SYNC).
+  (RPDO1 with "disable voltage", which leaves no CiA 402 state with the power stage on, and
+  the current targets, then a SYNC).
 - ``Guardian`` starts ``python -S -c GUARDIAN`` (standard library only, about 20 ms), which
   opens the port by its path (a second descriptor on the same device: the arm's own is
   untouched), takes a real-time priority where allowed, and blocks on a pipe. The arm's

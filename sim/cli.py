@@ -63,6 +63,18 @@ def register(sub: argparse._SubParsersAction) -> None:
         "the temporary folder; for tests, never read by a calibration)",
     )  # fmt: skip
     serve.add_argument(
+        "--zero-marks", choices=("horn", "anywhere"), default="horn",
+        help="with --stand-in on canopen: where the drives' encoders read each joint's zero "
+        "mark: a few degrees off (horn, the default) or anywhere on the turn and up to two "
+        "turns beyond (anywhere; docs/standin.md)",
+    )  # fmt: skip
+    serve.add_argument(
+        "--heartbeats", choices=("process", "threads"), default="process",
+        help="canopen: the drives' heartbeats from a process of their own (the default: on time "
+        "whatever the server does) or from the server's threads (for comparison; "
+        "docs/canopen.md)",
+    )  # fmt: skip
+    serve.add_argument(
         "--rig-id", default=None, metavar="ID",
         help="the twin's servos fitted to rig ID's arm (its dynamics.json, `ergo calibrate "
         "dynamics`; ERGO_CALIBRATION_DIR); without the file, the nominal servos (docs/dynamics.md)",

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from robot.angles import wrap
 from sim.servo_model import ServoModel, ServoModelError
 from sim.standin.hidden import HiddenCamera, HiddenRig, StandinError
 
@@ -41,6 +42,9 @@ def read_hidden(path: str | os.PathLike[str]) -> HiddenRig:
             ),
             servos=ServoModel.from_dict(data["servos"]),
             ball_xy=(float(data["ball_xy"][0]), float(data["ball_xy"][1])),
+            can_zero_marks=np.asarray(
+                joints.get("canopen_zero_marks_rad", joints["offsets_rad"]), float
+            ),
         )
     except OSError as exc:
         raise StandinError(f"cannot read the hidden parameters {path}: {exc}") from None
@@ -49,11 +53,15 @@ def read_hidden(path: str | os.PathLike[str]) -> HiddenRig:
 
 
 # ---- what a calibration recovered, against the truth --------------------------------------
-def joint_errors(hidden: HiddenRig, joints: dict) -> tuple[np.ndarray, bool]:
-    """A joints.json's ``data`` against the hidden mounting: per joint, the offset's error
-    (deg, wrapped, shape (6,)), and whether every direction is right."""
+def joint_errors(
+    hidden: HiddenRig, joints: dict, bus: str = "dynamixel"
+) -> tuple[np.ndarray, bool]:
+    """A joints.json's ``data`` against the hidden mounting of ``bus`` (``"dynamixel"``: the
+    servos' offsets; ``"canopen"``: the drives' zero marks): per joint, the offset's error
+    (deg, modulo whole turns, shape (6,)), and whether every direction is right."""
     offsets = np.asarray(joints["offsets"], float)
-    err = np.degrees(np.abs(np.angle(np.exp(1j * (offsets - hidden.offsets)))))
+    truth = hidden.can_offsets if bus == "canopen" else hidden.offsets
+    err = np.degrees(np.abs(wrap(offsets - truth)))
     return err, bool(np.array_equal(np.asarray(joints["directions"], float), hidden.directions))
 
 

@@ -6,7 +6,9 @@ this module is the arm on top of it: configuration, units, the CiA 402 state mac
 torque, the health monitor. At connect:
 
 1. every node answers an SDO read of its device type 0x1000 (low word 402: a drive);
-2. units: increments per revolution from 0x608F (position encoder resolution);
+2. units: increments per revolution from 0x608F (position encoder resolution), and the
+   offsets moved by whole turns to the turn each drive's position actual 0x6064 is in
+   (``units.JointScaling.anchored``, ``robot.angles``);
 3. SDO configuration: mode of operation 0x6060 = 8 (cyclic synchronous position), software
    position limits 0x607D from the arm spec, producer heartbeat 0x1017, the drive's guard of
    the host (``robot.canopen.guard``: the host's heartbeat, which the drive consumes, 0x1016,
@@ -17,13 +19,17 @@ torque, the health monitor. At connect:
 
 Each command is one cycle: RPDO1 to every node, then a SYNC; the drives apply the targets at
 the SYNC and answer with TPDO1. ``read`` returns the positions of the latest TPDOs (sending a
-SYNC itself if no command did since the last read). Torque on/off walks the CiA 402 state
-machine (shutdown -> switch on -> operation enabled; operation disabled for torque off) through
-the controlword in RPDO1.
+SYNC itself if no command did since the last read). Torque on walks the CiA 402 state
+machine (shutdown -> switch on -> operation enabled) through the controlword in RPDO1; torque
+off is "disable voltage" (0x00) to every node, which takes a drive out of each state whose
+power stage is on (operation enabled, quick stop active, switched on: ``cia402.POWER_STAGE_ON``)
+in one transition, and is confirmed only once each node reads back a state without it.
 
-Safety (on top of the base class's clamping, watchdog and torque off on exit):
+Safety (on top of the base class's clamping, watchdog and torque off on exit; the reasons are
+``robot.canopen.health``'s):
 - heartbeat consumer: a node silent for longer than 1.5 x its heartbeat time stops the arm;
-- EMCY messages and drives seen in FAULT stop the arm, with the decoded error;
+- EMCY messages and drives seen in FAULT or QUICK STOP ACTIVE stop the arm, with the decoded
+  error;
 - a node that answers no SYNC for ``max_position_age_s`` stops the arm;
 A stop turns torque off on every node at once (from a monitor thread) and makes the next
 ``read``/``command`` raise ``SafetyStop`` with a one-line reason; ``reset_faults()`` clears it.
@@ -51,17 +57,15 @@ from pathlib import Path
 import numpy as np
 
 from robot.arm import Arm, JointState, RecoveryPolicy
-from robot.canopen import cia402, emcy
+from robot.canopen import cia402, health
 from robot.canopen.bus import DEFAULT_BITRATE, CanBusSpec, parse_can_spec
 from robot.canopen.cia402 import State
 from robot.canopen.config import EDS_PATH, PTY_SETTINGS, CanArmConfig, config_for
 from robot.canopen.guard import HostHeartbeat, configure_drive_guard
 from robot.canopen.network import (
-    HEARTBEAT_OPERATIONAL,
     CanNodeError,
     CyclePreemptedError,
     DriveNetwork,
-    safe_decode,
 )
 from robot.canopen.units import JointScaling
 from robot.errors import BusError, SafetyStop
@@ -76,9 +80,6 @@ __all__ = ["EDS_PATH", "PTY_SETTINGS", "CanArm", "CanArmConfig", "config_for"]
 
 CSP = 8  # modes of operation 0x6060: cyclic synchronous position (CiA 402-2)
 DEVICE_PROFILE_402 = 402  # low word of 0x1000 for a drive (CiA 402-2)
-# A heartbeat lost to a garbled SLCAN line while the node's TPDOs keep coming is excused for up
-# to this many heartbeat limits (guess: a burst of noise of a few hundred ms; longer is a stop).
-GARBLED_HEARTBEAT_GRACE = 3.0
 
 
 class CanArm(Arm):
@@ -198,7 +199,10 @@ class CanArm(Arm):
                     f"{increments}/{revolutions} increments per revolution"
                 )
             cpr[i] = increments / revolutions
-        self.scaling = JointScaling(cpr, self._directions, self._offsets)
+        # the offsets in the turn each drive counts in now (robot.angles): a single-turn
+        # encoder reads 0..2 pi at power on, a multi-turn one any turn
+        here = np.array([net.sdo_read(i, 0x6064) for i in range(self.spec.n)], dtype=float)
+        self.scaling = JointScaling(cpr, self._directions, self._offsets).anchored(here)
         net.velocity_units = (self.scaling.counts_per_rev, self._directions)
         lo, hi = self.scaling.limits_to_counts(self.spec.lower, self.spec.upper)
         for i in range(self.spec.n):
@@ -267,60 +271,11 @@ class CanArm(Arm):
                     self._trip(reason)
 
     def _health(self) -> str | None:
-        """A one-line reason to stop the arm, or None when every node is healthy."""
-        if not self.net.started:
-            return None
-        now = time.monotonic()
-        limit = self.config.heartbeat_factor * self._heartbeat_s
-        net = self.net
-        with net.cond:
-            for i in range(self.spec.n):
-                active = net.emcy_active[i]
-                if active is not None:
-                    return f"safety stop: {net.who(i)}: {emcy.describe(*active)}; torque off"
-            for i in range(self.spec.n):
-                silent = now - net.heartbeat_at[i]
-                if silent > limit and not self._heartbeat_eaten_by_the_line(i, now, limit):
-                    return (
-                        f"safety stop: {net.who(i)} lost: no heartbeat for {silent:.2f} s "
-                        f"(heartbeat time {self._heartbeat_s:.3f} s x "
-                        f"{self.config.heartbeat_factor}){net.garbled_note()}; torque off"
-                    )
-                if net.nmt_state[i] != HEARTBEAT_OPERATIONAL:
-                    return (
-                        f"safety stop: {net.who(i)} left NMT OPERATIONAL (heartbeat state "
-                        f"{net.nmt_state[i]}); torque off"
-                    )
-            for i in range(self.spec.n):
-                if net.rx_seq[i] >= 0 and safe_decode(net.statusword[i]) is State.FAULT:
-                    return (
-                        f"safety stop: {net.who(i)} in FAULT (statusword "
-                        f"0x{int(net.statusword[i]):04X}); torque off"
-                    )
-                waited = now - net.late_since[i]  # NaN when not waiting
-                if waited > self.config.max_position_age_s:
-                    return (
-                        f"safety stop: {net.who(i)} answered no SYNC for {waited:.2f} s "
-                        f"({net.missed[i]} cycles){net.garbled_note()}; torque off"
-                    )
-        return None
-
-    def _heartbeat_eaten_by_the_line(self, i: int, now: float, limit: float) -> bool:
-        """Whether node ``i``'s overdue heartbeat was most likely lost on the serial line
-        between the SLCAN adapter and the host rather than by the node: garbled lines were
-        dropped since its last heartbeat, and its TPDOs, which only a live node in NMT
-        OPERATIONAL sends, kept coming (the last within ``limit``). Excused for at most
-        ``GARBLED_HEARTBEAT_GRACE`` times ``limit``: past that the node counts as lost
-        whatever the line did. (On the CAN wire itself a frame is not lost: the controllers
-        retransmit it; an SLCAN line has no checksum and no retransmission.) Call under
-        ``net.cond``."""
-        net = self.net
-        silent = now - net.heartbeat_at[i]
-        return bool(
-            silent <= GARBLED_HEARTBEAT_GRACE * limit
-            and net.garbled_at > net.heartbeat_at[i]
-            and net.rx_seq[i] >= 0
-            and now - net.rx_time[i] <= limit
+        """A one-line reason to stop the arm, or None when every node is healthy
+        (``robot.canopen.health``)."""
+        cfg = self.config
+        return health.reason_to_stop(
+            self.net, self._heartbeat_s, cfg.heartbeat_factor, cfg.max_position_age_s
         )
 
     def _trip(self, reason: str) -> None:
@@ -434,9 +389,9 @@ class CanArm(Arm):
             self._torque_off()
 
     def _torque_off(self) -> None:
-        """Disable operation on every node, confirmed by each node that can answer. Nodes that
-        cannot (lost, or the link failed under the exchange) get the torque-off frames once
-        more without confirmation (``DriveNetwork.blind_torque_off``), and
+        """Power stage off on every node (``_cut_power``), confirmed by each node that can
+        answer. Nodes that cannot (lost, or the link failed under the exchange) get the
+        torque-off frames once more without confirmation (``DriveNetwork.blind_torque_off``), and
         ``torque_off_report`` says so; a failed exchange still raises (``CanNodeError``)."""
         net = self.net
         if net.network is None:  # closed under the arm (a failed reconnection): blind only
@@ -451,7 +406,7 @@ class CanArm(Arm):
         for attempt in range(2):
             try:
                 with net.guard.hold():
-                    silent = self._drive_to(State.SWITCHED_ON)
+                    silent = self._cut_power()
                 break
             except CyclePreemptedError:
                 # another thread is cutting torque (a safety stop, a signal): once it is done,
@@ -475,35 +430,49 @@ class CanArm(Arm):
                 level = logging.DEBUG if quiet else logging.WARNING
                 log.log(level, "torque off %s", self.torque_off_report)
 
-    def _drive_to(self, target: State) -> list[int]:
-        """Walk every node to ``target`` (OPERATION_ENABLED or SWITCHED_ON) through the
-        controlword in RPDO1, one transition per cycle, holding the joints where they are.
+    def _cut_power(self) -> list[int]:
+        """Torque off: "disable voltage" (``cia402.CW_TORQUE_OFF``) to every node at once (lost
+        ones too) in the first cycle, with the joints held where they are, then cycles until
+        every node that can still answer reads back a state whose power stage is off
+        (``cia402.torque_is_off``: from OPERATION ENABLED, QUICK STOP ACTIVE and SWITCHED ON
+        alike). Returns the lost nodes last heard with their power stage on (torque off not
+        confirmed).
 
-        Torque off tells every node at once (lost ones too) in the first cycle, then waits
-        for the confirmation of the nodes that can still give one; nodes below SWITCHED_ON or
-        in FAULT already have their torque off and are left there. Returns the lost nodes
-        last heard in OPERATION ENABLED (torque off not confirmed), empty for torque on.
+        Raises:
+            CanNodeError: a node that answers kept its power stage on for ``state_timeout_s``.
         """
         net = self.net
         deadline = time.monotonic() + self.config.state_timeout_s
         with net.guard.hold():
             with net.cond:
                 net.target[:] = net.counts
-            if target is State.SWITCHED_ON:
-                enabling = (net.cw & 0x8F) == cia402.CW_ENABLE_OPERATION
-                net.cw[enabling] = cia402.CW_DISABLE_OPERATION
-                while True:
-                    net.cycle(send_rpdo=True, on_sent=self._torque_off_sent)
-                    lost = self._lost()
-                    enabled = [
-                        i for i, st in enumerate(net.states()) if st is State.OPERATION_ENABLED
-                    ]
-                    todo = [i for i in enabled if i not in lost]
-                    if not todo:
-                        return [i for i in enabled if i in lost]
-                    if time.monotonic() > deadline:
-                        names = ", ".join(net.who(i) for i in todo)
-                        raise CanNodeError(f"torque off not confirmed by {names}")
+            net.cw[:] = cia402.CW_TORQUE_OFF
+            while True:
+                net.cycle(send_rpdo=True, on_sent=self._torque_off_sent)
+                lost = self._lost()
+                on = [i for i, st in enumerate(net.states()) if not cia402.torque_is_off(st)]
+                todo = [i for i in on if i not in lost]
+                if not todo:
+                    return [i for i in on if i in lost]
+                if time.monotonic() > deadline:
+                    raise CanNodeError(f"torque off not confirmed by {self._where(todo)}")
+
+    def _where(self, nodes: list[int]) -> str:
+        """``node 3 (m3) in quick stop active, ...``: the nodes and their last states."""
+        states = self.net.states()
+        return ", ".join(
+            f"{self.net.who(i)} in {states[i].value if states[i] else 'an unknown state'}"
+            for i in nodes
+        )
+
+    def _drive_to(self, target: State) -> None:
+        """Walk every node to ``target`` (OPERATION_ENABLED) through the controlword in
+        RPDO1, one transition per cycle, holding the joints where they are."""
+        net = self.net
+        deadline = time.monotonic() + self.config.state_timeout_s
+        with net.guard.hold():
+            with net.cond:
+                net.target[:] = net.counts
             while True:
                 states = net.states()
                 todo = []
@@ -520,13 +489,9 @@ class CanArm(Arm):
                     if cw is not None:
                         net.cw[i] = cw
                 if not todo:
-                    return []
+                    return
                 if time.monotonic() > deadline:
-                    names = ", ".join(
-                        f"{net.who(i)} in {states[i].value if states[i] else 'an unknown state'}"
-                        for i in todo
-                    )
-                    raise CanNodeError(f"timeout reaching {target.value!r}: {names}")
+                    raise CanNodeError(f"timeout reaching {target.value!r}: {self._where(todo)}")
                 net.cycle(send_rpdo=True)
 
     def _emergency_torque_off(self) -> None:

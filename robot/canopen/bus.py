@@ -314,6 +314,14 @@ def tolerant_slcan_bus() -> Any:
             self.garbled_at = time.monotonic()
             return None, False
 
+        def unread_bytes(self) -> int:
+            """Bytes the adapter sent that this host has not decoded yet: waiting in the
+            port, or read into the line buffer (0 when the port cannot say)."""
+            try:
+                return int(self.serialPortOrig.in_waiting) + len(self._buffer)
+            except Exception:  # a closed or failed port: nothing known to be waiting
+                return 0
+
         def _recv_internal(self, timeout: float | None) -> tuple[Any, bool]:
             if len(self._buffer) > MAX_SLCAN_LINE:
                 return self._garbled()

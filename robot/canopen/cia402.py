@@ -50,6 +50,27 @@ CW_SWITCH_ON = 0x07  # also "disable operation" from operation enabled
 CW_DISABLE_OPERATION = 0x07
 CW_ENABLE_OPERATION = 0x0F
 CW_FAULT_RESET = 0x80
+CW_QUICK_STOP_BIT = 0x04  # bit 2: 0 = quick stop active
+
+# Torque off: "disable voltage" takes a drive out of every state whose power stage is on, in
+# one transition (CiA 402-2: 9 from OPERATION ENABLED, 10 from SWITCHED ON, 12 from QUICK STOP
+# ACTIVE; 7 from READY TO SWITCH ON), to SWITCH ON DISABLED; elsewhere it is no transition
+# (FAULT needs bit 7). "Disable operation" (0x07) would leave a drive in QUICK STOP ACTIVE
+# there and one in OPERATION ENABLED in SWITCHED ON, its power stage still on.
+CW_TORQUE_OFF = CW_DISABLE_VOLTAGE
+# The states whose power stage is on, where the motor may hold torque (CiA 402-2 "State
+# coding": switched on = power amplifier ready; operation enabled; quick stop active, holding
+# or braking; fault reaction active, braking before FAULT). Torque off is confirmed when a
+# drive reports none of them: SWITCH ON DISABLED, READY TO SWITCH ON, NOT READY TO SWITCH ON
+# or FAULT.
+POWER_STAGE_ON = frozenset(
+    {
+        State.SWITCHED_ON,
+        State.OPERATION_ENABLED,
+        State.QUICK_STOP_ACTIVE,
+        State.FAULT_REACTION_ACTIVE,
+    }
+)
 
 # Extra statusword bits the emulated drive sets (CiA 402-2 bit definitions above).
 SW_VOLTAGE_ENABLED = 0x0010
@@ -81,6 +102,12 @@ def decode_statusword(statusword: int) -> State:
         if statusword & mask == value:
             return state
     raise Cia402Error(f"statusword 0x{statusword:04X} encodes no CiA 402 state")
+
+
+def torque_is_off(state: State | None) -> bool:
+    """Whether a drive in ``state`` has its power stage off (None, a statusword no state has,
+    is not a confirmation)."""
+    return state is not None and state not in POWER_STAGE_ON
 
 
 def encode_statusword(state: State, extra: int = SW_REMOTE) -> int:

@@ -428,29 +428,31 @@ class DriveNetwork:
     # ---- the control cycle -----------------------------------------------------------------
     def torque_off_lines(self) -> bytes:
         """What cuts every drive's torque, as SLCAN lines (Lawicel ``tIIILDD..\\r``): RPDO1 to
-        each node with "disable operation" (to SWITCHED_ON, or no change: no state with torque
-        follows it) and its current target, then a SYNC (the RPDOs are synchronous). The
-        bytes a torque-off guardian writes to the adapter (``robot.torque_guardian``)."""
+        each node with "disable voltage" (``cia402.CW_TORQUE_OFF``: to SWITCH ON DISABLED from
+        every state whose power stage is on, quick stop active included; no change elsewhere)
+        and its current target, then a SYNC (the RPDOs are synchronous). The bytes a
+        torque-off guardian writes to the adapter (``robot.torque_guardian``)."""
         lines = [
-            slcan_line(RPDO1_BASE + nid, struct.pack("<Hi", cia402.CW_DISABLE_OPERATION, int(t)))
+            slcan_line(RPDO1_BASE + nid, struct.pack("<Hi", cia402.CW_TORQUE_OFF, int(t)))
             for nid, t in zip(self.node_ids, self.target, strict=True)
         ]
         return b"".join([*lines, slcan_line(SYNC_COB_ID, b"")])
 
     def torque_off_frames(self) -> list[tuple[int, bytes]]:
         """Every frame of a torque off that needs no answer, (COB-ID, data): RPDO1 "disable
-        operation" with the current target to each node and a SYNC (drives in NMT
-        OPERATIONAL apply it at the SYNC), then an SDO write of "disable operation" to each
-        node's controlword (applied at once in PRE-OPERATIONAL too: a drive that was reset or
-        never configured; its answer is not awaited). A drive in OPERATION ENABLED goes to
-        SWITCHED ON (torque off); in the lower states "disable operation" is no transition
-        or "switch on" from READY TO SWITCH ON, which leaves torque off (CiA 402-2)."""
+        voltage" with the current target to each node and a SYNC (drives in NMT OPERATIONAL
+        apply it at the SYNC), then an SDO write of "disable voltage" to each node's
+        controlword (applied at once in PRE-OPERATIONAL too: a drive that was reset or never
+        configured; its answer is not awaited). A drive in OPERATION ENABLED, QUICK STOP
+        ACTIVE, SWITCHED ON or READY TO SWITCH ON goes to SWITCH ON DISABLED (CiA 402-2
+        transitions 9, 12, 10, 7: ``cia402.CW_TORQUE_OFF``); in the other states it is no
+        transition."""
         frames = [
-            (RPDO1_BASE + nid, struct.pack("<Hi", cia402.CW_DISABLE_OPERATION, int(t)))
+            (RPDO1_BASE + nid, struct.pack("<Hi", cia402.CW_TORQUE_OFF, int(t)))
             for nid, t in zip(self.node_ids, self.target, strict=True)
         ]
         frames.append((SYNC_COB_ID, b""))
-        frames += [sdo_controlword(nid, cia402.CW_DISABLE_OPERATION) for nid in self.node_ids]
+        frames += [sdo_controlword(nid, cia402.CW_TORQUE_OFF) for nid in self.node_ids]
         return frames
 
     def blind_torque_off(self) -> str:
@@ -478,8 +480,7 @@ class DriveNetwork:
                     for msg in messages:
                         network.bus.send(msg)
                 return (
-                    f"sent to node(s) {ids} without confirmation (disable operation by RPDO "
-                    f"and SDO)"
+                    f"sent to node(s) {ids} without confirmation (disable voltage by RPDO and SDO)"
                 )
             except Exception as exc:
                 log.warning("blind torque off on the open bus %s: %s", self.bus_spec, exc)
@@ -507,7 +508,7 @@ class DriveNetwork:
             return f"could not be sent ({detail})"
         return (
             f"sent to node(s) {ids} on a reopened adapter without confirmation (disable "
-            f"operation by RPDO and SDO)"
+            f"voltage by RPDO and SDO)"
         )
 
     def cycle(self, send_rpdo: bool = True, on_sent: Callable[[], None] | None = None) -> None:

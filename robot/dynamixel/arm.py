@@ -11,6 +11,9 @@ Joint angles versus servo angles, per joint ``j`` (rad):
 
 where ``servo_angle`` is 0 at the servo's centre position (512 on an XL-320). Directions are
 +1/-1 (the Poppy configuration's "direct"/"indirect"); offsets come from the joint calibration.
+Whole turns follow ``robot.angles``: a joint angle read is wrapped to (-pi, pi]; a goal is
+reckoned from the offset in the servo's own turn, about its centre (a servo counts no turns),
+and clipped to the servo's range, never wrapped round to its other end.
 
 Safety: clamping, the watchdog and torque-off on disconnect are in ``robot.Arm``. Here, a
 servo's hardware alert (overload, overheating, voltage) turns every servo's torque off and
@@ -30,6 +33,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from robot.angles import anchor, joint_angle, raw_angle
 from robot.arm import Arm, JointState, RecoveryPolicy
 from robot.dynamixel import protocol as proto
 from robot.dynamixel.bus import (
@@ -100,6 +104,7 @@ class DynamixelArm(Arm):
         if len(set(self.ids)) != n:
             raise ValueError(f"servo ids must be distinct, got {self.ids}")
         self.directions, self.offsets = joint_mounting(n, directions, offsets)
+        self._servo_offsets = anchor(self.offsets, 0.0)  # in the servo's turn (robot.angles)
         if slow_every < 1:
             raise ValueError(f"slow_every must be >= 1, got {slow_every}")
         if return_delay_us is not None and not 0 <= return_delay_us <= 508:
@@ -128,12 +133,13 @@ class DynamixelArm(Arm):
 
     # ---- conversions -------------------------------------------------------------------------
     def joint_to_steps(self, q: np.ndarray) -> np.ndarray:
-        """Joint angles, shape (n,), rad -> raw goal positions, shape (n,)."""
-        return self.model.rad_to_steps(self.directions * np.asarray(q, float) + self.offsets)
+        """Joint angles, shape (n,), rad -> raw goal positions, shape (n,) (clipped to the
+        servo's range)."""
+        return self.model.rad_to_steps(raw_angle(q, self._servo_offsets, self.directions))
 
     def steps_to_joint(self, steps: np.ndarray) -> np.ndarray:
-        """Raw positions, shape (n,) -> joint angles, shape (n,), rad."""
-        return self.directions * (self.model.steps_to_rad(steps) - self.offsets)
+        """Raw positions, shape (n,) -> joint angles in (-pi, pi], shape (n,), rad."""
+        return joint_angle(self.model.steps_to_rad(steps), self.offsets, self.directions)
 
     @property
     def position_resolution(self) -> np.ndarray:

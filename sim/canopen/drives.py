@@ -1,11 +1,11 @@
 """Six emulated CiA 402 servo drives (CANopen nodes 1..6) backed by the twin's joints.
 
-Each drive is a ``canopen.LocalNode`` built from ``robot/canopen/ergo_drive.eds``: the
-library's SDO server answers configuration requests, its NMT slave produces the heartbeat and
-its EMCY producer reports faults. This module adds what a servo drive does:
+Each drive is a ``sim.canopen.drive.EmulatedDrive``: a ``canopen.LocalNode`` built from
+``robot/canopen/ergo_drive.eds`` (the library's SDO server answers configuration requests, its
+NMT slave produces the heartbeat and its EMCY producer reports faults) with the CiA 402 power
+state machine (``robot.canopen.cia402``), driven by the controlword 0x6040 (from an RPDO or an
+SDO write), and its encoder. This module puts six on a bus and adds the cycle:
 
-- the CiA 402 power state machine (``robot.canopen.cia402``), driven by the controlword
-  0x6040 (from an RPDO or an SDO write);
 - cyclic synchronous position (mode 8): synchronous RPDOs received between two SYNCs are
   applied at the SYNC; the joint targets go to the twin; then every node transmits its
   synchronous TPDOs (statusword 0x6041, position actual 0x6064 with the default mapping);
@@ -23,9 +23,9 @@ samples its position at the SYNC; it waits at most ``SYNC_LOCK_WAIT_S`` for the 
 else the TPDOs carry the latest positions of a pump thread, which exchanges with the twin
 between SYNCs (every 5 ms: for SDO reads and state changes between SYNCs).
 
-The twin has one torque switch for the whole arm: it is on only while all six drives are in
-OPERATION ENABLED (a drive out of it, e.g. in FAULT, leaves the whole arm limp). Joints whose
-drive is not enabled hold their current position as target.
+Each joint has its torque while its drive holds it (OPERATION ENABLED, or QUICK STOP ACTIVE
+holding where it stopped); a joint whose drive does not is limp (its target its current
+position).
 
 Fault injection (for tests and ``ergo twin serve``): a rate of lost PDO/SYNC frames (in both
 directions; heartbeats and SDOs are not dropped), a node that stops its heartbeat (and,
@@ -39,7 +39,6 @@ so a host only ever sees a frame late or, if the bus gives up, not at all (a dro
 from __future__ import annotations
 
 import logging
-import math
 import random
 import threading
 import time
@@ -47,30 +46,22 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-import canopen
 import numpy as np
-from canopen.sdo import SdoAbortedError
 
 from robot.canopen import cia402, emcy
 from robot.canopen.bus import open_bus
 from robot.canopen.cia402 import State
 from robot.canopen.config import EDS_PATH
+from sim.canopen.drive import FAULT_REGISTER, EmulatedDrive
 from sim.canopen.faulty import SYNC_COB_ID, FaultyNetwork
-from sim.canopen.guard import HostGuard, check_guard_write
+from sim.canopen.guard import HostGuard
 from sim.twin import Twin
 
 log = logging.getLogger(__name__)
 
 NODE_IDS = (1, 2, 3, 4, 5, 6)
-CSP = 8  # modes of operation 0x6060: cyclic synchronous position (CiA 402-2)
 # 0x6065 value meaning "following error monitoring off" (CiA 402-2).
 WINDOW_OFF = 0xFFFFFFFF
-# SDO abort codes (CiA 301 table "SDO abort codes").
-ABORT_VALUE_RANGE = 0x06090030
-ABORT_DEVICE_STATE = 0x08000022
-# Error register bits set while in fault (generic + device profile; see robot.canopen.emcy).
-FAULT_REGISTER = emcy.FOLLOWING_ERROR_REGISTER
-SUPPORTED_MODES = (CSP,)
 NMT_RESET_NODE, NMT_RESET_COMM = 0x81, 0x82
 NMT_PRE_OPERATIONAL = 0x80
 # Real-time mode: longest interval between two exchanges with the twin, s (guess: a fifth of
@@ -80,203 +71,6 @@ PUMP_PERIOD_S = 0.005
 # latest positions instead, s (guess: a fifth of the 40 Hz control period; the lock is held
 # for a physics catch-up, about 6 ms per simulated s, or a scene copy for a render).
 SYNC_LOCK_WAIT_S = 0.005
-
-
-class EmulatedDrive:
-    """One CiA 402 node: the object dictionary, the state machine and one twin joint.
-
-    Args:
-        node_id: CANopen node id (1..127).
-        joint: index of the twin joint it drives (0..5).
-        eds: the drive's EDS file.
-        direction: +1 or -1, how the drive is "mounted" (drive counts grow with the joint or
-            against it).
-        offset: joint angle at drive position 0, rad.
-    """
-
-    def __init__(
-        self, node_id: int, joint: int, eds: Path, direction: float = 1.0, offset: float = 0.0
-    ) -> None:
-        if not 1 <= node_id <= 127:
-            raise ValueError(f"CANopen node id must be 1..127, got {node_id}")
-        self.node_id = node_id
-        self.joint = joint
-        self.direction = float(direction)
-        self.offset = float(offset)
-        self.node = canopen.LocalNode(node_id, canopen.import_od(str(eds), node_id))
-        self.state = State.NOT_READY_TO_SWITCH_ON
-        self.controlword = 0
-        self.error_code = 0
-        self.demand = 0  # position demand, increments (the target the drive follows)
-        self.actual = 0  # position actual, increments
-        self.enabled_since: float | None = None
-        # wall time (time.monotonic, system-wide) the drive last left OPERATION ENABLED, for
-        # measuring how fast a host cuts torque
-        self.disabled_at: float | None = None
-        self.heartbeat_stopped = False
-        self.muted = False  # sends no TPDO (on top of a stopped heartbeat: a dead node)
-        self._rpdo_pending: list[Any] = []
-        self._cpr: float | None = None
-        self._mode: int | None = None
-        self._sync_count = 0
-        self.node.add_read_callback(self._on_read)
-        self.node.add_write_callback(self._on_write)
-        # Serial number: the node id, so that a scan tells the six drives apart.
-        self.node.data_store.setdefault(0x1018, {})[4] = node_id.to_bytes(4, "little")
-
-    # ---- object dictionary ---------------------------------------------------------------
-    def od_int(self, index: int, subindex: int = 0) -> int:
-        obj = self.node.object_dictionary[index]
-        var = obj if isinstance(obj, canopen.objectdictionary.ODVariable) else obj[subindex]
-        return int(var.decode_raw(self.node.get_data(index, subindex)))
-
-    @property
-    def counts_per_rev(self) -> float:
-        """Increments per revolution from 0x608F (sub 1 / sub 2), cached."""
-        if self._cpr is None:
-            self._cpr = self.od_int(0x608F, 1) / max(1, self.od_int(0x608F, 2))
-        return self._cpr
-
-    @property
-    def mode(self) -> int:
-        """Modes of operation 0x6060, cached."""
-        if self._mode is None:
-            self._mode = self.od_int(0x6060)
-        return self._mode
-
-    def statusword(self) -> int:
-        extra = cia402.SW_REMOTE
-        if self.state is State.OPERATION_ENABLED and self.mode == CSP:
-            extra |= cia402.SW_CSP_FOLLOWING
-        return cia402.encode_statusword(self.state, extra)
-
-    def _on_read(self, index: int, subindex: int, od: Any) -> int | None:
-        """Live values of the dynamic objects (the rest comes from the data store/EDS)."""
-        if index == 0x6041:
-            return self.statusword()
-        if index == 0x6064:
-            return self.actual
-        if index == 0x6061:
-            return self.mode
-        if index == 0x60F4:
-            return self.actual - self.demand
-        if index == 0x603F:
-            return self.error_code
-        if index == 0x1001:
-            return FAULT_REGISTER if self.state is State.FAULT else 0
-        return None
-
-    def _on_write(self, index: int, subindex: int, od: Any, data: bytes) -> None:
-        check_guard_write(index, data)
-        if index == 0x608F and subindex in (1, 2):
-            value = int.from_bytes(data[:4], "little")
-            inc = value if subindex == 1 else self.od_int(0x608F, 1)
-            revs = value if subindex == 2 else self.od_int(0x608F, 2)
-            if inc <= 0 or revs <= 0:
-                raise SdoAbortedError(ABORT_VALUE_RANGE)
-            self._cpr = inc / revs
-        if index == 0x6060:
-            mode = int.from_bytes(data, "little", signed=True)
-            if mode not in SUPPORTED_MODES and mode != 0:
-                raise SdoAbortedError(ABORT_VALUE_RANGE)
-            if self.state is State.OPERATION_ENABLED:
-                raise SdoAbortedError(ABORT_DEVICE_STATE)
-            self._mode = mode
-        elif index == 0x6040:
-            self.apply_controlword(int.from_bytes(data[:2], "little"))
-        elif index == 0x607A:
-            self.demand = self._limit(int.from_bytes(data[:4], "little", signed=True))
-
-    def _limit(self, counts: int) -> int:
-        """Clamp a target to the software position limits 0x607D."""
-        lo, hi = self.od_int(0x607D, 1), self.od_int(0x607D, 2)
-        return min(max(counts, lo), hi) if lo < hi else counts
-
-    # ---- state machine ---------------------------------------------------------------------
-    def apply_controlword(self, cw: int) -> None:
-        """Run the CiA 402 state machine on a new controlword."""
-        before = self.state
-        self.state = cia402.next_state(self.state, cw, self.controlword)
-        self.controlword = cw
-        if before is State.FAULT and self.state is not State.FAULT:
-            self.error_code = 0
-            self.node.emcy.reset(0)  # EMCY 0x0000: error reset
-        if self.state is State.OPERATION_ENABLED and before is not State.OPERATION_ENABLED:
-            self.demand = self.actual  # CSP: take over where the joint is, no jump
-            self.enabled_since = time.monotonic()
-        elif self.state is not State.OPERATION_ENABLED:
-            self.enabled_since = None
-            if before is State.OPERATION_ENABLED:
-                self.disabled_at = time.monotonic()
-
-    def trip(self, code: int = emcy.FOLLOWING_ERROR, register: int = FAULT_REGISTER) -> None:
-        """Fault (transition 13 then 14): FAULT state, error code 0x603F and an EMCY frame."""
-        if self.state is State.FAULT:
-            return
-        self.state = cia402.next_state(cia402.fault(self.state), self.controlword)
-        self.error_code = code
-        self.enabled_since = None
-        log.warning("drive %d: %s", self.node_id, emcy.describe(code, register))
-        self.node.emcy.send(code, register)
-
-    # ---- cyclic data -----------------------------------------------------------------------
-    @property
-    def operational(self) -> bool:
-        return self.node.nmt.state == "OPERATIONAL"
-
-    def load_pdo_config(self) -> None:
-        """(Re)read the PDO communication and mapping objects from the local dictionary (the
-        master wrote them by SDO) and subscribe the RPDOs."""
-        self.node.rpdo.read(from_od=False)
-        self.node.tpdo.read(from_od=False)
-        for pdo in self.node.rpdo.map.values():
-            if self._on_rpdo not in pdo.callbacks:
-                pdo.add_callback(self._on_rpdo)
-
-    def _on_rpdo(self, pdo: Any) -> None:
-        if not self.operational:
-            return
-        if pdo.trans_type is not None and pdo.trans_type <= 240:
-            self._rpdo_pending.append(pdo)  # synchronous: applied at the next SYNC
-        else:
-            self._apply_rpdo(pdo)
-
-    def _apply_rpdo(self, pdo: Any) -> None:
-        data = bytes(pdo.data)
-        for var in pdo.map:
-            if var.length and var.offset is not None:
-                chunk = data[var.offset // 8 : (var.offset + var.length) // 8]
-                if len(chunk) * 8 == var.length:
-                    self.node.set_data(var.index, var.subindex, chunk)
-
-    def apply_pending(self) -> None:
-        """At SYNC: apply the synchronous RPDOs received since the previous SYNC."""
-        pending, self._rpdo_pending = self._rpdo_pending, []
-        for pdo in pending:
-            self._apply_rpdo(pdo)
-
-    def transmit_sync_tpdos(self) -> None:
-        """At SYNC: transmit the synchronous TPDOs whose period (transmission type) is due."""
-        self._sync_count += 1
-        if self.muted or not self.operational:
-            return
-        for pdo in self.node.tpdo.map.values():
-            tt = pdo.trans_type
-            if not pdo.enabled or tt is None or tt > 240:
-                continue
-            if tt > 1 and self._sync_count % tt:
-                continue
-            for var in pdo.map:
-                if var.length:
-                    var.set_data(self.node.get_data(var.index, var.subindex))
-            pdo.transmit()
-
-    def joint_target(self, counts_per_rev: float) -> float:
-        """The twin target for this joint, rad (the demand, in CSP while enabled)."""
-        return self.offset + self.direction * self.demand * math.tau / counts_per_rev
-
-    def to_counts(self, q: float, counts_per_rev: float) -> int:
-        return round(self.direction * (q - self.offset) * counts_per_rev / math.tau)
 
 
 class EmulatedDrives:
@@ -294,6 +88,10 @@ class EmulatedDrives:
         late_rate: fraction of SYNCs whose TPDOs get that delay (1: every SYNC).
         seed: seed of the loss draws.
         eds: the drives' EDS.
+        single_turn: single-turn absolute encoders (each reads 0..2 pi at power on, then
+            counts on) instead of multi-turn ones (the count the offsets give, any turn).
+        heartbeats: who produces the nodes' heartbeats (``HeartbeatProducer.task``; None:
+            python-can's periodic tasks on ``bus``).
     """
 
     def __init__(
@@ -309,6 +107,8 @@ class EmulatedDrives:
         late_rate: float = 1.0,
         seed: int = 0,
         eds: Path = EDS_PATH,
+        single_turn: bool = False,
+        heartbeats: Callable[[int, bytes, float], Any] | None = None,
     ) -> None:
         if len(node_ids) != 6 or len(set(node_ids)) != 6:
             raise ValueError(f"need six distinct node ids, got {list(node_ids)}")
@@ -325,12 +125,14 @@ class EmulatedDrives:
         self.late_syncs = 0  # SYNCs whose TPDOs were delayed
         self._late_rng = random.Random(seed + 1)
         self.drives = [
-            EmulatedDrive(nid, j, eds, directions[j], offsets[j]) for j, nid in enumerate(node_ids)
+            EmulatedDrive(nid, j, eds, directions[j], offsets[j], single_turn)
+            for j, nid in enumerate(node_ids)
         ]
         self._by_id = {d.node_id: d for d in self.drives}
         self._owns_bus = isinstance(bus, str)
         self._bus = open_bus(bus) if isinstance(bus, str) else bus
         self.network = FaultyNetwork(self._bus, drop_rate, seed)
+        self.network.heartbeats = heartbeats
         self._lock = threading.RLock()
         self._scheduled_faults: dict[int, float] = {}
         self.syncs = 0
@@ -361,8 +163,6 @@ class EmulatedDrives:
             q = self.twin.joint_positions()
         with self._lock:
             self._set_actuals(q)
-            for d in self.drives:
-                d.demand = d.actual
         for d in self.drives:
             self._boot(d)
         if not self.sync_step_s:
@@ -415,6 +215,9 @@ class EmulatedDrives:
         self.stop()
 
     def _boot(self, d: EmulatedDrive) -> None:
+        d.power_on(float(self._q[d.joint]))
+        d.actual = d.to_counts(float(self._q[d.joint]), d.counts_per_rev)
+        d.demand = d.actual
         d.state = State.NOT_READY_TO_SWITCH_ON
         d.state = cia402.next_state(d.state, 0)  # self test done: switch on disabled
         d.controlword = 0
@@ -442,12 +245,13 @@ class EmulatedDrives:
 
     # ---- the cycle -------------------------------------------------------------------------
     def _plan(self) -> tuple[np.ndarray, np.ndarray]:
-        """Which joints are driven (OPERATION ENABLED in CSP) and their targets, shape (6,)
-        each (bool, rad). Call under ``self._lock``."""
+        """Which joints are driven (their drive holds torque: OPERATION ENABLED or QUICK STOP
+        ACTIVE, in CSP) and their targets, shape (6,) each (bool, rad). Call under
+        ``self._lock``."""
         enabled = np.zeros(6, dtype=bool)
         targets = np.zeros(6)
         for d in self.drives:
-            enabled[d.joint] = d.state is State.OPERATION_ENABLED and d.mode == CSP
+            enabled[d.joint] = d.holds_torque
             targets[d.joint] = d.joint_target(d.counts_per_rev)
         return enabled, targets
 
@@ -459,8 +263,8 @@ class EmulatedDrives:
             self.twin.catch_up()  # the physics at the wall time (a no-op without a real-time loop)
             q = self.twin.joint_positions_now()
             self.twin.set_targets(np.where(enabled, targets, q))
-            if self.twin.torque_enabled() != bool(enabled.all()):
-                self.twin.set_torque(bool(enabled.all()))
+            if not np.array_equal(self.twin.torque_mask(), enabled):
+                self.twin.set_joint_torque(enabled)
             if step_s:
                 self.twin.step(step_s)
                 q = self.twin.joint_positions()
@@ -582,6 +386,12 @@ class EmulatedDrives:
         drive (CiA 301 / CiA 402 error codes, see ``robot.canopen.emcy``)."""
         with self._lock:
             self.drive(node_id).trip(code, register)
+
+    def quick_stop(self, node_id: int, active: bool = True) -> None:
+        """The node's own quick-stop input, pressed (``active``) or released
+        (``EmulatedDrive.set_quick_stop_input``)."""
+        with self._lock:
+            self.drive(node_id).set_quick_stop_input(active)
 
     def following_error(self, node_id: int) -> None:
         """Trip a following-error fault on the node now (EMCY 0x8611, FAULT)."""

@@ -10,8 +10,12 @@ communication) and takes the reaction its abort connection option code 0x6007 na
 
 - 0 no action (the drive keeps following its last target);
 - 1 fault: FAULT (torque off), cleared by a fault reset;
-- 2 disable voltage, and 3 quick stop: SWITCH ON DISABLED, torque off (the emulated drive
-  stops at once: it has no deceleration ramp, 0x6085, to follow before it disables).
+- 2 disable voltage: SWITCH ON DISABLED, torque off;
+- 3 quick stop: the quick stop command (from OPERATION ENABLED to QUICK STOP ACTIVE,
+  transition 11; from the other powered states to SWITCH ON DISABLED); the emulated drive
+  stops at once (no deceleration ramp, 0x6085), then stays in QUICK STOP ACTIVE holding its
+  position, or goes on to SWITCH ON DISABLED, as its quick stop option code 0x605A says
+  (``sim.canopen.drive``).
 
 The watch then rests until the node is heard again, which also clears the error (EMCY 0x0000)
 unless the drive is in FAULT.
@@ -34,11 +38,11 @@ from typing import Any, Protocol
 
 from canopen.sdo import SdoAbortedError
 
-from robot.canopen.cia402 import State
+from robot.canopen.cia402 import CW_DISABLE_VOLTAGE, CW_QUICK_STOP, State
 
 
 class EmulatedDrive(Protocol):
-    """What the watch needs of an emulated drive (``sim.canopen.drives.EmulatedDrive``; a
+    """What the watch needs of an emulated drive (``sim.canopen.drive.EmulatedDrive``; a
     protocol, so that this module does not import the drives that import it)."""
 
     node_id: int
@@ -67,8 +71,8 @@ CHECK_PERIOD_S = 0.01
 # (guess: a quarter of the emulator's consumer time, 2 s; a longer gap is the emulator
 # starved, not the host silent).
 STALL_S = 0.5
-# States in which the reactions 2 and 3 take the drive to SWITCH ON DISABLED (CiA 402-2
-# transitions 7, 9, 10, 12).
+# States in which the reactions 2 and 3 apply (CiA 402-2: disable voltage, transitions 7, 9,
+# 10, 12; quick stop, transitions 7, 10, 11).
 POWERED = (
     State.READY_TO_SWITCH_ON,
     State.SWITCHED_ON,
@@ -190,5 +194,7 @@ class HostGuard:
             return
         d.error_code = HEARTBEAT_CONSUMER_ERROR
         d.node.emcy.send(HEARTBEAT_CONSUMER_ERROR, COMMUNICATION_REGISTER)
-        if option in (2, 3) and d.state in POWERED:
-            d.apply_controlword(0)  # disable voltage: SWITCH ON DISABLED, torque off
+        if option == 2 and d.state in POWERED:
+            d.apply_controlword(CW_DISABLE_VOLTAGE)  # SWITCH ON DISABLED, torque off
+        elif option == 3 and d.state in POWERED:
+            d.apply_controlword(CW_QUICK_STOP)  # QUICK STOP ACTIVE from OPERATION ENABLED

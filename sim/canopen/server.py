@@ -34,11 +34,16 @@ import termios
 import threading
 import time
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from plumbing.cli_errors import error
+from sim.canopen.heartbeats import BridgeRecord, HeartbeatProducer
 from sim.canopen.slcan import CanFrame, LineSplitter, SlcanAdapter, SlcanError, encode_frame
 from sim.pty_port import OnPty, PtyPort
+
+if TYPE_CHECKING:
+    from sim.canopen.drives import EmulatedDrives
+    from sim.standin.served import ServedRig
 
 log = logging.getLogger(__name__)
 
@@ -64,11 +69,21 @@ class SlcanPtyBridge(OnPty):
         link: path of a symbolic link to the current pty (None: no link).
     """
 
-    def __init__(self, bus: Any, link: str | os.PathLike[str] | None = None) -> None:
+    def __init__(
+        self,
+        bus: Any,
+        link: str | os.PathLike[str] | None = None,
+        heartbeats: HeartbeatProducer | None = None,
+        record: BridgeRecord | None = None,
+    ) -> None:
         self.bus = bus
+        self.heartbeats = heartbeats
+        self.record = record
         self.adapter = SlcanAdapter()
         self._splitter = LineSplitter()
         self.pty = PtyPort(link, on_open=self._power_on)
+        if heartbeats is not None:
+            heartbeats.set_port(self.pty.master)
         self._write_lock = threading.Lock()
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
@@ -79,6 +94,21 @@ class SlcanPtyBridge(OnPty):
     def _power_on(self) -> None:
         self.adapter = SlcanAdapter()  # a freshly plugged adapter starts closed
         self._splitter = LineSplitter()
+        if self.heartbeats is not None:
+            self.heartbeats.set_open(False)
+
+    def unplug(self) -> None:
+        """Close the pty, as an adapter pulled out of its USB socket (the heartbeat producer's
+        copy of it first)."""
+        if self.heartbeats is not None:
+            self.heartbeats.set_port(None)
+        self.pty.unplug()
+
+    def replug(self) -> None:
+        """Open a new pty (a new path; the link, if any, follows it)."""
+        self.pty.replug()
+        if self.heartbeats is not None and self.pty.master is not None:
+            self.heartbeats.set_port(self.pty.master)
 
     # ---- lifecycle -------------------------------------------------------------------------
     def start(self) -> None:
@@ -98,6 +128,8 @@ class SlcanPtyBridge(OnPty):
 
     def close(self) -> None:
         self.stop()
+        if self.heartbeats is not None:
+            self.heartbeats.set_port(None)
         self.pty.close()
 
     def __enter__(self) -> SlcanPtyBridge:
@@ -154,6 +186,8 @@ class SlcanPtyBridge(OnPty):
             for line in self._splitter.feed(chunk):
                 was_open = self.adapter.is_open
                 reply, frame = self.adapter.handle(line)
+                if self.heartbeats is not None and self.adapter.is_open != was_open:
+                    self.heartbeats.set_open(self.adapter.is_open)
                 if was_open and line is not None and line[:1] == b"C":
                     # A client opening the port sends C first (python-can's slcanBus does, before
                     # it reads anything): frames queued for a client that died with the channel
@@ -185,6 +219,8 @@ class SlcanPtyBridge(OnPty):
                 continue
             if not self.adapter.is_open:
                 self.frames_dropped += 1
+                if self.record is not None:
+                    self.record.reset()
                 continue
             try:
                 frame = CanFrame(
@@ -199,6 +235,8 @@ class SlcanPtyBridge(OnPty):
                 continue
             if self._write(encode_frame(frame), drop_if_full=True):
                 self.frames_out += 1
+                if self.record is not None:
+                    self.record.record(msg.arbitration_id, msg.timestamp)
             else:
                 self.frames_dropped += 1
 
@@ -241,6 +279,17 @@ def unanswered_nodes(bridge: SlcanPtyBridge, ids: Sequence[int]) -> list[int]:
     return silent
 
 
+def drives_for(rig: ServedRig, bus: str, **options: Any) -> EmulatedDrives:
+    """The served rig's six drives on ``bus`` (``INTERFACE:CHANNEL``), mounted as its hidden
+    mounting says (their zero marks ``rig.can_offsets``); ``options`` go to
+    ``EmulatedDrives`` (faults)."""
+    from sim.canopen.drives import EmulatedDrives
+
+    # the drives' convention: joint = offset + direction * drive angle (robot.canopen.units)
+    offsets = -rig.directions * rig.can_offsets
+    return EmulatedDrives(rig.twin, bus, directions=rig.directions, offsets=offsets, **options)
+
+
 def serve(args: argparse.Namespace) -> int:
     """Serve until interrupted (SIGINT/SIGTERM); returns the exit code. Prints the pty path and
     the camera URL, one line each, flushed, so that a parent process can read them."""
@@ -248,7 +297,6 @@ def serve(args: argparse.Namespace) -> int:
 
     import can
 
-    from sim.canopen.drives import EmulatedDrives
     from sim.realtime import RealtimeLoop
     from sim.standin.served import (
         SERVED_IDS,
@@ -284,12 +332,13 @@ def serve(args: argparse.Namespace) -> int:
     previous = signal.signal(signal.SIGTERM, _terminate)
     channel = f"ergo-canopen-{os.getpid()}"
     twin = rig.twin
-    # the drives' convention: joint = offset + direction * drive angle (robot.canopen.units)
-    drives = EmulatedDrives(
-        twin,
+    # the drives' heartbeats on time (sim.canopen.heartbeats); "threads": the serving process's
+    threads = getattr(args, "heartbeats", "process") == "threads"
+    producer = None if threads else HeartbeatProducer()
+    drives = drives_for(
+        rig,
         f"virtual:{channel}",
-        directions=rig.directions,
-        offsets=-rig.directions * rig.offsets,
+        heartbeats=None if producer is None else producer.task,
         drop_rate=drop_rate,
         tpdo_delay_s=delay_ms / 1000.0,
         seed=int(getattr(args, "seed", 0) or 0),
@@ -298,11 +347,14 @@ def serve(args: argparse.Namespace) -> int:
         after = float(getattr(args, "overload_after_s", DEFAULT_OVERLOAD_AFTER_S))
         drives.schedule_following_error(int(overload), after)
     bridge_bus = can.Bus(interface="virtual", channel=channel)
+    record = (
+        BridgeRecord(lambda node: drives.drive(node).od_int(0x1017) / 1000) if threads else None
+    )
     try:
         with (
             RealtimeLoop(twin, speed=float(getattr(args, "speed", 1.0) or 1.0)),
             drives,
-            SlcanPtyBridge(bridge_bus, link=getattr(args, "link", None)) as bridge,
+            SlcanPtyBridge(bridge_bus, getattr(args, "link", None), producer, record) as bridge,
         ):
             drives.host_backlog = bridge.backlog
             announce = [f"canopen bus (slcan) on {bridge.path}"]
@@ -312,6 +364,11 @@ def serve(args: argparse.Namespace) -> int:
                 rig, args, announce, lambda: unanswered_nodes(bridge, SERVED_IDS)
             )
     finally:
+        if producer is not None:
+            log.info("%s", producer.summary())
+            producer.stop()
+        if record is not None:
+            log.info("%s", record.summary())
         bridge_bus.shutdown()
         signal.signal(signal.SIGTERM, previous)
 
@@ -332,6 +389,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--hands-port", type=int, default=0)
     p.add_argument("--stand-in", type=int, default=None, metavar="SEED")
     p.add_argument("--hidden", default=None, metavar="PATH")
+    p.add_argument("--zero-marks", default="horn", choices=("horn", "anywhere"))
+    p.add_argument("--heartbeats", default="process", choices=("process", "threads"))
     return serve(p.parse_args(argv))
 
 

@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from robot.angles import anchor, joint_angle_in_turn, raw_angle
 from robot.dynamixel import protocol as proto
 from robot.dynamixel.control_table import XL320, Model
 from robot.spec import joint_mounting
@@ -195,6 +196,8 @@ class DynamixelEmulator:
         self.twin = twin
         n = len(ids)
         self.directions, self.offsets = joint_mounting(n, directions, offsets)
+        # a servo counts no turns: its angle is about its centre (robot.angles)
+        self._servo_offsets = anchor(self.offsets, 0.0)
         self.model = model
         self.faults = faults or FaultConfig()
         self.servos: dict[int, EmulatedServo] = {
@@ -408,13 +411,15 @@ class DynamixelEmulator:
     # ---- the twin ----------------------------------------------------------------------------
     def _servo_angle(self, servo: EmulatedServo, q: float) -> float:
         """Joint angle (rad) -> the servo's angle (rad) on its mounting."""
-        return float(self.directions[servo.joint] * q + self.offsets[servo.joint])
+        j = servo.joint
+        return float(raw_angle(q, self._servo_offsets[j], self.directions[j]))
 
     def _apply_goal(self, servo: EmulatedServo) -> None:
         if self.twin is None:
             return
         angle = float(servo.model.steps_to_rad(np.array([servo.peek("goal")]))[0])
-        q = self.directions[servo.joint] * (angle - self.offsets[servo.joint])
+        j = servo.joint
+        q = float(joint_angle_in_turn(angle, self._servo_offsets[j], self.directions[j]))
         with self.twin.lock:
             targets = self.twin.targets()
             targets[servo.joint] = q

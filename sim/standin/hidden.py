@@ -6,9 +6,13 @@ Every range below says where it comes from (a datasheet, a configuration, or "gu
 docs/standin.md has the table. What is hidden:
 
 - per joint, the servo's direction (+1/-1) and offset: ``servo_angle = direction *
-  joint_angle + offset`` (rad; the convention of ``robot.dynamixel.arm`` and
+  joint_angle + offset`` (rad; ``robot.angles``, the convention of ``robot.dynamixel.arm`` and
   ``calibration/joints.py``), applied to the bus emulators' raw positions: Dynamixel steps
-  ``512 + servo_angle / step``, CANopen counts ``servo_angle * counts_per_rev / 2 pi``;
+  ``512 + servo_angle / step``, CANopen counts ``servo_angle * counts_per_rev / 2 pi``. The
+  CANopen drives' zero marks are the same offsets unless drawn ``zero_marks="anywhere"``: then
+  each drive's encoder reads its joint's zero mark anywhere on the turn, past pi included, and
+  up to two turns either way (a multi-turn encoder counts on from wherever it was zeroed; a
+  drive's encoder is not a horn put on by eye);
 - the overhead camera: its pose (height, tilt, roll about its axis, offset) and its lens (focal
   lengths, principal point, k1 k2 p1 p2), applied to the served frames;
 - the servos' dynamics (``sim.servo_model.ServoModel``: kp, damping, armature, friction loss,
@@ -34,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from plumbing.files import atomic_write
+from robot.angles import TURN
 from robot.spec import ERGO_JR_JOINTS
 from sim.models.make_scene import (
     ARENA_MARKER_SIZE,
@@ -57,6 +62,11 @@ N_JOINTS = len(ERGO_JR_JOINTS)
 ASSEMBLY_ERROR_DEG = 5.0  # offsets uniform in +-5 deg ...
 TOOTH_DEG = 15.0  # ... plus, with probability TOOTH_PROBABILITY, one tooth either way
 TOOTH_PROBABILITY = 0.3  # per joint (guess: about one joint in three on a first assembly)
+# With zero_marks="anywhere", a CANopen drive's zero mark: uniform on the turn, plus a whole
+# number of turns uniform in -ZERO_MARK_TURNS..ZERO_MARK_TURNS (guess: a multi-turn encoder
+# zeroed at the factory reads any count; a single-turn one reads 0..2 pi).
+ZERO_MARKS = ("horn", "anywhere")
+ZERO_MARK_TURNS = 2
 # Directions: the original Poppy Ergo Jr configuration mounts m1 and m4 "direct" and m2, m3,
 # m5, m6 "indirect"; a stand-in draws each joint's +1/-1 at even odds, so that software which
 # assumed one pattern would be caught.
@@ -181,6 +191,8 @@ class HiddenRig:
         camera: the overhead camera.
         servos: the servos' dynamics.
         ball_xy: where the ball starts, (x, y) metres.
+        can_zero_marks: the CANopen drives' angle at each joint's zero mark (counts x 2 pi /
+            counts per revolution), shape (6,), rad, any number of turns; None: ``offsets``.
     """
 
     seed: int | None
@@ -189,6 +201,14 @@ class HiddenRig:
     camera: HiddenCamera
     servos: ServoModel
     ball_xy: tuple[float, float]
+    can_zero_marks: np.ndarray | None = None
+
+    @property
+    def can_offsets(self) -> np.ndarray:
+        """The CANopen drives' offsets (``robot.angles``: drive angle at joint zero), shape
+        (6,), rad: ``can_zero_marks``, else the servos' ``offsets``."""
+        marks = self.offsets if self.can_zero_marks is None else self.can_zero_marks
+        return np.asarray(marks, float).copy()
 
     def to_dict(self) -> dict[str, Any]:
         from robot.dynamixel.control_table import XL320
@@ -209,7 +229,8 @@ class HiddenRig:
                 "dynamixel_steps_at_zero": (
                     XL320.position_centre + self.offsets / XL320.rad_per_step
                 ).tolist(),
-                "canopen_counts_at_zero": (self.offsets * cpr / math.tau).tolist(),
+                "canopen_zero_marks_rad": self.can_offsets.tolist(),
+                "canopen_counts_at_zero": (self.can_offsets * cpr / math.tau).tolist(),
                 "canopen_counts_per_rev": cpr,
             },
             "camera": self.camera.to_dict(),
@@ -346,14 +367,21 @@ def _draw_servos(rng: np.random.Generator) -> ServoModel:
     )
 
 
-def draw_hidden(seed: int) -> HiddenRig:
-    """A stand-in rig's hidden parameters, a pure function of ``seed`` (an int >= 0).
+def draw_hidden(seed: int, zero_marks: str = "horn") -> HiddenRig:
+    """A stand-in rig's hidden parameters, a pure function of ``seed`` (an int >= 0) and
+    ``zero_marks``: ``"horn"``, the CANopen drives' zero marks are the servos' offsets (a few
+    degrees); ``"anywhere"``, drawn on the whole turn and beyond (``ZERO_MARK_TURNS``). The
+    other draws are the same either way.
 
     Raises:
-        StandinError: a negative or non-integer seed.
+        StandinError: a negative or non-integer seed, an unknown ``zero_marks``.
     """
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
         raise StandinError(f"--stand-in seed must be an integer >= 0, got {seed!r}")
+    if zero_marks not in ZERO_MARKS:
+        raise StandinError(
+            f"--zero-marks must be one of {', '.join(ZERO_MARKS)}, got {zero_marks!r}"
+        )
     rng = np.random.default_rng([int(seed), 0x57A1D])  # the stand-in's own stream
     directions = rng.choice([-1.0, 1.0], N_JOINTS)
     offsets = np.radians(rng.uniform(-ASSEMBLY_ERROR_DEG, ASSEMBLY_ERROR_DEG, N_JOINTS))
@@ -373,7 +401,11 @@ def draw_hidden(seed: int) -> HiddenRig:
     angle = rng.uniform(0.0, 2 * math.pi)
     radius = rng.uniform(*BALL_RING_M)
     ball = (radius * math.cos(angle), radius * math.sin(angle))
-    return HiddenRig(int(seed), directions, offsets, camera, servos, ball)
+    marks = None
+    if zero_marks == "anywhere":  # drawn last: the draws above stay those of "horn"
+        turns = rng.integers(-ZERO_MARK_TURNS, ZERO_MARK_TURNS + 1, N_JOINTS)
+        marks = rng.uniform(0.0, TURN, N_JOINTS) + TURN * turns
+    return HiddenRig(int(seed), directions, offsets, camera, servos, ball, marks)
 
 
 def default_hidden_path(seed: int) -> Path:

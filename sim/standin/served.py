@@ -64,7 +64,7 @@ class ServedRig:
         twin: the twin (the served scene: markers, board, hands' grips; the rig's servos).
         directions: +1/-1 per joint, shape (6,), for the bus emulators.
         offsets: servo angle at joint zero per joint, shape (6,), rad, for the bus emulators
-            (``servo_angle = direction * joint_angle + offset``).
+            (``servo_angle = direction * joint_angle + offset``, ``robot.angles``).
         plan: how the served camera's frames are made.
         lines: what to print once serving (the stand-in's hidden file).
     """
@@ -72,6 +72,9 @@ class ServedRig:
     twin: Twin
     directions: np.ndarray
     offsets: np.ndarray
+    #: the CANopen drives' angle at joint zero, shape (6,), rad (``offsets`` unless a stand-in
+    #: drawn with ``--zero-marks anywhere``)
+    can_offsets: np.ndarray
     plan: RenderPlan
     lines: list[str]
 
@@ -93,7 +96,10 @@ def open_served_rig(args: argparse.Namespace) -> ServedRig:
         raise StandinError(
             "--rig-id and --stand-in: a stand-in rig has its own (hidden) servos; give one"
         )
-    rig = nominal_rig() if seed is None else draw_hidden(seed)
+    zero_marks = getattr(args, "zero_marks", None) or "horn"
+    if seed is None and zero_marks != "horn":
+        raise StandinError("--zero-marks: a stand-in's hidden mounting (give --stand-in SEED)")
+    rig = nominal_rig() if seed is None else draw_hidden(seed, zero_marks)
     floor_rgb = getattr(args, "floor_rgb", None)
     if floor_rgb is not None:
         try:
@@ -113,7 +119,7 @@ def open_served_rig(args: argparse.Namespace) -> ServedRig:
         servos, line = rig_servos(rig_id)
         lines.append(line)
     twin, plan = served_twin(rig, servos, floor_rgb)
-    return ServedRig(twin, rig.directions.copy(), rig.offsets.copy(), plan, lines)
+    return ServedRig(twin, rig.directions.copy(), rig.offsets.copy(), rig.can_offsets, plan, lines)
 
 
 def rig_servos(rig_id: str) -> tuple[ServoModel | None, str]:

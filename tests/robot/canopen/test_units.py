@@ -111,6 +111,6 @@ def test_emcy_descriptions() -> None:
     assert emcy.describe(0x8611, 0x21) == (
         "EMCY 0x8611 following error (error register 0x21: generic, device profile)"
     )
-    assert emcy.describe_code(0x4299) == "temperature"
+    assert emcy.describe_code(0x4299) == "device temperature"  # its group, 0x42xx
     assert emcy.describe_code(0x0123) == "unknown error"
     assert emcy.unpack(emcy.pack(0x8611, 0x21)) == (0x8611, 0x21, b"\0" * 5)

@@ -124,7 +124,7 @@ def test_a_drive_without_a_heartbeat_consumer_stops_the_connect_in_one_line(
         if index == 0x1016:
             raise SdoAbortedError(0x06010002)  # attempt to write a read-only object
 
-    monkeypatch.setattr("sim.canopen.drives.check_guard_write", refuse)
+    monkeypatch.setattr("sim.canopen.drive.check_guard_write", refuse)
     with pytest.raises(CanNodeError) as info:
         make_arm(can).connect()
     message = str(info.value)
