@@ -65,6 +65,10 @@ EPISODES_PATH = "meta/episodes/chunk-000/file-000.parquet"
 VIDEO_KEY = "observation.images.overhead"
 QUANTILES = (0.01, 0.10, 0.50, 0.90, 0.99)  # LeRobot's DEFAULT_QUANTILES (compute_stats.py)
 AUTO_FEATURES = ("timestamp", "frame_index", "episode_index", "index", "task_index")
+# The names of ``observation.state`` and ``action``: each joint's position, ``m1.pos`` ..
+# ``m6.pos``, LeRobot's convention for an arm's joints (its lerobot-rollout hands a policy only
+# the features named ``*.pos``); the Ergo Jr's LeRobot robots (lerobot_plugins/) take them.
+JOINT_FEATURES = tuple(f"{j}.pos" for j in ERGO_JR_JOINTS)
 
 
 @dataclass
@@ -92,7 +96,7 @@ def features(
     n_joints: int, n_params: int, goal_dim: int, context_dim: int, video_side: int
 ) -> dict[str, dict[str, Any]]:
     """The dataset's ``features`` (``info.json``): dtype, shape and names of every column."""
-    joints = list(ERGO_JR_JOINTS)[:n_joints]
+    joints = list(JOINT_FEATURES)[:n_joints]
     out: dict[str, dict[str, Any]] = {
         "observation.state": _vector(joints),
         "action": _vector(joints),

@@ -11,8 +11,8 @@ arm's own safety holds under LeRobot's scripts:
   (``robot.signals.torque_off_on_signals``), and on a serial bus a guardian process cuts torque if
   this process dies without doing so (``robot.torque_guardian``, ``on_crash``).
 
-Observation: the joints read (``m1`` .. ``m6``, rad), the overhead frame (``overhead``, RGB) and
-LeRobot's own cameras, if any. Action: the joints' goal positions, rad
+Observation: the joints read (``m1.pos`` .. ``m6.pos``, rad), the overhead frame (``overhead``,
+RGB) and LeRobot's own cameras, if any. Action: the joints' goal positions, rad
 (``lerobot_robot_ergo_jr.features``).
 """
 

@@ -1,9 +1,10 @@
 """The names LeRobot sees of the Ergo Jr, the same for the three robots, the leader, the
 scripted teleoperator and the environment, and the same as ``ergo export lerobot``'s dataset:
 
-- one float per joint, ``m1`` .. ``m6`` (``robot.spec.ERGO_JR_JOINTS``), rad: the joints read
-  (observation) and the goal positions (action); LeRobot gathers them into
-  ``observation.state`` and ``action``, each named ``[m1, ..., m6]``;
+- one float per joint, ``m1.pos`` .. ``m6.pos`` (the export's ``JOINT_FEATURES``: the joints of
+  ``robot.spec.ERGO_JR_JOINTS``, named as LeRobot names an arm's joint positions), rad: the
+  joints read (observation) and the goal positions (action); LeRobot gathers them into
+  ``observation.state`` and ``action``, each named ``[m1.pos, ..., m6.pos]``;
 - ``overhead``: the centre square of the overhead camera, (side, side, 3) RGB uint8, which
   LeRobot records as ``observation.images.overhead`` (the export's ``VIDEO_KEY``);
 - the robot type ``poppy_ergo_jr`` (the export's ``ROBOT_TYPE``), written as a dataset's
@@ -19,11 +20,10 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from explore.export.lerobot import ROBOT_TYPE, VIDEO_KEY
-from robot.spec import ERGO_JR_JOINTS
+from explore.export.lerobot import JOINT_FEATURES, ROBOT_TYPE, VIDEO_KEY
 from vision.observation import OBSERVATION_SIZE, square_observation
 
-JOINTS: tuple[str, ...] = ERGO_JR_JOINTS
+JOINTS: tuple[str, ...] = JOINT_FEATURES
 IMAGES_PREFIX = "observation.images."
 IMAGE_KEY = VIDEO_KEY.removeprefix(IMAGES_PREFIX)  # "overhead"
 STATE_KEY = "observation.state"
@@ -61,8 +61,8 @@ def observation_features(image_side: int | None) -> dict[str, type | tuple[int, 
 
 
 def joints_vector(values: Mapping[str, object], what: str = "action") -> np.ndarray:
-    """``{m1: rad, ..., m6: rad}`` -> shape (6,) rad, in joint order; a one-line ``ValueError``
-    naming a missing joint or a value that is not a number."""
+    """``{m1.pos: rad, ..., m6.pos: rad}`` -> shape (6,) rad, in joint order; a one-line
+    ``ValueError`` naming a missing joint or a value that is not a number."""
     missing = [j for j in JOINTS if j not in values]
     if missing:
         raise ValueError(
@@ -79,7 +79,7 @@ def joints_vector(values: Mapping[str, object], what: str = "action") -> np.ndar
 
 
 def joints_dict(vector: np.ndarray) -> dict[str, float]:
-    """Shape (6,) rad -> ``{m1: rad, ..., m6: rad}`` (Python floats)."""
+    """Shape (6,) rad -> ``{m1.pos: rad, ..., m6.pos: rad}`` (Python floats)."""
     return {j: float(v) for j, v in zip(JOINTS, np.asarray(vector).reshape(-1), strict=True)}
 
 

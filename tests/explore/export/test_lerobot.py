@@ -98,7 +98,8 @@ def test_the_layout_is_lerobots_v3(dataset):
         info["data_path"].format(chunk_index=0, file_index=0) == "data/chunk-000/file-000.parquet"
     )
     feats = info["features"]
-    assert feats["observation.state"]["names"] == ["m1", "m2", "m3", "m4", "m5", "m6"]
+    names = ["m1.pos", "m2.pos", "m3.pos", "m4.pos", "m5.pos", "m6.pos"]
+    assert feats["observation.state"]["names"] == feats["action"]["names"] == names
     assert feats["episode.dmp_parameters"]["shape"] == [48]
     assert feats[VIDEO_KEY]["shape"] == [SIDE, SIDE, 3]
     assert feats[VIDEO_KEY]["info"]["video.codec"] == "av1"
