@@ -307,7 +307,7 @@ def _write(
     stats = {key: _stats(cols.array(key)) for key in cols.frames}
     if with_video:
         stats[VIDEO_KEY] = image_stats.result()
-    _write_json(root / "meta/stats.json", stats)
+    _write_json(root / "meta/stats.json", stats, allow_nan=True)  # as LeRobot writes NaN
     info = {
         "codebase_version": CODEBASE_VERSION,
         "robot_type": ROBOT_TYPE,
@@ -445,23 +445,20 @@ def _write_tables(
     pq.write_table(table, root / "meta/tasks.parquet")
 
 
-def _json_number(v: float) -> float | None:
-    return float(v) if np.isfinite(v) else None  # JSON has no NaN: a coordinate never set
-
-
 def _stats(values: np.ndarray) -> dict[str, list[Any]]:
-    """LeRobot's statistics of a column over every frame (NaN-aware: null where a coordinate
-    is never set)."""
+    """LeRobot's statistics of a column over every frame (NaN-aware: NaN where a coordinate is
+    never set, which LeRobot's own writer stores as the token ``NaN`` and reads back as a
+    number; a ``null`` there made lerobot-train's normalizer fail on the whole file)."""
     v = np.asarray(values, dtype=float).reshape(len(values), -1)
     finite = np.isfinite(v).any(axis=0)
     out: dict[str, list[Any]] = {"count": [len(v)]}
     if not finite.any():
-        nulls = [None] * v.shape[1]
-        out.update({k: nulls for k in ("min", "max", "mean", "std")})
-        out.update({f"q{round(q * 100):02d}": nulls for q in QUANTILES})
+        unset = [float("nan")] * v.shape[1]
+        out.update({k: unset for k in ("min", "max", "mean", "std")})
+        out.update({f"q{round(q * 100):02d}": unset for q in QUANTILES})
         return out
     with np.errstate(all="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN coordinates: null below
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN coordinates: NaN
         stats = {
             "min": np.nanmin(v, axis=0),
             "max": np.nanmax(v, axis=0),
@@ -471,7 +468,7 @@ def _stats(values: np.ndarray) -> dict[str, list[Any]]:
         for q in QUANTILES:
             stats[f"q{round(q * 100):02d}"] = np.nanquantile(v, q, axis=0)
     for key, arr in stats.items():
-        out[key] = [_json_number(x) for x in arr]
+        out[key] = [float(x) for x in arr]
     return out
 
 
@@ -510,6 +507,6 @@ class _ImageStats:
         return out
 
 
-def _write_json(path: Path, data: Any) -> None:
+def _write_json(path: Path, data: Any, allow_nan: bool = False) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(data, indent=2, allow_nan=False) + "\n")
+    path.write_text(json.dumps(data, indent=2, allow_nan=allow_nan) + "\n")
