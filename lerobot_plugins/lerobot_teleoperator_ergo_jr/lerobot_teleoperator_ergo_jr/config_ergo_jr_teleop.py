@@ -15,6 +15,7 @@ from lerobot.teleoperators.config import TeleoperatorConfig
 
 from robot.canopen.bus import DEFAULT_BITRATE
 from robot.dynamixel.bus import DEFAULT_BAUD
+from robot.spec import CONTROL_RATE_HZ, ERGO_JR_MAX_STEP
 
 # The scripted teleoperator's timing, s: from rest to the motion's first point, then the motion
 # (the motor primitive's own duration, 40 points at 40 Hz), back to rest, a pause at rest.
@@ -22,6 +23,10 @@ from robot.dynamixel.bus import DEFAULT_BAUD
 LEAD_S = 0.5
 RETURN_S = 1.0
 PAUSE_S = 0.5
+# The fastest a scripted joint moves, rad/s: half the arm's step bound (0.15 rad per 40 Hz tick,
+# 6 rad/s), so that a follower at 20 Hz or more plays the motions unclipped. A motor primitive
+# played at its own rate moves up to 0.6 rad a tick (median 0.34, 1000 draws): it is slowed down.
+MAX_SPEED = 0.5 * ERGO_JR_MAX_STEP * CONTROL_RATE_HZ
 
 
 @TeleoperatorConfig.register_subclass("ergo_jr_leader")
@@ -63,15 +68,20 @@ class ErgoJrScriptedConfig(TeleoperatorConfig):
 
     Attributes:
         seed: the motions' seed.
-        lead_s, return_s, pause_s: the timing around each motion, s.
+        lead_s, return_s, pause_s: the least time to the motion's start, back to rest, and the
+            pause at rest, s.
+        max_speed: the fastest any joint moves, rad/s (the motion is slowed down to it).
     """
 
     seed: int = 0
     lead_s: float = LEAD_S
     return_s: float = RETURN_S
     pause_s: float = PAUSE_S
+    max_speed: float = MAX_SPEED
 
     def __post_init__(self) -> None:
+        if not (isinstance(self.max_speed, int | float) and self.max_speed > 0):
+            raise ValueError(f"max_speed must be rad/s > 0, got {self.max_speed!r}")
         for key in ("lead_s", "return_s", "pause_s"):
             value = getattr(self, key)
             if not (isinstance(value, int | float) and value > 0):

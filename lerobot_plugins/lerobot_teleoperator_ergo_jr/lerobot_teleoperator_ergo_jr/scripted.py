@@ -4,9 +4,10 @@
 From ``connect`` on, it plays motions one after the other, each drawn from its seed: from the
 rest pose to the first point of a motor primitive (the Ergo Jr's DMPs over the exploration's
 joint ranges, ``explore.rigs.motor.ergo_jr_dmp``, 48 parameters uniform in [-1, 1]: what
-``ergo explore --strategy rpe`` plays), the primitive itself at its own rate, back to rest, a
-pause. ``get_action`` gives the goal positions at the wall time since ``connect``, linearly
-interpolated between the motion's points, rad: the same motions at any loop rate.
+``ergo explore --strategy rpe`` plays), the primitive itself, back to rest, a pause; each part
+slowed down so that no joint moves faster than ``max_speed``. ``get_action`` gives the goal
+positions at the wall time since ``connect``, linearly interpolated between the motion's points,
+rad: the same motions at any loop rate.
 """
 
 from __future__ import annotations
@@ -31,14 +32,19 @@ class MotionScript:
 
     Args:
         seed: the motions' seed.
-        lead_s, return_s, pause_s: the timing around each motion, s.
+        lead_s, return_s, pause_s: the least time to a motion's start, back to rest, and the
+            pause at rest, s.
+        max_speed: the fastest any joint moves, rad/s.
     """
 
-    def __init__(self, seed: int, lead_s: float, return_s: float, pause_s: float) -> None:
+    def __init__(
+        self, seed: int, lead_s: float, return_s: float, pause_s: float, max_speed: float
+    ) -> None:
         self.rng = np.random.default_rng(seed)
         self.dmp = ergo_jr_dmp()
         self.rest = ergo_jr_spec().rest
         self.lead_s, self.return_s, self.pause_s = lead_s, return_s, pause_s
+        self.max_speed = max_speed
         self._times = np.zeros(0)  # keyframe times, s, increasing
         self._points = np.zeros((0, len(self.rest)))  # (k, 6) rad
 
@@ -46,11 +52,14 @@ class MotionScript:
         """Add the next motion's keyframes."""
         start = self._times[-1] if len(self._times) else 0.0
         path = self.dmp.trajectory(self.rng.uniform(-1.0, 1.0, N_PARAMS))  # (n, 6) rad
-        rate = self.dmp.config.rate_hz
-        t_path = start + self.lead_s + np.arange(len(path)) / rate
-        end = t_path[-1] + self.return_s
-        times = np.concatenate([[start], t_path, [end, end + self.pause_s]])
-        points = np.vstack([self.rest, path, self.rest, self.rest])
+        points = np.vstack([self.rest, path, self.rest])
+        steps = np.abs(np.diff(points, axis=0)).max(axis=1) / self.max_speed  # (n + 1,) s
+        steps[1:-1] = np.maximum(steps[1:-1], 1.0 / self.dmp.config.rate_hz)
+        steps[0] = max(steps[0], self.lead_s)
+        steps[-1] = max(steps[-1], self.return_s)
+        t = start + np.concatenate([[0.0], np.cumsum(steps)])
+        times = np.concatenate([t, [t[-1] + self.pause_s]])
+        points = np.vstack([points, self.rest])
         if len(self._times):  # the first keyframe is the previous motion's last
             times, points = times[1:], points[1:]
         self._times = np.concatenate([self._times, times])
@@ -101,7 +110,7 @@ class ErgoJrScripted(Teleoperator):
         if self.is_connected:
             raise DeviceAlreadyConnectedError(f"{self} is already connected")
         c = self.config
-        self.script = MotionScript(c.seed, c.lead_s, c.return_s, c.pause_s)
+        self.script = MotionScript(c.seed, c.lead_s, c.return_s, c.pause_s, c.max_speed)
         self._t0 = time.monotonic()
 
     def configure(self) -> None:
