@@ -7,6 +7,7 @@ user's path)."""
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -53,7 +54,8 @@ def run_lerobot(
 
 
 def note(line: str, rc: int | None, seconds: float) -> None:
-    """Keep a command's line for the session's summary."""
+    """Keep a command's line for the session's summary (pytest's temporary folders as $TMP)."""
+    line = re.sub(r"/\S*/pytest-\d+/", "$TMP/", line)
     RAN.append(f"$ {line}  (rc {rc}, {seconds:.0f} s)")
 
 

@@ -1,7 +1,7 @@
 """``--env.type=ergo_jr``: the twin as LeRobot's environment, with the robots' features.
 
-The environment observes ``agent_pos`` (the joints, rad) and ``pixels/overhead`` (the overhead
-frame, RGB), which LeRobot maps onto ``observation.state`` and ``observation.images.overhead``;
+The environment observes ``agent_pos`` (the joints, rad) and ``pixels`` ``{overhead: frame}``
+(RGB), which LeRobot maps onto ``observation.state`` and ``observation.images.overhead``;
 its action is the joints' goal positions, rad: the names a dataset recorded on the robots (or
 exported by ``ergo export lerobot``) gives a policy, so that the policy runs here unchanged.
 """
@@ -28,7 +28,10 @@ from robot.spec import CONTROL_RATE_HZ
 PACKAGE = "lerobot_env_ergo_jr"
 TASK = "ArmBall-v0"  # the twin's per-tick environment (explore/export/gym_env.py)
 GYM_ID = f"{PACKAGE}/{TASK}"
-PIXELS_KEY = f"pixels/{IMAGE_KEY}"
+# The frame's feature is named as the policy takes it (not "pixels/overhead" as LeRobot's own
+# environments do): lerobot-eval --eval.recording=true records features under these names and
+# refuses a "/" in one.
+IMAGE_FEATURE = IMAGES_PREFIX + IMAGE_KEY
 
 
 @EnvConfig.register_subclass("ergo_jr")
@@ -62,7 +65,7 @@ class ErgoJrEnvConfig(EnvConfig):
         default_factory=lambda: {
             ACTION_KEY: ACTION_KEY,
             "agent_pos": STATE_KEY,
-            PIXELS_KEY: IMAGES_PREFIX + IMAGE_KEY,
+            IMAGE_FEATURE: IMAGE_FEATURE,
         }
     )
 
@@ -75,7 +78,7 @@ class ErgoJrEnvConfig(EnvConfig):
             )
         check_image_side(self.image_side)
         side = self.image_side
-        self.features[PIXELS_KEY] = PolicyFeature(type=FeatureType.VISUAL, shape=(side, side, 3))
+        self.features[IMAGE_FEATURE] = PolicyFeature(type=FeatureType.VISUAL, shape=(side, side, 3))
 
     @property
     def package_name(self) -> str:
