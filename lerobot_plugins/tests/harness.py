@@ -62,3 +62,26 @@ def note(line: str, rc: int | None, seconds: float) -> None:
 def tail(done: subprocess.CompletedProcess[str], n: int = 3000) -> str:
     """The end of a command's output, for an assertion's message."""
     return (done.stdout + done.stderr)[-n:]
+
+
+def nominal_joint_calibration(rig_id: str) -> Path:
+    """Write the joint calibration ``ergo calibrate joints`` finds on a nominal served twin
+    (servo angle = joint angle, the spec's limits) for ``rig_id``, without the minute its
+    hands take: for the tests whose subject is not the calibration."""
+    import numpy as np
+
+    from calibration import store
+    from calibration.joints import JointCalibration
+    from robot.spec import ergo_jr_spec
+
+    spec = ergo_jr_spec()
+    cal = JointCalibration(
+        tuple(spec.names), np.zeros(spec.n), np.ones(spec.n), spec.lower.copy(), spec.upper.copy()
+    )
+    return store.save("joints", rig_id, cal.to_dict())
+
+
+def bus_flag(rig: object, device: str) -> str:
+    """``--robot.port=PTY`` / ``--robot.can=slcan:PTY`` (or ``--teleop...``) of a served rig."""
+    kind = "port" if rig.bus_kind == "dynamixel" else "can"  # type: ignore[attr-defined]
+    return f"--{device}.{kind}={rig.where}"  # type: ignore[attr-defined]
