@@ -85,3 +85,28 @@ def bus_flag(rig: object, device: str) -> str:
     """``--robot.port=PTY`` / ``--robot.can=slcan:PTY`` (or ``--teleop...``) of a served rig."""
     kind = "port" if rig.bus_kind == "dynamixel" else "can"  # type: ignore[attr-defined]
     return f"--{device}.{kind}={rig.where}"  # type: ignore[attr-defined]
+
+
+def report_dataset(dataset: Path) -> dict:
+    """The dataset's ``meta/info.json``, its robot type, frames and features kept for the
+    session's summary (read as LeRobot wrote it)."""
+    import json
+
+    info = json.loads((dataset / "meta/info.json").read_text())
+    feats = ", ".join(
+        f"{k} {v['dtype']} {v['shape']}"
+        + (f" {v['names']}" if k in ("action", "observation.state") else "")
+        for k, v in info["features"].items()
+        if k not in ("timestamp", "frame_index", "episode_index", "index", "task_index")
+    )
+    RAN.append(
+        f"  -> {dataset.name}/meta/info.json: robot_type {info['robot_type']}, "
+        f"{info['total_episodes']} episode(s), {info['total_frames']} frames at {info['fps']} "
+        f"fps; {feats}"
+    )
+    return info
+
+
+def report(line: str) -> None:
+    """A result line under the last command in the session's summary."""
+    RAN.append(f"  -> {line}")

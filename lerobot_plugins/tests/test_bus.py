@@ -24,6 +24,8 @@ from lerobot_plugins.tests.harness import (
     bus_flag,
     nominal_joint_calibration,
     note,
+    report,
+    report_dataset,
     run_lerobot,
     tail,
 )
@@ -103,7 +105,7 @@ def test_calibrate_teleoperate_and_record_over_the_bus_with_a_leader_arm(bus, tm
         _ok(run_lerobot(*args))
         assert f_owner.torque_read_back() == [False] * 6
 
-    info = json.loads((dataset / "meta/info.json").read_text())
+    info = report_dataset(dataset)
     assert info["robot_type"] == ROBOT_TYPE and info["total_episodes"] == 1
     assert info["total_frames"] > 0.3 * 4 * FPS
     feats = info["features"]
@@ -113,6 +115,8 @@ def test_calibrate_teleoperate_and_record_over_the_bus_with_a_leader_arm(bus, tm
     action, state = np.asarray(table["action"]), np.asarray(table["observation.state"])
     pose = np.array([POSE.get(j.removesuffix(".pos"), 0.0) for j in JOINT_FEATURES])
     np.testing.assert_allclose(action[-5:], np.tile(pose, (5, 1)), atol=math.radians(1.0))
+    off = np.degrees(np.abs(state[-5:] - pose).max())
+    report(f"the follower's last 5 frames within {off:.2f} deg of the leader's pose")
     np.testing.assert_allclose(state[-5:], np.tile(pose, (5, 1)), atol=FOLLOW_RAD)
 
 

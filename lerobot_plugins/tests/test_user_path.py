@@ -17,7 +17,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from explore.export.lerobot import JOINT_FEATURES, ROBOT_TYPE, VIDEO_KEY
-from lerobot_plugins.tests.harness import note, run_lerobot, tail
+from lerobot_plugins.tests.harness import note, report, report_dataset, run_lerobot, tail
 
 FPS = 30
 EPISODES = 2
@@ -95,7 +95,7 @@ def test_the_twin_path_from_calibration_to_a_rolled_out_policy(tmp_path):
         "--play_sounds=false",
     ]  # fmt: skip
     _ok(run_lerobot(*args))
-    info = _info(dataset)
+    info = report_dataset(dataset)
     assert info["robot_type"] == ROBOT_TYPE and info["fps"] == FPS
     assert info["total_episodes"] == EPISODES
     assert 0.3 * EPISODES * EPISODE_S * FPS < info["total_frames"] <= EPISODES * EPISODE_S * FPS + 2
@@ -127,10 +127,19 @@ def test_the_twin_path_from_calibration_to_a_rolled_out_policy(tmp_path):
     said = _ok(run_lerobot(*args))
     result = json.loads((evaluated / "eval_info.json").read_text())["overall"]
     assert result["n_episodes"] == 2
+    report(
+        f"eval_info.json: {result['n_episodes']} episodes, avg_sum_reward "
+        f"{result['avg_sum_reward']}, pc_success {result['pc_success']}"
+    )
     for env in range(2):  # one twin per episode, side by side (batch_size 2)
         rollout = _frames(evaluated / f"recordings/ergo_jr_0/env_{env}")
         assert len(rollout["action"]) == 30
-        assert np.ptp(rollout["agent_pos"], axis=0).max() > 0.05  # the policy moved the twin
+        moved = np.ptp(rollout["agent_pos"], axis=0)
+        report(
+            f"rollout {env}: {len(rollout['action'])} steps, each joint's range "
+            f"{moved.round(3)} rad"
+        )
+        assert moved.max() > 0.05  # the policy moved the twin
 
     args = [
         "rollout",
@@ -161,7 +170,7 @@ def test_an_exported_exploration_trains_a_policy_for_the_twin(tmp_path):
         note(f"ergo {' '.join(args)}", done.returncode, time.monotonic() - t0)
         assert done.returncode == 0, tail(done)
     exported = tmp_path / "exported"
-    info = _info(exported)
+    info = report_dataset(exported)
     assert info["robot_type"] == ROBOT_TYPE and info["total_frames"] == 3 * 40
     model = _train(exported, "local/exported", tmp_path / "train_exported")
     config = json.loads((model / "config.json").read_text())
