@@ -56,7 +56,7 @@ def test_it_sees_what_the_twin_robot_sees():
         twin = env.inner.twin
         with robot.twin.lock:  # the robot's twin put in the environment's state
             robot.twin.set_state(twin.get_state())
-        seen = robot._frame(robot.overhead)
+        seen = robot.render(robot.overhead)
         np.testing.assert_array_equal(seen, obs["pixels"]["overhead"])
         other = ErgoJrTwinEnv(image_side=96)
         obs96, _ = other.reset(seed=0)

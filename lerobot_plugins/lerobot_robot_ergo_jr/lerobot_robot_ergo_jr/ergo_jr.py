@@ -19,6 +19,7 @@ RGB) and LeRobot's own cameras, if any. Action: the joints' goal positions, rad
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from contextlib import ExitStack
 from functools import cached_property
 from typing import Any
@@ -45,6 +46,7 @@ from lerobot_robot_ergo_jr.features import (
     observation_features,
     rgb_square,
 )
+from lerobot_robot_ergo_jr.latest_frame import LatestFrame
 from robot.arm import Arm
 from robot.signals import torque_off_on_signals
 from vision.camera import Camera
@@ -54,7 +56,7 @@ log = logging.getLogger(__name__)
 
 class ErgoJrRobot(Robot):
     """What the three robots share (see the module docstring); a subclass builds the arm and
-    its overhead camera (``_build``) and reads the frame (``_frame``)."""
+    its overhead camera (``_build``) and says how its frame is read (``_frame_reader``)."""
 
     config_class = ErgoJrBaseConfig
     name = ROBOT_TYPE
@@ -65,6 +67,7 @@ class ErgoJrRobot(Robot):
         self.cameras = make_cameras_from_configs(config.cameras)
         self.arm: Arm | None = None
         self.overhead: Camera | None = None
+        self._frames: Callable[[], np.ndarray] | None = None  # the overhead frame now
         self._stack: ExitStack | None = None
 
     # ---- what it observes and takes -------------------------------------------------------
@@ -111,11 +114,12 @@ class ErgoJrRobot(Robot):
             self.arm, self.overhead = arm, overhead
             if overhead is not None:
                 overhead.connect()
+                self._frames = self._frame_reader(overhead, stack)
             for cam in self.cameras.values():
                 cam.connect()
             arm.set_torque(True)  # holding the measured pose (robot.arm.Arm.set_torque)
         except BaseException:
-            self.arm = None
+            self.arm, self._frames = None, None
             stack.close()
             raise
         self._stack = stack
@@ -136,7 +140,7 @@ class ErgoJrRobot(Robot):
         """Torque off and close the arm, then the cameras. Does nothing when not connected (a
         script's ``finally`` may call it after a failed connect or calibration)."""
         stack, self._stack = self._stack, None
-        self.arm = None
+        self.arm, self._frames = None, None
         if stack is not None:
             stack.close()
             log.info("%s disconnected (torque off)", self)
@@ -157,15 +161,19 @@ class ErgoJrRobot(Robot):
     def get_observation(self) -> dict[str, Any]:
         arm = self._require()
         obs: dict[str, Any] = joints_dict(self._positions(arm))
-        if self.overhead is not None:
-            obs[IMAGE_KEY] = self._frame(self.overhead)
+        if self._frames is not None:
+            obs[IMAGE_KEY] = self._frames()
         for key, cam in self.cameras.items():
             obs[key] = cam.async_read()
         return obs
 
-    def _frame(self, camera: Camera) -> np.ndarray:
-        """The overhead frame, (side, side, 3) RGB uint8."""
-        return rgb_square(camera.read().image, self.config.image_side)
+    def _frame_reader(self, camera: Camera, stack: ExitStack) -> Callable[[], np.ndarray]:
+        """() -> the overhead frame now, (side, side, 3) RGB uint8: a live camera's newest
+        frame (``LatestFrame``, its thread stopped with the rest on ``stack``)."""
+        side = self.config.image_side
+        frames = LatestFrame(camera, lambda image: rgb_square(image, side))
+        stack.callback(frames.stop)
+        return frames.get
 
     def send_action(self, action: dict[str, Any]) -> dict[str, float]:
         """Send the goal positions, clamped by the arm; returns what was sent, rad."""
@@ -277,7 +285,12 @@ class ErgoJrTwin(ErgoJrRobot):
             self.twin.catch_up()
             return arm.read().positions
 
-    def _frame(self, camera: Camera) -> np.ndarray:
+    def _frame_reader(self, camera: Camera, stack: ExitStack) -> Callable[[], np.ndarray]:
+        """() -> the overhead camera rendered now at (side, side), RGB."""
+        return lambda: self.render(camera)
+
+    def render(self, camera: Camera) -> np.ndarray:
+        """The twin's overhead square at ``image_side``, RGB uint8, physics caught up first."""
         with self.twin.lock:
             self.twin.catch_up()
         side = self.config.image_side
