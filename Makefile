@@ -13,7 +13,19 @@ TORCH_INDEX ?= https://download.pytorch.org/whl/cpu
 EPISODES ?= 300
 export MUJOCO_GL ?= egl
 
-.PHONY: run test install lint format bench bench-all paper paper-final clean
+.PHONY: run test install lint format bench bench-all paper paper-final clean lerobot-venv test-lerobot
+
+# The LeRobot plugins (lerobot_plugins/, docs/lerobot.md) live in a venv of their own: lerobot
+# 0.6.1 needs Python >= 3.12 and torch < 2.12, which from the registry is the CUDA build (about
+# 2 GB to download, a 6 GB venv). LEROBOT_PY: the first Python >= 3.12 found (pyenv's versions
+# folder first: its shim may not find one); give LEROBOT_PY=/path/to/python3.12 otherwise.
+LEROBOT_VERSION ?= 0.6.1
+LEROBOT_VENV := .venv-lerobot
+LEROBOT_STAMP := $(LEROBOT_VENV)/.installed
+LEROBOT_PLUGINS := $(wildcard lerobot_plugins/lerobot_*_ergo_jr)
+LEROBOT_PY ?= $(shell for p in $(wildcard $(HOME)/.pyenv/versions/3.1[2-9]*/bin/python3.1[2-9]) \
+    python3.12 python3.13 python3; do $$p -c 'import sys; sys.exit(sys.version_info < (3, 12))' \
+    2>/dev/null && { echo $$p; break; }; done)
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -29,6 +41,24 @@ run: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
+	@if [ -f $(LEROBOT_STAMP) ]; then $(MAKE) --no-print-directory test-lerobot; else echo \
+	  "LeRobot plugin tests skipped: no $(LEROBOT_VENV); build it with 'make lerobot-venv'"; fi
+
+# lerobot[dataset,training] first (its torch), then this project and the plugins, editable.
+$(LEROBOT_STAMP): pyproject.toml $(addsuffix /pyproject.toml,$(LEROBOT_PLUGINS))
+	@test -n "$(LEROBOT_PY)" || { echo "no Python >= 3.12 found: give LEROBOT_PY=/path/to/python3.12"; exit 1; }
+	$(LEROBOT_PY) -m venv $(LEROBOT_VENV)
+	$(LEROBOT_VENV)/bin/pip install -q --upgrade pip
+	$(LEROBOT_VENV)/bin/pip install -q "lerobot[dataset,training]==$(LEROBOT_VERSION)" \
+	    "pytest>=8" "pytest-timeout>=2.3"
+	$(LEROBOT_VENV)/bin/pip install -q -e '.[export,gym]' $(addprefix -e ,$(LEROBOT_PLUGINS))
+	touch $(LEROBOT_STAMP)
+
+lerobot-venv: $(LEROBOT_STAMP)
+
+# The plugins' tests (lerobot_plugins/tests/): the LeRobot user's path, headless.
+test-lerobot: $(LEROBOT_STAMP)
+	$(LEROBOT_VENV)/bin/python -m pytest -q lerobot_plugins/tests
 
 lint: $(STAMP)
 	$(BIN)/ruff format --check . && $(BIN)/ruff check .
@@ -71,4 +101,4 @@ paper-final: $(STAMP)
 	bash experiments/twin_final.sh $(PAPER_FINAL) 2 $(PAPER_FINAL_PHASES)
 
 clean:
-	rm -rf $(VENV) runs .pytest_cache
+	rm -rf $(VENV) $(LEROBOT_VENV) runs .pytest_cache

@@ -276,13 +276,14 @@ class Owner:
         on_output: Callable[[str, subprocess.Popen[bytes]], None] | None,
         beside: Callable[[threading.Event], None] | None = None,
         check: bool = True,
+        program: Sequence[str] = ERGO,
     ) -> Step:
-        """``ergo ARGS`` with a pipe on stdin: ``on_output(all output so far, process)`` is
-        called on each new piece of stdout (it may answer on stdin); ``beside(stop)`` runs in a
-        thread until the command ends (``stop`` is then set)."""
+        """``ergo ARGS`` (or ``program ARGS``) with a pipe on stdin: ``on_output(all output so
+        far, process)`` is called on each new piece of stdout (it may answer on stdin);
+        ``beside(stop)`` runs in a thread until the command ends (``stop`` is then set)."""
         t0 = time.monotonic()
         proc = subprocess.Popen(
-            [*ERGO, *args],
+            [*program, *args],
             env={**self.env, "PYTHONUNBUFFERED": "1"},
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
@@ -358,13 +359,22 @@ class Owner:
         """``ergo bus scan``: which servos answer."""
         return self.run("bus", "scan", *self.rig.bus_flags(), check=check)
 
-    def calibrate_joints(self, joints: Sequence[str] | None = None, check: bool = True) -> Step:
+    def calibrate_joints(
+        self,
+        joints: Sequence[str] | None = None,
+        check: bool = True,
+        command: Sequence[str] | None = None,
+    ) -> Step:
         """``ergo calibrate joints``: the hands put the limp arm at its zero marks, then each
         joint at its stops, pressing Enter after each move as the command asks; the arm is
-        left held at its zero pose."""
+        left held at its zero pose. ``command``: another command line that asks the same
+        prompts (``lerobot-calibrate`` on the Ergo Jr's LeRobot plugin), run instead."""
         args = ["calibrate", "joints", "--rig-id", self.rig_id, *self.rig.bus_flags()]
         if joints:
             args += ["--joints", *joints]
+        program = ERGO
+        if command is not None:
+            program, args = list(command[:1]), list(command[1:])
         answered = [0]
         failure: list[str] = []
         with self.hands() as hands:
@@ -385,11 +395,9 @@ class Owner:
                     proc.stdin.write(b"\n")
                     proc.stdin.flush()
 
-            step = self._run_with(args, answer, check=False)
+            step = self._run_with(args, answer, check=False, program=program)
             if failure:
-                raise OwnerError(
-                    f"the hands could not do what ergo calibrate joints asked: {failure[0]}"
-                )
+                raise OwnerError(f"the hands could not do what the calibration asked: {failure[0]}")
             self._to_zero(hands)
         return self._finish_checked(step, check)
 

@@ -65,6 +65,10 @@ EPISODES_PATH = "meta/episodes/chunk-000/file-000.parquet"
 VIDEO_KEY = "observation.images.overhead"
 QUANTILES = (0.01, 0.10, 0.50, 0.90, 0.99)  # LeRobot's DEFAULT_QUANTILES (compute_stats.py)
 AUTO_FEATURES = ("timestamp", "frame_index", "episode_index", "index", "task_index")
+# The names of ``observation.state`` and ``action``: each joint's position, ``m1.pos`` ..
+# ``m6.pos``, LeRobot's convention for an arm's joints (its lerobot-rollout hands a policy only
+# the features named ``*.pos``); the Ergo Jr's LeRobot robots (lerobot_plugins/) take them.
+JOINT_FEATURES = tuple(f"{j}.pos" for j in ERGO_JR_JOINTS)
 
 
 @dataclass
@@ -92,7 +96,7 @@ def features(
     n_joints: int, n_params: int, goal_dim: int, context_dim: int, video_side: int
 ) -> dict[str, dict[str, Any]]:
     """The dataset's ``features`` (``info.json``): dtype, shape and names of every column."""
-    joints = list(ERGO_JR_JOINTS)[:n_joints]
+    joints = list(JOINT_FEATURES)[:n_joints]
     out: dict[str, dict[str, Any]] = {
         "observation.state": _vector(joints),
         "action": _vector(joints),
@@ -303,7 +307,7 @@ def _write(
     stats = {key: _stats(cols.array(key)) for key in cols.frames}
     if with_video:
         stats[VIDEO_KEY] = image_stats.result()
-    _write_json(root / "meta/stats.json", stats)
+    _write_json(root / "meta/stats.json", stats, allow_nan=True)  # as LeRobot writes NaN
     info = {
         "codebase_version": CODEBASE_VERSION,
         "robot_type": ROBOT_TYPE,
@@ -441,23 +445,20 @@ def _write_tables(
     pq.write_table(table, root / "meta/tasks.parquet")
 
 
-def _json_number(v: float) -> float | None:
-    return float(v) if np.isfinite(v) else None  # JSON has no NaN: a coordinate never set
-
-
 def _stats(values: np.ndarray) -> dict[str, list[Any]]:
-    """LeRobot's statistics of a column over every frame (NaN-aware: null where a coordinate
-    is never set)."""
+    """LeRobot's statistics of a column over every frame (NaN-aware: NaN where a coordinate is
+    never set, which LeRobot's own writer stores as the token ``NaN`` and reads back as a
+    number; a ``null`` there made lerobot-train's normalizer fail on the whole file)."""
     v = np.asarray(values, dtype=float).reshape(len(values), -1)
     finite = np.isfinite(v).any(axis=0)
     out: dict[str, list[Any]] = {"count": [len(v)]}
     if not finite.any():
-        nulls = [None] * v.shape[1]
-        out.update({k: nulls for k in ("min", "max", "mean", "std")})
-        out.update({f"q{round(q * 100):02d}": nulls for q in QUANTILES})
+        unset = [float("nan")] * v.shape[1]
+        out.update({k: unset for k in ("min", "max", "mean", "std")})
+        out.update({f"q{round(q * 100):02d}": unset for q in QUANTILES})
         return out
     with np.errstate(all="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN coordinates: null below
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN coordinates: NaN
         stats = {
             "min": np.nanmin(v, axis=0),
             "max": np.nanmax(v, axis=0),
@@ -467,7 +468,7 @@ def _stats(values: np.ndarray) -> dict[str, list[Any]]:
         for q in QUANTILES:
             stats[f"q{round(q * 100):02d}"] = np.nanquantile(v, q, axis=0)
     for key, arr in stats.items():
-        out[key] = [_json_number(x) for x in arr]
+        out[key] = [float(x) for x in arr]
     return out
 
 
@@ -506,6 +507,6 @@ class _ImageStats:
         return out
 
 
-def _write_json(path: Path, data: Any) -> None:
+def _write_json(path: Path, data: Any, allow_nan: bool = False) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(data, indent=2, allow_nan=False) + "\n")
+    path.write_text(json.dumps(data, indent=2, allow_nan=allow_nan) + "\n")

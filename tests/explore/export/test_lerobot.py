@@ -103,7 +103,8 @@ def test_the_layout_is_lerobots_v3(dataset):
         info["data_path"].format(chunk_index=0, file_index=0) == "data/chunk-000/file-000.parquet"
     )
     feats = info["features"]
-    assert feats["observation.state"]["names"] == ["m1", "m2", "m3", "m4", "m5", "m6"]
+    names = ["m1.pos", "m2.pos", "m3.pos", "m4.pos", "m5.pos", "m6.pos"]
+    assert feats["observation.state"]["names"] == feats["action"]["names"] == names
     assert feats["episode.dmp_parameters"]["shape"] == [48]
     assert feats[VIDEO_KEY]["shape"] == [SIDE, SIDE, 3]
     assert feats[VIDEO_KEY]["info"]["video.codec"] == "av1"
@@ -349,6 +350,11 @@ def test_an_rpe_run_is_described_in_rge_efrs_goal_space(runs, tmp_path):
     assert feats["episode.outcome"]["shape"] == [3]  # (r_n, cos t, sin t)
     table = pq.read_table(tmp_path / "o/data/chunk-000/file-000.parquet").to_pydict()
     assert np.isnan(np.array(table["episode.goal"], dtype=float)).all()  # no goals
+    # their statistics are NaN numbers, as LeRobot stores them (lerobot-train reads every
+    # feature's statistics as numbers: a null made it fail)
+    stats = json.loads((tmp_path / "o/meta/stats.json").read_text())["episode.goal"]
+    values = stats["mean"] + stats["std"] + stats["q50"]
+    assert all(isinstance(x, float) and np.isnan(x) for x in values)
     outcome = np.array(table["episode.outcome"], dtype=float)
     np.testing.assert_allclose(outcome[:, 1] ** 2 + outcome[:, 2] ** 2, 1.0, atol=1e-5)
 
