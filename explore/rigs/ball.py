@@ -26,6 +26,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from explore.learner.experience import Observation
+from plumbing.fixed_order import distance
 from vision.camera import Camera
 from vision.observation import square_observation
 
@@ -231,7 +232,7 @@ class CameraSensor:
         if self.locator is None:
             return True
         here = self._ball(self.camera.read().image)
-        step = float(np.linalg.norm(here - self._previous))  # NaN if either is unseen
+        step = distance(here, self._previous)  # NaN if either is unseen
         self._previous = here
         return step / interval_s < speed
 

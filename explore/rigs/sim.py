@@ -170,9 +170,11 @@ def scene(config: RigConfig, options: Options) -> Scene:
 
 
 def distractor_walk(xy: np.ndarray, step: float, rng: np.random.Generator) -> np.ndarray:
-    """One step of the distractor's random walk from ``xy`` (2,) m: the new (x, y), m."""
-    r = float(np.hypot(*xy)) + rng.normal(0.0, DISTRACTOR_RADIUS_STEP)
+    """One step of the distractor's random walk from ``xy`` (2,) m: the new (x, y), m. The
+    C library's scalar functions (numpy's arctan2 runs a SIMD version chosen by CPU)."""
+    x, y = float(xy[0]), float(xy[1])
+    r = math.sqrt(x * x + y * y) + rng.normal(0.0, DISTRACTOR_RADIUS_STEP)
     span = R_MAX - R_MIN
     r = R_MIN + span - abs(span - abs(r - R_MIN) % (2 * span))  # reflected into the ring
-    t = float(np.arctan2(xy[1], xy[0])) + rng.normal(0.0, step)
-    return np.array([r * np.cos(t), r * np.sin(t)])
+    t = math.atan2(y, x) + rng.normal(0.0, step)
+    return np.array([r * math.cos(t), r * math.sin(t)])

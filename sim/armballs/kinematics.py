@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from plumbing.fixed_order import matmul
+
 
 def joint_angles(commands: np.ndarray) -> np.ndarray:
     """Absolute angle of each link, rad.
@@ -50,4 +52,5 @@ def hand_position(commands: np.ndarray, link_lengths: np.ndarray) -> np.ndarray:
     """
     a = joint_angles(commands)
     lengths = np.asarray(link_lengths, dtype=float)
-    return np.stack([np.cos(a) @ lengths, np.sin(a) @ lengths], axis=-1)
+    # summed link after link, as ``link_points``' cumulative sum (never BLAS's order)
+    return np.stack([matmul(np.cos(a), lengths), matmul(np.sin(a), lengths)], axis=-1)

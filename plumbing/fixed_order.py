@@ -1,0 +1,140 @@
+"""Arithmetic whose result is the same bits on every x86-64 machine: sums in an order fixed
+here, built only from operations IEEE 754 rounds exactly.
+
+Why: an exploration run turns a difference in the last bit of one distance into another run.
+numpy hands a float64 matrix or dot product (``@``, ``np.dot``, and so ``np.linalg.norm`` of
+a vector) to OpenBLAS, which picks a kernel by CPU (``OPENBLAS_CORETYPE`` forces one) and
+splits the work by thread count: each kernel sums in its own order, with or without fused
+multiply-add, and the last bit differs (measured: a 200k-element dot product and a (10k, 20)
+matrix-vector product under Prescott, Haswell and SkylakeX give three different results).
+numpy's ``exp``, ``log``, ``arctan2``, ``tanh`` and ``power`` run SIMD versions chosen by CPU
+that differ from the scalar ones in the last bit (``NPY_DISABLE_CPU_FEATURES`` shows it).
+
+What does not vary: elementwise ``+ - * /``, ``sqrt``, comparisons, ``floor``, ``rint``,
+``ldexp`` and ``frexp`` of float64 are exactly rounded (or exact) in every implementation,
+SIMD or not, and two numpy ufunc calls are never fused into one multiply-add. Everything here
+is built from those, one ufunc call per operation, in the order the docstrings give, so it is
+a function of its inputs alone. ``tests/plumbing/test_fixed_order.py`` runs it under every
+OpenBLAS kernel, thread count and numpy CPU feature set and compares the bits.
+
+Not covered: the C library's ``sin``, ``cos``, ``atan2`` (glibc picks an FMA variant by CPU),
+which numpy's float64 ``sin`` and ``cos`` call; docs/determinism.md says where that matters.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+# fdlibm's split of ln 2 (e_exp.c): LN2_HI has its low 32 bits zero, so k * LN2_HI is exact
+# for |k| < 2^20
+LN2_HI = 6.93147180369123816490e-01
+LN2_LO = 1.90821492927058770002e-10
+INV_LN2 = 1.44269504088896338700e00
+SQRT_HALF = 0.70710678118654752440
+# exp's Taylor series to degree 13 on |r| <= ln(2) / 2: truncation below 4e-18 (relative)
+_EXP_TERMS = 13
+_EXP_COEFFS = [1.0]
+for _n in range(1, _EXP_TERMS + 1):
+    _EXP_COEFFS.append(_EXP_COEFFS[-1] / _n)
+# log's series 2 s (1 + z/3 + z^2/5 + ...), z = s^2, |s| <= 0.1716: to z^9, truncation 1e-17
+_LOG_TERMS = 10
+# exp's argument range: below, exp underflows to 0; above, it overflows to infinity
+_EXP_MIN, _EXP_MAX = -746.0, 710.0
+
+
+def sq_distances(points: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Squared Euclidean distances of ``points`` (n, d) to ``q`` (d,): for each point,
+    ``(p_0 - q_0)^2 + (p_1 - q_1)^2 + ...`` summed left to right. Shape (n,)."""
+    points = np.asarray(points, dtype=float)
+    q = np.asarray(q, dtype=float).reshape(-1)
+    n, d = points.shape
+    if d != len(q):
+        raise ValueError(f"points have {d} coordinates, the query {len(q)}")
+    if d == 0:
+        return np.zeros(n)
+    diff = points[:, 0] - q[0]
+    out = diff * diff
+    for j in range(1, d):
+        diff = points[:, j] - q[j]
+        out += diff * diff
+    return out
+
+
+def sq_norm(v: np.ndarray) -> float:
+    """``v_0^2 + v_1^2 + ...`` of a vector (d,), summed left to right."""
+    v = np.asarray(v, dtype=float).reshape(-1)
+    return float(sq_distances(v[None, :], np.zeros(len(v)))[0])
+
+
+def norm(v: np.ndarray) -> float:
+    """Euclidean norm of a vector (d,): ``sqrt(sq_norm(v))``."""
+    return float(np.sqrt(sq_norm(v)))
+
+
+def distance(a: np.ndarray, b: np.ndarray) -> float:
+    """Euclidean distance between two vectors (d,): ``sqrt`` of ``sq_distances``."""
+    a = np.asarray(a, dtype=float).reshape(1, -1)
+    return float(np.sqrt(sq_distances(a, b)[0]))
+
+
+def matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a @ b`` summed over the shared axis k = 0, 1, ... left to right: ``a`` (..., m, K),
+    ``b`` (..., K, n) broadcast as ``np.matmul``'s batch axes, or ``b`` (K,) for a
+    matrix-vector product (then shape (..., m)). Cost: 2 K elementwise operations on the
+    output's shape, so for the small K of a motor primitive (7) it is as fast as BLAS."""
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    k = a.shape[-1]
+    if b.shape[0 if b.ndim == 1 else -2] != k:
+        raise ValueError(f"matmul: shapes {a.shape} and {b.shape} do not match")
+    if b.ndim == 1:
+        out = a[..., 0] * b[0]
+        for j in range(1, k):
+            out = out + a[..., j] * b[j]
+        return out
+    out = a[..., :, 0:1] * b[..., 0:1, :]
+    for j in range(1, k):
+        out = out + a[..., :, j : j + 1] * b[..., j : j + 1, :]
+    return out
+
+
+def exp(x: np.ndarray) -> np.ndarray:
+    """e^x elementwise, within 2 ulp of the exact value (``tests/plumbing``): x = k ln 2 + r
+    (Cody and Waite's reduction with fdlibm's split of ln 2), e^r by its Taylor series to
+    degree 13 in Horner's order, times 2^k. 0 below -746, inf above 710, NaN for NaN."""
+    x = np.asarray(x, dtype=float)
+    xc = np.clip(x, _EXP_MIN, _EXP_MAX)
+    k = np.rint(np.nan_to_num(xc) * INV_LN2)
+    r = (xc - k * LN2_HI) - k * LN2_LO
+    p = np.full_like(r, _EXP_COEFFS[-1])
+    for c in reversed(_EXP_COEFFS[:-1]):
+        p = p * r + c
+    with np.errstate(over="ignore", under="ignore"):
+        out = np.ldexp(p, k.astype(np.int64))
+    return np.where(np.isnan(x), np.nan, out)
+
+
+def log(x: np.ndarray) -> np.ndarray:
+    """Natural logarithm elementwise, within 2 ulp (``tests/plumbing``): x = m 2^e with m in
+    [sqrt(1/2), sqrt(2)), f = m - 1, log m = 2 atanh(s) with s = f / (2 + f), by its series to
+    s^19 in Horner's order, summed in fdlibm's order (e_log.c), plus e ln 2. -inf at 0, NaN
+    below 0 and for NaN, inf at inf."""
+    x = np.asarray(x, dtype=float)
+    finite = np.isfinite(x) & (x > 0)
+    m, e = np.frexp(np.where(finite, x, 1.0))
+    low = m < SQRT_HALF
+    m = np.where(low, m * 2.0, m)
+    e = (e - low).astype(float)
+    f = m - 1.0  # exact
+    s = f / (2.0 + f)
+    z = s * s
+    r = np.full_like(z, 2.0 / (2 * _LOG_TERMS - 1))
+    for i in range(_LOG_TERMS - 2, 0, -1):
+        r = r * z + 2.0 / (2 * i + 1)
+    r = r * z  # log(1 + f) = 2 s + s r
+    hfsq = 0.5 * f * f
+    # fdlibm's order (e_log.c): f - s (f - r) rewritten around f^2 / 2
+    out = e * LN2_HI - ((hfsq - (s * (hfsq + r) + e * LN2_LO)) - f)
+    out = np.where(finite, out, np.nan)
+    out = np.where(x == 0, -np.inf, out)
+    return np.where(np.isposinf(x), np.inf, out)
