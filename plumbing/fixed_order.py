@@ -38,13 +38,21 @@ for _n in range(1, _EXP_TERMS + 1):
     _EXP_COEFFS.append(_EXP_COEFFS[-1] / _n)
 # log's series 2 s (1 + z/3 + z^2/5 + ...), z = s^2, |s| <= 0.1716: to z^9, truncation 1e-17
 _LOG_TERMS = 10
+# sq_distances: up to this many points a cumulative sum along the rows is the faster way
+# (measured: 1 point 4.6 against 18 us column by column at 6-D; 200 points 22 against 14 us)
+_FEW_POINTS = 16
 # exp's argument range: below, exp underflows to 0; above, it overflows to infinity
 _EXP_MIN, _EXP_MAX = -746.0, 710.0
 
 
 def sq_distances(points: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Squared Euclidean distances of ``points`` (n, d) to ``q`` (d,): for each point,
-    ``(p_0 - q_0)^2 + (p_1 - q_1)^2 + ...`` summed left to right. Shape (n,)."""
+    ``(p_0 - q_0)^2 + (p_1 - q_1)^2 + ...`` summed left to right. Shape (n,).
+
+    Each partial sum is the previous one plus the next square, a chain of single additions no
+    implementation can reorder (a reduction, ``np.sum``, may: numpy's is pairwise, in blocks of
+    8): for a few points a cumulative sum along each row, for many a column added to a vector
+    at a time (faster; the same additions in the same order)."""
     points = np.asarray(points, dtype=float)
     q = np.asarray(q, dtype=float).reshape(-1)
     n, d = points.shape
@@ -52,18 +60,22 @@ def sq_distances(points: np.ndarray, q: np.ndarray) -> np.ndarray:
         raise ValueError(f"points have {d} coordinates, the query {len(q)}")
     if d == 0:
         return np.zeros(n)
-    diff = points[:, 0] - q[0]
-    out = diff * diff
+    diff = points - q
+    diff *= diff
+    if n <= _FEW_POINTS:
+        return np.add.accumulate(diff, axis=1)[:, -1]
+    out = diff[:, 0].copy()
     for j in range(1, d):
-        diff = points[:, j] - q[j]
-        out += diff * diff
+        out += diff[:, j]
     return out
 
 
 def sq_norm(v: np.ndarray) -> float:
-    """``v_0^2 + v_1^2 + ...`` of a vector (d,), summed left to right."""
+    """``v_0^2 + v_1^2 + ...`` of a vector (d,), summed left to right (as ``sq_distances``)."""
     v = np.asarray(v, dtype=float).reshape(-1)
-    return float(sq_distances(v[None, :], np.zeros(len(v)))[0])
+    if not len(v):
+        return 0.0
+    return float(np.add.accumulate(v * v)[-1])
 
 
 def norm(v: np.ndarray) -> float:

@@ -21,7 +21,8 @@ differently (cKDTree sums in its own order, the product is OpenBLAS's, whose ker
 the CPU), so each proposes every point within a margin far above its rounding (relative 1e-9)
 of the best it found, and the fixed-order distance chooses among them. The answer is then the
 fixed-order nearest whatever the kernel: a kernel's error on a squared distance is below
-d x 2^-53 of the squared norms involved, some 10^6 times smaller than the margin.
+d x 2^-53 of the squared norms involved, some 10^6 times smaller than the margin (the squared
+norms and the margin are BLAS's too: they move the margin by an ulp, never the answer).
 
 The first version rebuilt only when the history doubled: up to half of the points sat in the
 tail, and at 100k stored episodes a query was no faster than a brute-force scan (1.7 ms in
@@ -36,7 +37,7 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.spatial import cKDTree
 
-from plumbing.fixed_order import sq_distances, sq_norm
+from plumbing.fixed_order import sq_distances
 
 DEFAULT_SIGMA = 0.05  # paper, simulation experiments ([-1, 1] parameter space)
 MIN_TREE = 64  # below this many points a brute-force scan is as fast as a tree (guess)
@@ -115,7 +116,8 @@ class NearestNeighbourIndex:
             self._points = grown
             self._sq = np.concatenate([self._sq[: self._n], np.empty(self._n)])
         self._points[self._n] = p
-        self._sq[self._n] = sq = sq_norm(p)
+        # the scan's filter only: BLAS's rounding here changes no answer (module doc)
+        self._sq[self._n] = sq = float(p @ p)
         self._sq_max = max(self._sq_max, sq)
         self._n += 1
         if self.uses_tree and self._n - self._n_tree >= self._tail_limit():
@@ -133,7 +135,7 @@ class NearestNeighbourIndex:
             return start + j, float(sq[j])
         # |p - q|^2 - |q|^2 = |p|^2 - 2 p.q, as BLAS rounds it: candidates within the margin
         approx = self._sq[start : self._n] - 2.0 * (pts @ q)
-        tol = MARGIN * (self._sq_max + sq_norm(q)) + 1e-300
+        tol = MARGIN * (self._sq_max + float(q @ q)) + 1e-300
         cand = np.flatnonzero(approx <= approx.min() + tol)
         sq = sq_distances(pts[cand], q)
         j = int(np.argmin(sq))
@@ -152,7 +154,9 @@ class NearestNeighbourIndex:
         d, _ = self._tree.query(q, k=1)
         # the tree's own distance rounds in its own order: every point it places within the
         # margin of its best is a candidate, the fixed-order distance chooses
-        near = np.sort(np.asarray(self._tree.query_ball_point(q, d * (1 + MARGIN) + 1e-300)))
+        near = self._tree.query_ball_point(q, d * (1 + MARGIN) + 1e-300)
+        if len(near) > 1:
+            near.sort()
         sq = sq_distances(self._points[near], q)
         j = int(np.argmin(sq))
         best_i, best_sq = int(near[j]), float(sq[j])
