@@ -98,9 +98,11 @@ def scaled_sq_distances(
     units, summed over the coordinates in order."""
     q, r = queries / bandwidth, reference / bandwidth
     sq = np.zeros((len(q), len(r)))
+    diff = np.empty_like(sq)  # one buffer for every coordinate: no large temporaries
     for j in range(q.shape[1]):
-        diff = q[:, j, None] - r[None, :, j]
-        sq += diff * diff
+        np.subtract(q[:, j, None], r[None, :, j], out=diff)
+        diff *= diff
+        sq += diff
     return sq
 
 
