@@ -163,3 +163,45 @@ def log(x: np.ndarray) -> np.ndarray:
     out = np.where(finite, out, np.nan)
     out = np.where(x == 0, -np.inf, out)
     return np.where(np.isposinf(x), np.inf, out)
+
+
+# fdlibm's split of pi / 2 (e_rem_pio2.c): PIO2_1 and PIO2_2 hold 33 bits each, so n * PIO2_1
+# and n * PIO2_2 are exact for |n| < 2^20; PIO2_2T is what is left of pi / 2
+INV_PIO2 = 6.36619772367581382433e-01
+PIO2_1 = 1.57079632673412561417e00
+PIO2_2 = 6.07710050630396597660e-11
+PIO2_2T = 2.02226624879595063154e-21
+# fdlibm's minimax kernels on [-pi/4, pi/4] (k_sin.c, k_cos.c)
+_SIN = (
+    -1.66666666666666324348e-01, 8.33333333332248946124e-03, -1.98412698298579493134e-04,
+    2.75573137070700676789e-06, -2.50507602534068634195e-08, 1.58969099521155010221e-10,
+)  # fmt: skip
+_COS = (
+    4.16666666666666019037e-02, -1.38888888888741095749e-03, 2.48015872894767294178e-05,
+    -2.75573143513906633035e-07, 2.08757232129817482790e-09, -1.13596475577881948265e-11,
+)  # fmt: skip
+_TRIG_MAX = 1e6  # |x| above: the reduction's n leaves the exact range (not needed here)
+
+
+def sin_cos(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """sin x and cos x elementwise, within 2 ulp for |x| <= 1e6 (``tests/plumbing``): fdlibm's
+    algorithm (Cody and Waite's reduction by pi / 2 in three parts, then its minimax kernels in
+    their order, k_sin.c and k_cos.c), without the C library, whose variant depends on the
+    CPU. Raises ``ValueError`` beyond |x| 1e6 or for NaN and infinities."""
+    x = np.asarray(x, dtype=float)
+    if not np.all(np.abs(x) <= _TRIG_MAX):
+        raise ValueError(f"sin_cos takes |x| <= {_TRIG_MAX:g}, finite")
+    n = np.rint(x * INV_PIO2)
+    y = (x - n * PIO2_1) - n * PIO2_2
+    y = y - n * PIO2_2T
+    z = y * y
+    r = _SIN[1] + z * (_SIN[2] + z * (_SIN[3] + z * (_SIN[4] + z * _SIN[5])))
+    s = y + (z * y) * (_SIN[0] + z * r)
+    rc = z * (_COS[0] + z * (_COS[1] + z * (_COS[2] + z * (_COS[3] + z * (_COS[4] + z * _COS[5])))))
+    hz = 0.5 * z
+    w = 1.0 - hz
+    c = w + (((1.0 - w) - hz) + z * rc)
+    q = n.astype(np.int64) & 3
+    sin = np.where(q == 0, s, np.where(q == 1, c, np.where(q == 2, -s, -c)))
+    cos = np.where(q == 0, c, np.where(q == 1, -s, np.where(q == 2, -c, s)))
+    return sin, cos

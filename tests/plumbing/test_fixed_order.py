@@ -1,4 +1,5 @@
-"""Fixed-order arithmetic: its sums are in the order it says, its exp and log within 2 ulp, and
+"""Fixed-order arithmetic: its sums are in the order it says, its exp, log, sin and cos within
+2 ulp, and
 its results (and the nearest-neighbour index's large scans, which BLAS only proposes candidates
 for) the same bits under every OpenBLAS kernel, thread count and numpy CPU feature set."""
 
@@ -56,6 +57,19 @@ def test_exp_and_log_are_within_two_ulp_of_the_c_library():
     np.testing.assert_array_equal(special, [-np.inf, np.nan, np.inf, np.nan, 0.0])
 
 
+def test_sin_and_cos_are_within_two_ulp_of_the_c_library():
+    rng = np.random.default_rng(3)
+    x = np.concatenate([rng.uniform(-25, 25, 20000), rng.uniform(-1e6, 1e6, 5000)])
+    x = np.concatenate([x, np.arange(-20, 21) * np.pi / 2, rng.uniform(-1e-3, 1e-3, 1000)])
+    sin, cos = fixed_order.sin_cos(x)
+    for got, f in ((sin, math.sin), (cos, math.cos)):
+        ref = np.array([f(v) for v in x])
+        assert _ulps(got, ref).max() <= 2
+    assert fixed_order.sin_cos(0.0) == (0.0, 1.0)
+    with pytest.raises(ValueError, match="1e"):
+        fixed_order.sin_cos(np.array([0.0, np.nan]))
+
+
 BITS = """
 import hashlib, numpy as np
 from plumbing import fixed_order as f
@@ -65,6 +79,7 @@ h = hashlib.sha256()
 p, q = rng.normal(size=(5000, 20)), rng.normal(size=20)
 for v in (f.sq_distances(p, q), f.matmul(p[:, :7], rng.normal(size=(7, 6))),
           f.exp(rng.uniform(-50, 50, 5000)), f.log(rng.uniform(0, 50, 5000)),
+          *f.sin_cos(rng.uniform(-30, 30, 5000)),
           np.array([f.norm(p[0]), f.distance(p[1], p[2])])):
     h.update(np.ascontiguousarray(v).tobytes())
 # 20-D: every query scans all points through BLAS's matrix-vector product; 6-D with a long

@@ -29,9 +29,9 @@ GOLDEN = {
     "twin-rge-efr": "af69a4e54b5f37e3a184f7c28f12bb0222854bb8735028efb171832ae02689c5",
     "twin-mge-efr": "ab27a89c15124a2c32845267daeb94271d452f34fa34a74f2189f9941ed42c79",
     "twin-rge-efr-frontier": "16834688d8e49af2221e0ebe3e1878dbc4d18b95f3221db9517e467dc03d9a79",
-    "arm2balls-rge-corl2018": "488eb29ad57831f78b0888b9d7a06a4ed28983bac3a52918765eb23f4849f0f4",
-    "arm2balls-mge-corl2018": "418661212ec21891ff5a8608531ecf51c7d0a84d8f19da43481debf9ed19fa06",
-    "armballs-rge-efr-density": "f1851256b7922e586057a31ec6e8424bdaa50722d695268a10762568f0fe6e94",
+    "arm2balls-rge-corl2018": "5e2ee07f6deb5db6b9a015c882989a8da5b65598b598c4215afff8e0a460edf9",
+    "arm2balls-mge-corl2018": "3359c25cd8fc0279ac9f9d5183de1a383748c9990b5dff24d4fb95fbab7b4be5",
+    "armballs-rge-efr-density": "024ce932ed4c752d6c36ea2bf109cb12384dcce2d3a6a191b9aab56becf2f942",
 }  # fmt: skip
 
 
@@ -57,6 +57,25 @@ def test_short_runs_match_their_golden_fingerprints():
 def test_one_fingerprint_per_strategy_whatever_the_kernel_threads_and_simd(setting):
     out = json.loads(run_python(["-m", "testkit.determinism"], SETTINGS[setting], 300))
     assert out == GOLDEN
+
+
+# glibc's libm without its FMA variant, as on a CPU without FMA (docs/determinism.md)
+NO_FMA_LIBM = {"GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX2,-FMA,-AVX512F"}
+LIBM_PROBE = (
+    "import hashlib, math, struct; "
+    "print(hashlib.sha256(b''.join(struct.pack('<d', math.sin(0.001 * k)) "
+    "for k in range(100000))).hexdigest())"
+)
+
+
+def test_armballs_runs_do_not_depend_on_the_c_library_variant():
+    # ArmBalls is numpy and our own arithmetic only: its runs are the same with glibc's
+    # non-FMA libm; the twin's are not (MuJoCo's physics calls the C library)
+    if run_python(["-c", LIBM_PROBE], NO_FMA_LIBM, 60) == run_python(["-c", LIBM_PROBE], {}, 60):
+        pytest.skip("this C library ignores GLIBC_TUNABLES' hwcaps: nothing to compare")
+    names = [name for name in GOLDEN if name.startswith("arm")]
+    out = json.loads(run_python(["-m", "testkit.determinism", *names], NO_FMA_LIBM, 300))
+    assert out == {name: GOLDEN[name] for name in names}
 
 
 # The first runs: the README's first task and ``make run``, their figures in one place
