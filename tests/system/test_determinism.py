@@ -45,18 +45,33 @@ def run_python(args: list[str], env: dict[str, str], timeout: float) -> str:
     return done.stdout
 
 
+# ``ERGO_TEST_NUDGE_ULP=1`` (tests/nudge_twin.py) moves every twin run off its golden
+# fingerprint on purpose: then the settings are compared with the default setting's runs
+NUDGED = os.environ.get("ERGO_TEST_NUDGE_ULP") == "1"
+
+
+@pytest.fixture(scope="module")
+def expected() -> dict[str, str]:
+    """The golden fingerprints, or the default setting's under the nudge."""
+    if not NUDGED:
+        return GOLDEN
+    return json.loads(run_python(["-m", "testkit.determinism"], {}, 300))
+
+
 def test_short_runs_match_their_golden_fingerprints():
     from testkit.determinism import SHORT_RUNS
 
     assert set(SHORT_RUNS) == set(GOLDEN)
+    if NUDGED:
+        pytest.skip("the twin is nudged: its runs are not the golden ones")
     out = json.loads(run_python(["-m", "testkit.determinism"], {}, 300))
     assert out == GOLDEN
 
 
 @pytest.mark.parametrize("setting", list(SETTINGS))
-def test_one_fingerprint_per_strategy_whatever_the_kernel_threads_and_simd(setting):
+def test_one_fingerprint_per_strategy_whatever_the_kernel_threads_and_simd(setting, expected):
     out = json.loads(run_python(["-m", "testkit.determinism"], SETTINGS[setting], 300))
-    assert out == GOLDEN
+    assert out == expected
 
 
 # glibc's libm without its FMA variant, as on a CPU without FMA (docs/determinism.md)
@@ -103,6 +118,8 @@ def first_runs_table() -> dict[str, tuple[int, str]]:
 
 
 def test_the_first_runs_give_the_figures_the_docs_quote(tmp_path):
+    if NUDGED:
+        pytest.skip("the twin is nudged: the docs quote the unnudged twin's figures")
     table = first_runs_table()
     script = (
         "import sys\n"
