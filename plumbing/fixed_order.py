@@ -17,8 +17,10 @@ is built from those, one ufunc call per operation, in the order the docstrings g
 a function of its inputs alone. ``tests/plumbing/test_fixed_order.py`` runs it under every
 OpenBLAS kernel, thread count and numpy CPU feature set and compares the bits.
 
-Not covered: the C library's ``sin``, ``cos``, ``atan2`` (glibc picks an FMA variant by CPU),
-which numpy's float64 ``sin`` and ``cos`` call; docs/determinism.md says where that matters.
+The C library's ``exp``, ``log``, ``sin``, ``cos`` and ``atan2`` are not used: glibc picks a
+variant by CPU (with or without fused multiply-add), and numpy's float64 ``sin`` and ``cos``
+call them; ``sin_cos`` here is fdlibm's algorithm in numpy operations. docs/determinism.md
+says what is covered.
 """
 
 from __future__ import annotations

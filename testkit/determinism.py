@@ -1,6 +1,6 @@
 """Short runs whose fingerprints must not depend on the machine: what
 ``tests/system/test_determinism.py`` runs in subprocesses under several BLAS kernels, thread
-counts and numpy CPU feature sets, and ``bench``/docs name.
+counts and numpy CPU feature sets (``SETTINGS``), against its golden fingerprints.
 
     python -m testkit.determinism [NAME ...] [--root DIR]   # prints {name: sha256} as JSON
 
