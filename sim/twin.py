@@ -17,6 +17,7 @@ from collections import deque
 from pathlib import Path
 from typing import Protocol
 
+from plumbing.fixed_order import norm
 from robot.spec import ERGO_JR_JOINTS
 from sim.headless import ensure_fork_safe_software_gl, ensure_headless_gl
 from sim.servo_model import ServoModel, read_model, write_model
@@ -303,7 +304,8 @@ class Twin:
 
     def ball_speed(self) -> float:
         """Linear speed of the ball, m/s."""
-        return float(np.linalg.norm(self.data.qvel[self._ball_qvel : self._ball_qvel + 3]))
+        # fixed-order sum, not BLAS's dot (the settle it decides is the same on every machine)
+        return norm(self.data.qvel[self._ball_qvel : self._ball_qvel + 3])
 
     def end_effector_position(self) -> np.ndarray:
         """Tool tip, shape (3,), m."""

@@ -1,6 +1,7 @@
 """``ergo runs check RUN`` and ``ergo runs salvage RUN``: what a run folder's history holds, and
 keeping every good record of a damaged one so that the run can resume
-(``explore/runs/repair.py``)."""
+(``explore/runs/repair.py``); ``ergo runs fingerprint RUN [RUN ...]``: what each run explored,
+as one SHA-256 (``explore/runs/fingerprint.py``)."""
 
 from __future__ import annotations
 
@@ -33,6 +34,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     salvage.add_argument("run", type=Path, metavar="RUN")
     salvage.set_defaults(func=run_salvage)
+    fingerprint = cmds.add_parser(
+        "fingerprint",
+        help="one SHA-256 over what each run explored (parameters, outcomes, metrics; no "
+        "times), computed from its history: equal for the same run (exit 1 if the runs "
+        "given differ)",
+    )
+    fingerprint.add_argument("runs", type=Path, nargs="+", metavar="RUN")
+    fingerprint.set_defaults(func=run_fingerprint)
 
 
 def run_check(args: argparse.Namespace) -> int:
@@ -78,4 +87,34 @@ def run_salvage(args: argparse.Namespace) -> int:
         f"and {r.damaged_bytes} damaged byte(s) to {r.folder}; start again with: ergo explore "
         f"--resume {args.run}"
     )
+    return 0
+
+
+def run_fingerprint(args: argparse.Namespace) -> int:
+    from explore.rigs.rig import RigError
+    from explore.runs.fingerprint import fingerprint_run
+    from explore.runs.store import RunStoreError
+
+    digests = set()
+    for run in args.runs:
+        try:
+            found = fingerprint_run(run)
+        except (RunStoreError, RigError) as exc:
+            raise CliError(str(exc)) from exc
+        fp = found.fingerprint
+        digests.add(fp.hexdigest())
+        line = f"{fp.hexdigest()}  {run}: {fp.episodes} episodes, {fp.ball_cells} ball cells"
+        if found.torn_bytes:
+            line += f" (a torn last record of {found.torn_bytes} bytes left out)"
+        old = found.recorded
+        if old and old.get("episodes") == fp.episodes and old.get("sha256") != fp.hexdigest():
+            line += (
+                f"; run.json recorded {str(old.get('sha256'))[:16]}... for as many episodes "
+                "(another version's arithmetic)"
+            )
+        print(line)
+    if len(args.runs) > 1:
+        same = len(digests) == 1
+        print("the same run" if same else f"{len(digests)} different runs")
+        return 0 if same else 1
     return 0

@@ -3,6 +3,9 @@
 One DMP per joint, 7 Gaussian basis functions and one goal each (the paper's rig,
 docs/facts.md). Vectorised over joints.
 
+Arithmetic: ``plumbing.fixed_order``'s exp, log and sums in a fixed order, never BLAS or numpy's
+SIMD exp, so a trajectory is the same bits on every machine (docs/determinism.md).
+
 Constants from the original implementation (flowersteam/APEX ``poppimage``, read for facts):
 weights scaled by 200, goals by 1, 40 points at dt = 1/40 s, alpha_y = 25, beta_y = alpha_y / 4,
 canonical system x' = -x, centres exp(-linspace(0.8, 0, 7)), widths 8 n^2 / c^1.5,
@@ -20,6 +23,8 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
+
+from plumbing import fixed_order
 
 N_JOINTS = 6
 N_BASIS = 7
@@ -97,8 +102,9 @@ class Dmp:
 
     def __init__(self, config: DmpConfig) -> None:
         self.config = config
-        self.centres = np.exp(-np.linspace(0.8, 0.0, N_BASIS))  # shape (7,)
-        self.widths = 8.0 * N_BASIS**2 / self.centres**1.5  # shape (7,)
+        spread = np.linspace(0.8, 0.0, N_BASIS)
+        self.centres = fixed_order.exp(-spread)  # shape (7,)
+        self.widths = 8.0 * N_BASIS**2 * fixed_order.exp(1.5 * spread)  # / centres^1.5, (7,)
         self.lower = np.asarray(self.config.lower, dtype=float)
         self.upper = np.asarray(self.config.upper, dtype=float)
         if self.lower.shape != (N_JOINTS,) or self.upper.shape != (N_JOINTS,):
@@ -109,7 +115,8 @@ class Dmp:
         """Canonical phase x before each integration sub-step, shape (n_points * substeps,)."""
         cfg = self.config
         h = 1.0 / (cfg.rate_hz * cfg.substeps)
-        return (1.0 - h * ALPHA_X) ** np.arange(cfg.n_points * cfg.substeps)
+        steps = np.arange(cfg.n_points * cfg.substeps, dtype=float)
+        return fixed_order.exp(steps * float(fixed_order.log(1.0 - h * ALPHA_X)))
 
     def _linear_map(self) -> tuple[np.ndarray, np.ndarray]:
         """The DMP with y0 = z0 = 0 is linear time-invariant in its input u = ab g + f, so the
@@ -138,9 +145,11 @@ class Dmp:
         lag = samples[:, None] - 1 - np.arange(n_sub)[None, :]  # (n_points, n_sub)
         conv = np.where(lag >= 0, impulse[np.clip(lag, 0, None)], 0.0)
         x = self._phase()
-        psi = np.exp(-self.widths[None, :] * (x[:, None] - self.centres[None, :]) ** 2)
-        phi = x[:, None] * psi / psi.sum(axis=1, keepdims=True)  # (n_sub, 7)
-        return ab * conv.sum(axis=1), conv @ phi
+        gap = x[:, None] - self.centres[None, :]
+        psi = fixed_order.exp(-self.widths[None, :] * (gap * gap))
+        total = fixed_order.matmul(psi, np.ones(N_BASIS))  # the basis summed in order
+        phi = x[:, None] * psi / total[:, None]  # (n_sub, 7)
+        return ab * np.add.reduce(conv, axis=1), fixed_order.matmul(conv, phi)
 
     def normalised(self, theta: np.ndarray) -> np.ndarray:
         """Integrate the DMPs in normalised units (unclipped).
@@ -154,7 +163,10 @@ class Dmp:
         theta = check_parameters(theta).reshape(N_JOINTS, N_BASIS + 1)
         weights = theta[:, :N_BASIS] * WEIGHT_SCALE  # (6, 7)
         goal = theta[:, N_BASIS] * GOAL_SCALE  # (6,)
-        return self._goal_gain[:, None] * goal[None, :] + self._basis_gain @ weights.T
+        # the basis summed in a fixed order, not by BLAS (the same bits on every machine)
+        return self._goal_gain[:, None] * goal[None, :] + fixed_order.matmul(
+            self._basis_gain, weights.T
+        )
 
     def normalised_reference(self, theta: np.ndarray) -> np.ndarray:
         """The same integration step by step (slow; the tests compare it to ``normalised``)."""

@@ -44,6 +44,10 @@ Reachability guard, three parts.
 - Radius: ``frontier``'s goals are not reached outcomes, so no miss is counted for them; a
   goal lies one bandwidth beyond a reached outcome, never farther.
 
+Arithmetic: distances summed over the coordinates in a fixed order, and ``plumbing.fixed_order``'s
+exp and log (numpy's run SIMD versions chosen by CPU), so that a goal is the same bits on every
+machine (docs/determinism.md).
+
 State is a deterministic function of the records learnt (outcomes and miss counts); all
 randomness comes from the generator passed to ``goal`` (the episode's), so a resumed run
 that replays its history proposes the same goals.
@@ -54,6 +58,8 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
+
+from plumbing import fixed_order
 
 GoalSampling = Literal["uniform", "density", "frontier", "sparse"]
 GOAL_SAMPLINGS: tuple[str, ...] = ("uniform", "density", "frontier", "sparse")
@@ -81,17 +87,23 @@ def scott_bandwidth(points: np.ndarray) -> np.ndarray:
     """
     n, d = points.shape
     sd = points.std(axis=0) if n > 1 else np.zeros(d)
-    return np.maximum(n ** (-1.0 / (d + 4)) * sd, MIN_BANDWIDTH)
+    factor = float(fixed_order.exp(fixed_order.log(float(n)) * (-1.0 / (d + 4))))  # n^(-1/(d+4))
+    return np.maximum(factor * sd, MIN_BANDWIDTH)
 
 
 def scaled_sq_distances(
     queries: np.ndarray, reference: np.ndarray, bandwidth: np.ndarray
 ) -> np.ndarray:
     """(c, m) squared distances of queries (c, d) to references (m, d), in bandwidth (d,)
-    units."""
+    units, summed over the coordinates in order."""
     q, r = queries / bandwidth, reference / bandwidth
-    sq = (q * q).sum(1)[:, None] + (r * r).sum(1)[None, :] - 2.0 * q @ r.T
-    return np.maximum(sq, 0.0)
+    sq = np.zeros((len(q), len(r)))
+    diff = np.empty_like(sq)  # one buffer for every coordinate: no large temporaries
+    for j in range(q.shape[1]):
+        np.subtract(q[:, j, None], r[None, :, j], out=diff)
+        diff *= diff
+        sq += diff
+    return sq
 
 
 def kernel_log_density(
@@ -111,8 +123,10 @@ def kernel_log_density(
     if sq is None:
         sq = scaled_sq_distances(queries, reference, bandwidth)
     e = -0.5 * sq
-    top = e.max(axis=1)  # numpy's own log-sum-exp: scipy's costs 1.2 ms at (100, 500)
-    return top + np.log(np.exp(e - top[:, None]).sum(axis=1))
+    top = e.max(axis=1)  # our own log-sum-exp: scipy's costs 1.2 ms at (100, 500)
+    # numpy's pairwise sum along a row: an order fixed by its source, not by the CPU
+    total = np.add.reduce(fixed_order.exp(e - top[:, None]), axis=1)
+    return top + fixed_order.log(total)
 
 
 class OutcomeStore:
@@ -181,7 +195,7 @@ class GoalSampler:
             j = store.aimed_at(g)
             if j is not None:
                 span = _span(low, high)
-                miss = np.linalg.norm((np.asarray(parts[module], dtype=float) - g) / span)
+                miss = fixed_order.norm((np.asarray(parts[module], dtype=float) - g) / span)
                 if miss > MISS_RADIUS:
                     store.misses[j] += 1
         c = np.zeros(self.context_dim) if context is None else np.asarray(context, dtype=float)
@@ -264,7 +278,7 @@ class GoalSampler:
         if n <= N_CANDIDATES:
             return np.arange(n)
         pool = rng.integers(0, n, N_POOL)  # drawn, not in order: ties go to chance
-        gap = ((store.contexts[pool] - np.asarray(context, dtype=float)) ** 2).sum(axis=1)
+        gap = fixed_order.sq_distances(store.contexts[pool], context)
         order = np.argsort(gap, kind="stable")  # ties: the earlier draw
         return pool[order[:N_CANDIDATES]]
 
@@ -279,14 +293,15 @@ def frontier_step(x: np.ndarray, reference: np.ndarray, bandwidth: np.ndarray) -
         (d,) the frontier goal, in scaled coordinates.
     """
     z = (reference - x) / bandwidth
-    sq = (z * z).sum(1)
+    sq = fixed_order.sq_distances(z, np.zeros(z.shape[1]))
     others = sq > 0
     if not others.any():
         return x.copy()
-    w = np.exp(-0.5 * (sq[others] - sq[others].min()))
-    mean = w @ reference[others] / w.sum()
+    w = fixed_order.exp(-0.5 * (sq[others] - sq[others].min()))
+    # sums over the reference down axis 0: row after row, an order fixed by numpy's source
+    mean = np.add.reduce(w[:, None] * reference[others], axis=0) / np.add.reduce(w)
     v = (x - mean) / bandwidth
-    norm = float(np.linalg.norm(v))
+    norm = fixed_order.norm(v)
     if norm == 0.0:
         return x.copy()
     return x + bandwidth * v / norm

@@ -22,6 +22,7 @@ positions of a spatial autoencoder's features (``spatial_goal_space``).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -32,27 +33,39 @@ from vision.spatial_code import distinct_features
 
 POLAR_FORMS = FORMS  # every engineered form (explore/learner/scene.py)
 Features = Callable[[np.ndarray], np.ndarray]
+_ATAN2 = np.frompyfunc(math.atan2, 2, 1)  # the C library's, elementwise
+
+
+def _radius(xy: np.ndarray) -> np.ndarray:
+    """sqrt(x^2 + y^2) of (..., 2), elementwise (no libm hypot: the same bits everywhere)."""
+    x, y = xy[..., 0], xy[..., 1]
+    return np.sqrt(x * x + y * y)
 
 
 def ring_polar_features(xy: np.ndarray, ring: tuple[float, float]) -> np.ndarray:
     """The ``"polar"`` form: ball (x, y), shape (..., 2) -> (r_n, t / pi), shape (..., 2),
     t = atan2(y, x), r_n the radius mapped from ``ring`` = (r_min, r_max) onto [-1, 1]
-    (not ``vision.rectify.polar_features``, the tracker's (r, cos t, sin t) in metres)."""
+    (not ``vision.rectify.polar_features``, the tracker's (r, cos t, sin t) in metres).
+    The angle is the C library's ``atan2`` (numpy's own runs a SIMD version chosen by CPU;
+    docs/determinism.md)."""
     xy = np.asarray(xy, dtype=float)
     mid, half = (ring[0] + ring[1]) / 2, (ring[1] - ring[0]) / 2
-    r = np.hypot(xy[..., 0], xy[..., 1])
-    t = np.arctan2(xy[..., 1], xy[..., 0])
-    return np.stack([(r - mid) / half, t / np.pi], axis=-1)
+    t = np.asarray(_ATAN2(xy[..., 1], xy[..., 0]), dtype=float)
+    return np.stack([(_radius(xy) - mid) / half, t / np.pi], axis=-1)
 
 
 def wrap_safe_features(xy: np.ndarray, ring: tuple[float, float]) -> np.ndarray:
     """The ``"wrap-safe"`` form: ball (x, y), shape (..., 2) -> (r_n, cos t, sin t), shape
-    (..., 3), r_n as in ``ring_polar_features``."""
+    (..., 3), r_n as in ``ring_polar_features``; cos t = x / r and sin t = y / r ((1, 0) at
+    the centre), exactly rounded divisions: the same bits on every machine."""
     xy = np.asarray(xy, dtype=float)
     mid, half = (ring[0] + ring[1]) / 2, (ring[1] - ring[0]) / 2
-    r = np.hypot(xy[..., 0], xy[..., 1])
-    t = np.arctan2(xy[..., 1], xy[..., 0])
-    return np.stack([(r - mid) / half, np.cos(t), np.sin(t)], axis=-1)
+    r = _radius(xy)
+    centre = r == 0
+    safe = np.where(centre, 1.0, r)
+    cos_t = np.where(centre, 1.0, xy[..., 0] / safe)
+    sin_t = np.where(centre, 0.0, xy[..., 1] / safe)
+    return np.stack([(r - mid) / half, cos_t, sin_t], axis=-1)
 
 
 def form_features(form: str, scene: Scene) -> tuple[Features, int]:

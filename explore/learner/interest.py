@@ -21,10 +21,13 @@ goal history is the caller's choice (``remember``): every one in our schedule, o
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Sequence
 
 import numpy as np
+
+from plumbing.fixed_order import distance, sq_distances
 
 RANDOM_CHOICE = 0.1  # paper: 10% of module choices at random
 # Paper: 1000 episodes in simulation, 200 on the rig, for runs of ~10k episodes. Our CPU runs are
@@ -90,13 +93,14 @@ class ModuleInterest:
         """Current interest of each module, shape (n_modules,), >= 0."""
         if self.average == "exponential":
             return np.abs(np.array(self.smoothed, dtype=float))
-        return np.array([abs(float(np.mean(p))) if p else 0.0 for p in self.progress])
+        # math.fsum: the correctly rounded sum, the same on every machine
+        return np.array([abs(math.fsum(p) / len(p)) if p else 0.0 for p in self.progress])
 
     def probabilities(self) -> np.ndarray:
         """Module choice probabilities, shape (n_modules,), summing to 1."""
         n = self.n_modules
         interest = self.interests()
-        total = interest.sum()
+        total = math.fsum(interest)
         greedy = interest / total if total > 0 else np.full(n, 1.0 / n)
         return self.random_choice / n + (1.0 - self.random_choice) * greedy
 
@@ -109,7 +113,7 @@ class ModuleInterest:
         worst = -COMPETENCE_DIST_MAX if self.competence_kind == "distance" else -1.0
         if reached is None or not np.all(np.isfinite(reached)):
             return worst
-        d = float(np.linalg.norm(goal - reached))
+        d = distance(goal, reached)
         if self.competence_kind == "distance":
             return -min(d, COMPETENCE_DIST_MAX)
         return -min(d / max(scale, 1e-9), 1.0)
@@ -132,7 +136,7 @@ class ModuleInterest:
             c = self.competence(goal, reached, scale)
             past = self.goals[module]
             if past:
-                d = np.linalg.norm(np.asarray(past) - goal, axis=1)
+                d = sq_distances(np.asarray(past), goal)
                 old = self.reached[module][int(np.argmin(d))]
                 progress = c - self.competence(goal, old, scale)
             else:

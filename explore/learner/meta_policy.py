@@ -14,6 +14,16 @@ A query costs a tree search plus a scan of at most that tail (``bench/bench_meta
 Above 8 dimensions (a VAE's 10 latents + 10 of context) a k-d tree prunes almost nothing, so
 there is no tree: each query scans all points with one matrix-vector product.
 
+One distance decides, the same bits on every machine: the squared distance summed over the
+coordinates in order (``plumbing.fixed_order.sq_distances``), compared as it is (ties: the
+lowest index). The tree and the matrix-vector product only propose candidates; they round
+differently (cKDTree sums in its own order, the product is OpenBLAS's, whose kernel depends on
+the CPU), so each proposes every point within a margin far above its rounding (relative 1e-9)
+of the best it found, and the fixed-order distance chooses among them. The answer is then the
+fixed-order nearest whatever the kernel: a kernel's error on a squared distance is below
+d x 2^-53 of the squared norms involved, some 10^6 times smaller than the margin (the squared
+norms and the margin are BLAS's too: they move the margin by an ulp, never the answer).
+
 The first version rebuilt only when the history doubled: up to half of the points sat in the
 tail, and at 100k stored episodes a query was no faster than a brute-force scan (1.7 ms in
 6-D, 17 ms in 20-D).
@@ -27,12 +37,17 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.spatial import cKDTree
 
+from plumbing.fixed_order import sq_distances
+
 DEFAULT_SIGMA = 0.05  # paper, simulation experiments ([-1, 1] parameter space)
 MIN_TREE = 64  # below this many points a brute-force scan is as fast as a tree (guess)
 REBUILD_TAIL = 1024  # most points left outside the tree below 32k points (bench_meta_policy)
 TAIL_FRACTION = 32  # beyond, at most n / 32 outside the tree (rebuild cost amortised, guess)
 TREE_MAX_DIM = 8  # above, a k-d tree query costs about a full scan (bench_meta_policy: 6-D vs 20-D)
 SMALL_SCAN = 256  # below, a plain distance scan beats the matrix-vector one (guess)
+# relative margin around a candidate proposer's best (the tree's distance, the matrix-vector
+# product's squared one): far above their rounding (module doc)
+MARGIN = 1e-9
 TIES = ("first", "spread")
 
 
@@ -44,8 +59,9 @@ class NearestNeighbourIndex:
     bench_meta_policy, VAE rows), so every query is a scan, done as one matrix-vector
     product on the stored squared norms, then exact distances for the few candidates it leaves.
 
-    Ties between equally distant points go to the lowest index, so runs stay deterministic
-    whatever the rebuild schedule. ``rebuild_tail``: the most points left outside the tree
+    Distances are the fixed-order ones (module doc); ties between equally distant points go
+    to the lowest index, so runs stay deterministic whatever the rebuild schedule and the
+    machine. ``rebuild_tail``: the most points left outside the tree
     (before n / ``TAIL_FRACTION`` takes over); tests make it and ``tree_max_dim`` small.
     """
 
@@ -100,6 +116,7 @@ class NearestNeighbourIndex:
             self._points = grown
             self._sq = np.concatenate([self._sq[: self._n], np.empty(self._n)])
         self._points[self._n] = p
+        # the scan's filter only: BLAS's rounding here changes no answer (module doc)
         self._sq[self._n] = sq = float(p @ p)
         self._sq_max = max(self._sq_max, sq)
         self._n += 1
@@ -109,23 +126,24 @@ class NearestNeighbourIndex:
         return self._n - 1
 
     def _scan(self, q: np.ndarray, start: int) -> tuple[int, float]:
-        """Exact nearest of the points [start, n) to ``q``: index (lowest of ties), distance."""
+        """Nearest of the points [start, n) to ``q``: index (lowest of ties), squared
+        distance (fixed order)."""
         pts = self._points[start : self._n]
         if len(pts) <= SMALL_SCAN:
-            dist = np.linalg.norm(pts - q, axis=1)
-            j = int(np.argmin(dist))  # the first of equal minima
-            return start + j, float(dist[j])
-        # |p - q|^2 - |q|^2 = |p|^2 - 2 p.q, rounded: keep every point within a bound far above
-        # that rounding (relative 1e-9 of the largest squared norm), then exact distances
+            sq = sq_distances(pts, q)
+            j = int(np.argmin(sq))  # the first of equal minima
+            return start + j, float(sq[j])
+        # |p - q|^2 - |q|^2 = |p|^2 - 2 p.q, as BLAS rounds it: candidates within the margin
         approx = self._sq[start : self._n] - 2.0 * (pts @ q)
-        tol = 1e-9 * (self._sq_max + float(q @ q)) + 1e-300
+        tol = MARGIN * (self._sq_max + float(q @ q)) + 1e-300
         cand = np.flatnonzero(approx <= approx.min() + tol)
-        dist = np.linalg.norm(pts[cand] - q, axis=1)
-        j = int(np.argmin(dist))
-        return start + int(cand[j]), float(dist[j])
+        sq = sq_distances(pts[cand], q)
+        j = int(np.argmin(sq))
+        return start + int(cand[j]), float(sq[j])
 
-    def nearest(self, query: np.ndarray) -> tuple[int, float]:
-        """Index and distance of the point nearest to ``query`` (dim,). Raises if empty."""
+    def nearest_sq(self, query: np.ndarray) -> tuple[int, float]:
+        """Index of the point nearest to ``query`` (dim,) (the lowest of ties) and its squared
+        distance, both by the fixed-order distance. Raises if empty."""
         if self._n == 0:
             raise ValueError("nearest neighbour of an empty index")
         q = np.asarray(query, dtype=float).reshape(-1)
@@ -133,21 +151,26 @@ class NearestNeighbourIndex:
             raise ValueError(f"query has shape {q.shape}, expected ({self.dim},)")
         if self._tree is None:
             return self._scan(q, 0)
-        d, i = self._tree.query(q, k=1)
-        best_i, best_d = int(i), float(d)
-        # cKDTree breaks ties arbitrarily: look for an equally distant lower index
-        ties = self._tree.query_ball_point(q, best_d * (1 + 1e-12) + 1e-300)
-        if ties:
-            tied = np.asarray(ties)
-            dist = np.linalg.norm(self._points[tied] - q, axis=1)
-            tied = tied[dist <= best_d]
-            if len(tied):
-                best_i = int(tied.min())
+        d, _ = self._tree.query(q, k=1)
+        # the tree's own distance rounds in its own order: every point it places within the
+        # margin of its best is a candidate, the fixed-order distance chooses
+        near = self._tree.query_ball_point(q, d * (1 + MARGIN) + 1e-300)
+        if len(near) > 1:
+            near.sort()
+        sq = sq_distances(self._points[near], q)
+        j = int(np.argmin(sq))
+        best_i, best_sq = int(near[j]), float(sq[j])
         if self._n_tree < self._n:
-            j, dj = self._scan(q, self._n_tree)
-            if dj < best_d:
-                best_i, best_d = j, dj
-        return best_i, best_d
+            i, s = self._scan(q, self._n_tree)
+            if s < best_sq:  # the tail's indices are above the tree's: ties stay with it
+                best_i, best_sq = i, s
+        return best_i, best_sq
+
+    def nearest(self, query: np.ndarray) -> tuple[int, float]:
+        """Index and distance of the point nearest to ``query`` (dim,) (``nearest_sq``, the
+        square root taken). Raises if empty."""
+        i, sq = self.nearest_sq(query)
+        return i, float(np.sqrt(sq))
 
     def nearest_spread(self, query: np.ndarray) -> tuple[int, float]:
         """Like ``nearest``, but among the points at exactly the smallest distance the one
@@ -158,9 +181,9 @@ class NearestNeighbourIndex:
         q = np.asarray(query, dtype=float).reshape(-1)
         if q.shape != (self.dim,):
             raise ValueError(f"query has shape {q.shape}, expected ({self.dim},)")
-        dist = np.linalg.norm(self._points[: self._n] - q, axis=1)
-        best = float(dist.min())
-        return spread_pick(q, np.flatnonzero(dist == best)), best
+        sq = sq_distances(self._points[: self._n], q)
+        best = float(sq.min())
+        return spread_pick(q, np.flatnonzero(sq == best)), float(np.sqrt(best))
 
 
 def spread_pick(query: np.ndarray, tied: np.ndarray) -> int:

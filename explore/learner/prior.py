@@ -5,7 +5,8 @@ The rule (docs/warm_start.md says why):
 
 1. **The inverse model looks in both, the nearer wins.** For a goal in a module, the arm's
    own nearest (context, outcome) and the prior's nearest one still in play are compared in the
-   same distance (``MetaPolicy``'s, the context weighted); the prior's answers only when it is
+   same distance (``MetaPolicy``'s, the context weighted: the fixed-order squared distance of
+   ``plumbing.fixed_order``, the same bits on both sides); the prior's answers only when it is
    strictly nearer. Its parameters are then played as the strategy plays its own (plus its
    noise on an explore episode, none on an exploit one).
 2. **A prior entry answers once.** The arm's episode that played it retires it (in every
@@ -38,6 +39,7 @@ import numpy as np
 from explore.learner.experience import Experience
 from explore.learner.meta_policy import MetaPolicy
 from explore.learner.strategies.base import Strategy, StrategyError
+from plumbing.fixed_order import norm, sq_distances
 
 # Rule 3's radius, a fraction of the diagonal of the prior's points in a module's (context,
 # outcome) space. A guess: about one cell of the 30 x 30 metric along one axis (1/30 = 0.033).
@@ -80,19 +82,19 @@ class _ModulePrior:
         self.alive = np.ones(len(self.points), dtype=bool)
         if len(self.points):
             span = self.points.max(axis=0) - self.points.min(axis=0)
-            self.radius = REACH_FRACTION * float(np.linalg.norm(span))
+            self.radius = REACH_FRACTION * norm(span)
         else:
             self.radius = 0.0
 
-    def nearest(self, q: np.ndarray) -> tuple[int, float]:
-        """The nearest entry in play to ``q`` (lowest index of ties) and its distance; (-1,
-        inf) when none is."""
+    def nearest_sq(self, q: np.ndarray) -> tuple[int, float]:
+        """The nearest entry in play to ``q`` (lowest index of ties) and its squared distance
+        (fixed order, as the arm's index measures it); (-1, inf) when none is."""
         live = np.flatnonzero(self.alive)
         if not len(live):
             return -1, np.inf
-        dist = np.linalg.norm(self.points[live] - q, axis=1)
-        j = int(np.argmin(dist))
-        return int(live[j]), float(dist[j])
+        sq = sq_distances(self.points[live], q)
+        j = int(np.argmin(sq))
+        return int(live[j]), float(sq[j])
 
 
 class WarmPolicy(MetaPolicy):
@@ -122,13 +124,13 @@ class WarmPolicy(MetaPolicy):
         """The prior entry (index in the module's) that answers (context, goal), or -1 when the
         arm's own nearest is at least as near (rule 1)."""
         q = self._query(context, goal)
-        j, d_prior = self.prior[module].nearest(q)
+        j, sq_prior = self.prior[module].nearest_sq(q)
         if j < 0:
             return -1
         own = self.indexes[module]
         if len(own):
-            _, d_own = own.nearest(q)
-            if d_own <= d_prior:
+            _, sq_own = own.nearest_sq(q)  # the same formula: an equal entry is a tie
+            if sq_own <= sq_prior:
                 return -1
         return j
 
@@ -157,7 +159,7 @@ class WarmPolicy(MetaPolicy):
             if o is None or not np.all(np.isfinite(o)) or not p.alive.any():
                 continue
             point = np.concatenate([c, np.asarray(o, dtype=float).reshape(-1)])
-            near = p.alive & (np.linalg.norm(p.points - point, axis=1) <= p.radius)
+            near = p.alive & (np.sqrt(sq_distances(p.points, point)) <= p.radius)
             self.retired_by_reach += int(near.sum())
             p.alive &= ~near
 

@@ -26,6 +26,7 @@ from explore.learner.experience import Observation
 from explore.rigs.ball import BallSensor
 from explore.rigs.clock import Clock
 from explore.rigs.episodes import EpisodeConfig, EpisodeResult
+from plumbing.fixed_order import distance
 from robot.arm import Arm
 
 
@@ -170,7 +171,7 @@ class EpisodeRunner:
         moved = bool(
             np.all(np.isfinite(context.ball))
             and np.all(np.isfinite(outcome.ball))
-            and np.linalg.norm(outcome.ball - context.ball) > MOVED_THRESHOLD
+            and distance(outcome.ball, context.ball) > MOVED_THRESHOLD
         )
         return EpisodeResult(
             move.targets, move.measured, move.end_effector, outcome, settle_s, moved,

@@ -31,6 +31,7 @@ import numpy as np
 
 from explore.learner.experience import Observation
 from explore.rigs.arena import TWIN_VIEW
+from plumbing.fixed_order import distance
 from vision.camera import Camera
 from vision.observation import ArenaObservation, square_observation
 
@@ -261,7 +262,7 @@ class CameraSensor:
         if self.locator is None:
             return True
         here = self._ball(self.camera.read().image)
-        step = float(np.linalg.norm(here - self._previous))  # NaN if either is unseen
+        step = distance(here, self._previous)  # NaN if either is unseen
         self._previous = here
         return step / interval_s < speed
 

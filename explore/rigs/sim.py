@@ -43,6 +43,14 @@ PHYSICAL = False  # nothing physical attached: any host can run it
 # twin's servos do not heat; 5 s is longer than an episode's return and settle cap (1 + 3 s),
 # so a wedge the twin frees by itself passes and an arm that stays stuck is still stopped.
 TWIN_WATCHDOG_HOLD_S = 5.0
+# The history fsyncs at most once a second (``Rig.sync_interval_s``), as ArmBalls' does
+# (explore/rigs/armballs.py): an fsync cost 3-5 ms an episode on the development machine
+# (cProfile, 180 rge-efr episodes: 0.5-0.8 s of fsync), a third of a 15 ms twin episode and
+# more than the outcome frame; a SIGKILL loses nothing (the records are in the page cache), a
+# power cut at most the last second of episodes, which the resume detects (``history.synced``)
+# and plays again to the same records (the twin is deterministic). A real arm's rig keeps one
+# fsync per episode: its episodes cannot be played again.
+TWIN_SYNC_INTERVAL_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -122,7 +130,7 @@ def make_rig(config: RigConfig, options: Options) -> Rig:
     sensor = TwinSensor(twin, camera, locator, prepare=prepare if reset or walk else None)
     return Rig(
         arm=SimArm(twin, watchdog=Watchdog(hold_s=options.watchdog_hold_s)), camera=camera,
-        clock=TwinClock(twin), config=config, sensor=sensor,
+        clock=TwinClock(twin), config=config, sensor=sensor, sync_interval_s=TWIN_SYNC_INTERVAL_S,
         video_frame=(
             (lambda: camera.read_square(options.record_video).image)
             if options.record_video
@@ -170,9 +178,11 @@ def scene(config: RigConfig, options: Options) -> Scene:
 
 
 def distractor_walk(xy: np.ndarray, step: float, rng: np.random.Generator) -> np.ndarray:
-    """One step of the distractor's random walk from ``xy`` (2,) m: the new (x, y), m."""
-    r = float(np.hypot(*xy)) + rng.normal(0.0, DISTRACTOR_RADIUS_STEP)
+    """One step of the distractor's random walk from ``xy`` (2,) m: the new (x, y), m. The
+    C library's scalar functions (numpy's arctan2 runs a SIMD version chosen by CPU)."""
+    x, y = float(xy[0]), float(xy[1])
+    r = math.sqrt(x * x + y * y) + rng.normal(0.0, DISTRACTOR_RADIUS_STEP)
     span = R_MAX - R_MIN
     r = R_MIN + span - abs(span - abs(r - R_MIN) % (2 * span))  # reflected into the ring
-    t = float(np.arctan2(xy[1], xy[0])) + rng.normal(0.0, step)
-    return np.array([r * np.cos(t), r * np.sin(t)])
+    t = math.atan2(y, x) + rng.normal(0.0, step)
+    return np.array([r * math.cos(t), r * math.sin(t)])

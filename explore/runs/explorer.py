@@ -15,6 +15,7 @@ import numpy as np
 from explore.learner.strategies.base import Strategy
 from explore.rigs.episodes import EpisodeConfig, EpisodePlayer
 from explore.rigs.rig import Rig
+from explore.runs.fingerprint import FINGERPRINT_KEY, Fingerprint
 from explore.runs.layout import FAULTS_FILE
 from explore.runs.metrics import METRICS_FILE, MetricsLog
 from explore.runs.prior import WarmStart
@@ -104,6 +105,7 @@ class Explorer:
         self.seed = seed
         self.runner: EpisodePlayer = rig.episodes(episode_config)
         self.metrics = MetricsLog(store.path / METRICS_FILE, rig.scene)
+        self.fingerprint = Fingerprint()  # of the episodes so far (explore/runs/fingerprint.py)
         self.on_episode = on_episode
         self.on_record = on_record
         self.unsaved: list[str] = []  # derived files this session could not write, and why
@@ -114,7 +116,7 @@ class Explorer:
             if self.warm is not None:
                 self.warm.before_update(rec, replay=True)
             self.strategy.update(rec)
-            self.metrics.update(rec)
+            self.fingerprint.add(rec, self.metrics.update(rec))
         try:
             self.metrics.rewrite()
             if self.warm is not None:
@@ -129,6 +131,7 @@ class Explorer:
         done = len(self.store)
         if done >= n_episodes:
             log.info("run already has %d episodes (asked for %d)", done, n_episodes)
+            self._save_fingerprint()
             return
         try:
             self._explore(done, n_episodes)
@@ -136,6 +139,19 @@ class Explorer:
             self._save_fault_counts(failing=True)
             raise
         self._save_fault_counts(failing=False)
+        self._save_fingerprint()
+
+    def _save_fingerprint(self) -> None:
+        """``run.json``'s fingerprint of the episodes stored (``ergo runs fingerprint``
+        recomputes it from the history at any time); a failure to write it is logged."""
+        record = self.fingerprint.record()
+        if self.store.meta.get(FINGERPRINT_KEY) == record:
+            return
+        try:
+            self.store.replace_meta({**self.store.meta, FINGERPRINT_KEY: record})
+        except (OSError, RunStoreError) as exc:
+            self.unsaved.append(f"run.json's fingerprint ({exc})")
+            log.warning("could not save the fingerprint to %s: %s", self.store.path, exc)
 
     def _save_fault_counts(self, failing: bool) -> None:
         """``RUN/faults.json`` += this session's counters; never masks the run's own error.
@@ -185,6 +201,7 @@ class Explorer:
             self.warm.before_update(rec)
         self.strategy.update(rec)
         row = self.metrics.update(rec)
+        self.fingerprint.add(rec, row)
         try:
             self.metrics.append_last()
         except OSError as exc:  # a full disk: the episode is stored, the metrics are derived

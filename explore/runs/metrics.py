@@ -43,14 +43,15 @@ class CellCounter:
         self.grid = np.zeros((n_bins, n_bins), dtype=bool)
 
     def cells_of(self, points: np.ndarray) -> np.ndarray:
-        """Cell indices (i along x, j along y) of points inside the square, shape (k, 2)."""
+        """Cell indices (i along x, j along y) of points inside the closed square [-h, h]^2,
+        shape (k, 2). Which points are inside is decided on the coordinates themselves, then
+        the index is clipped into the grid: a point an ulp inside the far edge whose scaled
+        coordinate rounds up to ``n_bins`` belongs to the last cell, as the edge itself."""
         p = np.asarray(points, dtype=float).reshape(-1, 2)
-        p = p[np.all(np.isfinite(p), axis=1)]
-        idx = np.floor((p + self.half_width) / (2 * self.half_width) * self.n_bins).astype(int)
-        # the square's far edges belong to the last cell
-        idx[(p == self.half_width)] = self.n_bins - 1
-        inside = np.all((idx >= 0) & (idx < self.n_bins), axis=1)
-        return idx[inside]
+        h = self.half_width
+        p = p[np.all((p >= -h) & (p <= h), axis=1)]  # NaN: never inside
+        idx = np.floor((p + h) / (2 * h) * self.n_bins).astype(int)
+        return np.clip(idx, 0, self.n_bins - 1)
 
     def add(self, points: np.ndarray) -> int:
         """Mark the cells of ``points`` (k, 2) m; returns the count of cells reached so far."""

@@ -9,7 +9,11 @@ records what it read under ``PRIOR_KEY``: the path, the SHA-256 of its ``history
 episode count, rig and strategy. A resume whose prior changed or is missing is refused in one
 line naming the override (``--allow-changed-inputs``, as for the calibration files:
 ``explore/runs/inputs.py``); with it, ``run.json`` keeps the old record under
-``prior_before``, and a missing prior leaves the learner without one from then on.
+``prior_before``, and a missing prior leaves the learner without one for the rest of the run:
+``run.json`` records the episode it went missing at (``PRIOR_DETACHED``), and a later resume
+never attaches it again, even when its folder is back (the learner that chose the episodes
+since had none, so a resume replays every record to a learner without it, and the gap file
+gains no row for an episode no prior answered).
 
 The reality gap (``REALITY_GAP_FILE``, a CSV of its own in the run folder): one row per arm
 episode whose parameters came from the prior, with the ball before and after that episode in
@@ -41,6 +45,9 @@ from explore.runs.store import RunStore, RunStoreError, read_history
 from plumbing.files import atomic_write
 
 PRIOR_BEFORE = "prior_before"  # run.json's key of the prior records replaced by an override
+# run.json's key of a prior that went missing at a resume (allowed): {"episode", "path"}; the run
+# has no prior from then on
+PRIOR_DETACHED = "prior_detached"
 CAMPAIGN_MARKER = "campaign.json"  # a campaign folder's (explore/campaigns/trial.py)
 GAP_COLUMNS = (
     "episode", "kind", "prior_episode", "prior_context_x", "prior_context_y", "prior_x",
@@ -245,8 +252,20 @@ def check_prior(
     path = Path(config.warm_start)
     recorded = store.meta.get(PRIOR_KEY)
     now = history_sha256(path) if RunStore.is_run(path) else None
-    if recorded is None:  # a missing prior allowed before, or a run killed before its record
-        return not (PRIOR_BEFORE in store.meta and now is None), None
+    detached = store.meta.get(PRIOR_DETACHED)
+    if detached is None and recorded is None and PRIOR_BEFORE in store.meta:
+        detached = {}  # a prior allowed missing before PRIOR_DETACHED was recorded
+    if detached is not None:  # missing at an earlier resume: it stays detached
+        if now is None:
+            return False, None
+        at = detached.get("episode", "?") if isinstance(detached, dict) else "?"
+        return False, (
+            f"{store.path}: its prior {path} is back, but the run went on without it from "
+            f"episode {at}: it stays detached for the rest of the run (run.json: "
+            f"{PRIOR_DETACHED})"
+        )
+    if recorded is None:  # a run killed before its record
+        return True, None
     if isinstance(recorded, dict) and recorded.get("sha256") == now:
         return True, None
     was = str(recorded.get("sha256"))[:12] if isinstance(recorded, dict) else "?"
@@ -260,10 +279,15 @@ def check_prior(
     before = [*list(store.meta.get(PRIOR_BEFORE) or []),
               {"until_episode": len(store), PRIOR_KEY: recorded}]  # fmt: skip
     meta = {k: v for k, v in store.meta.items() if k != PRIOR_KEY}
-    _write_meta(store, {**meta, PRIOR_BEFORE: before})
     if now is None:
+        gone = {"episode": len(store), "path": str(path)}
+        _write_meta(store, {**meta, PRIOR_BEFORE: before, PRIOR_DETACHED: gone})
         keeps = "run.json keeps the old record"
-        return False, f"{store.path}: resumed without its prior {path} ({what}); {keeps}"
+        return False, (
+            f"{store.path}: resumed without its prior {path} ({what}), for the rest of the run; "
+            f"{keeps}"
+        )
+    _write_meta(store, {**meta, PRIOR_BEFORE: before})
     return (
         True,
         f"{store.path}: resumed with its prior {path}, which {what}; run.json keeps the old record",

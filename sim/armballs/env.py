@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from plumbing.fixed_order import distance
 from sim.armballs.config import ArmBallsConfig
 from sim.armballs.kinematics import hand_position
 from sim.armballs.primitives import PrimitiveParameterError, RbfPrimitive
@@ -83,7 +84,7 @@ def step(
     """
     cfg = config or ArmBallsConfig()
     hand = hand_position(np.asarray(command, dtype=float), np.asarray(cfg.link_lengths))
-    caught = state.caught or bool(np.linalg.norm(hand - state.ball) < cfg.catch_radius)
+    caught = state.caught or bool(distance(hand, state.ball) < cfg.catch_radius)
     ball = hand.copy() if caught else state.ball.copy()
     distractor = None
     if state.distractor is not None:
@@ -129,7 +130,8 @@ def play_commands(
     hand = hand_position(commands, np.asarray(cfg.link_lengths))  # (N, T, 2)
     start = np.asarray(cfg.ball_start, dtype=float)
     # the ball stays at its start until caught, so the catch test is against the start
-    close = np.linalg.norm(hand - start, axis=-1) < cfg.catch_radius  # (N, T)
+    gap = hand - start
+    close = np.sqrt(gap[..., 0] * gap[..., 0] + gap[..., 1] * gap[..., 1]) < cfg.catch_radius
     caught_any = close.any(axis=1)
     first = np.where(caught_any, close.argmax(axis=1), NOT_CAUGHT)
     held = np.arange(t)[None, :] >= np.where(caught_any, first, t)[:, None]  # (N, T)

@@ -2,12 +2,16 @@
 
 Joint k's absolute angle is pi times the sum of the commands of joints 0..k (the original's
 ArmBalls.act: ``pi * cumsum(action)``), so a command of 1 on joint 0 alone turns the whole arm
-by pi rad. The base is at the origin; with every command at 0 the arm lies along +x.
+by pi rad. The base is at the origin; with every command at 0 the arm lies along +x. Sines and
+cosines are ``plumbing.fixed_order``'s (the C library's variant depends on the CPU), so a
+scene is the same bits on every machine.
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from plumbing.fixed_order import matmul, sin_cos
 
 
 def joint_angles(commands: np.ndarray) -> np.ndarray:
@@ -32,9 +36,9 @@ def link_points(commands: np.ndarray, link_lengths: np.ndarray) -> np.ndarray:
     Returns:
         shape (..., n_joints, 2): (x, y) of each link's far end.
     """
-    a = joint_angles(commands)
+    sin, cos = sin_cos(joint_angles(commands))
     lengths = np.asarray(link_lengths, dtype=float)
-    steps = np.stack([np.cos(a) * lengths, np.sin(a) * lengths], axis=-1)
+    steps = np.stack([cos * lengths, sin * lengths], axis=-1)
     return np.cumsum(steps, axis=-2)
 
 
@@ -48,6 +52,7 @@ def hand_position(commands: np.ndarray, link_lengths: np.ndarray) -> np.ndarray:
     Returns:
         shape (..., 2): (x, y).
     """
-    a = joint_angles(commands)
+    sin, cos = sin_cos(joint_angles(commands))
     lengths = np.asarray(link_lengths, dtype=float)
-    return np.stack([np.cos(a) @ lengths, np.sin(a) @ lengths], axis=-1)
+    # summed link after link, as ``link_points``' cumulative sum (never BLAS's order)
+    return np.stack([matmul(cos, lengths), matmul(sin, lengths)], axis=-1)

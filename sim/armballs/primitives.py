@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from plumbing import fixed_order
 from sim.armballs.config import ArmBallsConfig
 
 
@@ -34,7 +35,8 @@ def rbf_basis(n_steps: int, n_rbf: int, sdev: float) -> np.ndarray:
     t = np.arange(n_steps, dtype=float)[:, None]
     d = t - rbf_centres(n_steps, n_rbf)[None, :]
     radius = int(4.0 * sdev + 0.5)  # scipy.ndimage.gaussian_filter1d's default truncation
-    return np.where(np.abs(d) <= radius, np.exp(-0.5 * (d / sdev) ** 2), 0.0)
+    z = d / sdev
+    return np.where(np.abs(d) <= radius, fixed_order.exp(-0.5 * (z * z)), 0.0)
 
 
 class RbfPrimitive:
@@ -80,5 +82,6 @@ class RbfPrimitive:
         """
         single = np.ndim(params) == 1
         p = self.check(params).reshape(-1, self.config.n_joints, self.config.n_rbf)
-        out = np.clip(self.basis @ p.transpose(0, 2, 1), -1.0, 1.0)  # (N, T, n_joints)
+        # the bumps summed in a fixed order, not by BLAS (the same bits on every machine)
+        out = np.clip(fixed_order.matmul(self.basis, p.transpose(0, 2, 1)), -1.0, 1.0)
         return out[0] if single else out

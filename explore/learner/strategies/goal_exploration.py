@@ -51,8 +51,6 @@ from explore.learner.strategies.base import (
     Strategy,
     StrategyError,
 )
-
-# the options and their constants, importable from here as before they moved
 from explore.learner.strategies.goal_options import (  # noqa: F401
     BOOTSTRAP,
     BOX,
@@ -69,6 +67,9 @@ from explore.learner.strategies.goal_options import (  # noqa: F401
     LatentOptions,
     SpatialOptions,
 )
+
+# the options and their constants, importable from here as before they moved
+from plumbing.fixed_order import distance, norm
 
 
 class GoalExploration(Strategy):
@@ -249,8 +250,8 @@ class GoalExploration(Strategy):
             return
         self._still_low = np.minimum(self._still_low, np.minimum(o, context))
         self._still_high = np.maximum(self._still_high, np.maximum(o, context))
-        diag = float(np.linalg.norm(self._still_high - self._still_low))
-        moved = float(np.linalg.norm(o - context)) > STILL_FRACTION * diag
+        diag = norm(self._still_high - self._still_low)
+        moved = distance(o, context) > STILL_FRACTION * diag
         self.still = 0 if moved else self.still + 1
 
     def random_share(self) -> float:
@@ -269,7 +270,7 @@ class GoalExploration(Strategy):
         """Competence scale of a module: the diagonal of its outcome bounds (at least 1e-6)."""
         span = self.high[module] - self.low[module]
         span = np.where(np.isfinite(span), span, 0.0)
-        return max(float(np.linalg.norm(span)), 1e-6)
+        return max(norm(span), 1e-6)
 
     # ---- proposals ---------------------------------------------------------------------------
     def _random(self, rng: np.random.Generator) -> Proposal:

@@ -111,3 +111,31 @@ def test_what_cannot_take_a_prior_is_refused_in_one_line():
         warm_start(rpe, lambda: rpe, _prior())
     with pytest.raises(StrategyError, match="holds no episode"):
         _warm([])
+
+
+def test_an_arm_entry_as_near_as_the_prior_s_wins_whatever_the_index_s_schedule():
+    # the arm's 64 identical entries fill its k-d tree (8-D: the tree's own distance once met
+    # np.linalg.norm's on the prior's side, and an ulp gave the tie to the prior); the prior's
+    # entry mirrors them in the first coordinate, so every query with a first coordinate 0
+    # is exactly as near to both
+    from explore.learner.meta_policy import MetaPolicy
+    from explore.learner.prior import WarmPolicy, _ModulePrior
+
+    rng = np.random.default_rng(11)
+    own = rng.uniform(-1, 1, 8)
+    own[0] = 0.5
+    mirror = own.copy()
+    mirror[0] = -0.5
+    far = mirror - 10 * np.eye(8)[0]  # farther than both from every query; reach radius 0.3
+    points = np.stack([mirror, far])
+    policy = WarmPolicy(
+        MetaPolicy(4, [4], N_PARAMS),
+        [_ModulePrior(points, np.zeros((2, N_PARAMS)), np.array([0, 1]))],
+    )
+    for _ in range(64):
+        policy.add(own[:4], [own[4:]], np.ones(N_PARAMS))
+    assert policy.indexes[0].outside_tree == 0 and policy.prior[0].alive.all()
+    queries = rng.uniform(-1, 1, (1000, 8))
+    queries[:, 0] = 0.0
+    answers = [policy.prior_answer(0, q[:4], q[4:]) for q in queries]
+    assert answers == [-1] * len(queries)  # a tie: the arm's own answers

@@ -179,6 +179,29 @@ def test_a_changed_or_missing_prior_is_refused_naming_the_override(warmed, prior
     assert PRIOR_KEY not in meta and meta["prior_before"][0]["until_episode"] == 10
 
 
+def test_a_prior_missing_at_a_resume_stays_missing_when_it_comes_back(prior, tmp_path, capsys):
+    # a 10-episode warmed run resumed to 16 without its prior, then to 18 with it back: the
+    # episodes since 10 were chosen without a prior, so no resume attaches it again (once, it
+    # was re-attached silently and reality_gap.csv gained rows 15 and 16)
+    twin = _copy(prior, tmp_path / "twin")
+    arm = tmp_path / "arm"
+    assert _arm(arm, twin, episodes=10) == 0
+    rows = _gap(arm)
+    assert rows  # the prior answered some of the first 10
+    twin.rename(tmp_path / "away")
+    flags = ["--allow-changed-inputs"]
+    assert main(["explore", "--resume", str(arm), "--episodes", "16", *FAST, *flags]) == 0
+    meta = json.loads((arm / "run.json").read_text())
+    assert meta["prior_detached"] == {"episode": 10, "path": str(twin)}
+    (tmp_path / "away").rename(twin)
+    capsys.readouterr()
+    assert main(["explore", "--resume", str(arm), "--episodes", "18", *FAST]) == 0
+    err = capsys.readouterr().err
+    assert f"its prior {twin} is back, but the run went on without it from episode 10" in err
+    assert _gap(arm) == rows
+    assert len(read_history(arm).records) == 18
+
+
 def test_an_incompatible_prior_is_refused_in_one_line(prior, tmp_path, capsys):
     cases = [
         (["--strategy", "mge-efr"], "explored with rge-efr, this run with mge-efr"),
