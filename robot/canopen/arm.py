@@ -151,6 +151,8 @@ class CanArm(Arm):
         self._tripping = threading.Event()
         self._closing = threading.Event()
         self._monitor: threading.Thread | None = None
+        self._asked_at: float | None = None  # when the health was last asked, monotonic s
+        self._stalled_until = 0.0  # a host stall's silence excused until then, monotonic s
         #: how the last torque off went when some drive could not confirm it (None: every
         #: drive that can answer confirmed it): "not confirmed by ...: sent to ..."
         self.torque_off_report: str | None = None
@@ -253,6 +255,7 @@ class CanArm(Arm):
     # ---- safety monitor --------------------------------------------------------------------
     def _start_monitor(self) -> None:
         self._closing.clear()
+        self._asked_at, self._stalled_until = None, 0.0
         self._monitor = threading.Thread(
             target=self._monitor_loop, name="canarm-monitor", daemon=True
         )
@@ -274,9 +277,15 @@ class CanArm(Arm):
         """A one-line reason to stop the arm, or None when every node is healthy
         (``robot.canopen.health``)."""
         cfg = self.config
+        now = time.monotonic()
+        last, self._asked_at = self._asked_at, now
+        limit = cfg.heartbeat_factor * self._heartbeat_s
+        if last is not None and now - last > health.HOST_STALL_FRACTION * limit:
+            self._stalled_until = now + self._heartbeat_s  # the host's own stall (health.py)
         return health.reason_to_stop(
-            self.net, self._heartbeat_s, cfg.heartbeat_factor, cfg.max_position_age_s
-        )
+            self.net, self._heartbeat_s, cfg.heartbeat_factor, cfg.max_position_age_s,
+            host_stalled=now < self._stalled_until,
+        )  # fmt: skip
 
     def _trip(self, reason: str) -> None:
         """Stop: torque off on every node, then record the reason. A thread that calls

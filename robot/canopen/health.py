@@ -3,10 +3,11 @@
 
 A node stops the arm when it sent an EMCY error, when its heartbeat is silent for longer than
 the limit (heartbeat time x factor; not while frames wait unread by the host, which is then
-behind, nor while the serial line garbles lines and the node's TPDOs keep coming, each for at
-most a few limits) or says it left NMT OPERATIONAL, when it reports FAULT or
-QUICK STOP ACTIVE (its own quick-stop input, or its reaction to losing the host, 0x6007: it
-no longer follows the host's targets), or when it answered no SYNC for ``max_position_age_s``.
+behind, nor just after the host itself did not run, nor while the serial line garbles lines and
+the node's TPDOs keep coming, each for at most a few limits) or says it left NMT OPERATIONAL,
+when it reports FAULT or QUICK STOP ACTIVE (its own quick-stop input, or its reaction to losing
+the host, 0x6007: it no longer follows the host's targets), or when it answered no SYNC for
+``max_position_age_s``.
 Pure reading: the arm's monitor thread and its calls ask, the arm turns torque off.
 """
 
@@ -27,6 +28,15 @@ GARBLED_HEARTBEAT_GRACE = 3.0
 # when it called a node lost whose heartbeats had all been written to the adapter on time,
 # tests/stress/can_heartbeat.py). Past it the node is lost whatever the host read.
 BEHIND_HEARTBEAT_GRACE = 3.0
+# The host did not run (its process stalled: a C call holding the GIL, such as loading torch's
+# libraries, 0.4 s measured here; the CPU taken by others) when it last asked more than this
+# fraction of the heartbeat limit ago, while its monitor asks every sixth of it. The frames
+# that came meanwhile may sit with its reader, read from the port but not yet handled (so
+# neither the port nor the reader says they wait): for one heartbeat time after the stall, in
+# which the reader and every live node are heard, that silence is the host's, not the node's.
+# Excused as frames waiting unread are, within ``BEHIND_HEARTBEAT_GRACE`` (chosen: three
+# missed checks).
+HOST_STALL_FRACTION = 0.5
 # The states a node reports that stop the arm, and why in words.
 STOPPING_STATES = {
     State.FAULT: "in FAULT",
@@ -37,7 +47,11 @@ STOPPING_STATES = {
 
 
 def reason_to_stop(
-    net: DriveNetwork, heartbeat_s: float, heartbeat_factor: float, max_position_age_s: float
+    net: DriveNetwork,
+    heartbeat_s: float,
+    heartbeat_factor: float,
+    max_position_age_s: float,
+    host_stalled: bool = False,
 ) -> str | None:
     """A one-line reason to stop the arm (``safety stop: ...; torque off``), or None when
     every node is healthy or the nodes were not started yet.
@@ -48,10 +62,12 @@ def reason_to_stop(
             is lost.
         heartbeat_factor: see above.
         max_position_age_s: the longest a node may answer no SYNC, s.
+        host_stalled: the host itself did not run a moment ago (``HOST_STALL_FRACTION``):
+            overdue heartbeats are excused as when frames wait unread.
     """
     if not net.started:
         return None
-    behind = reading_behind(net)  # before ``now``: what waits unread came before it
+    behind = host_stalled or reading_behind(net)  # before ``now``: it came before it
     now = time.monotonic()
     limit = heartbeat_factor * heartbeat_s
     n = len(net.node_ids)

@@ -1,6 +1,7 @@
 """What stops a ``CanArm`` (``robot.canopen.health``): a heartbeat overdue while frames wait
 unread by the host is the host's lateness, not the node's, for at most a few limits; past them,
-and whenever the host has read everything, the node is lost."""
+and whenever the host has read everything, the node is lost; so too just after the host itself
+did not run."""
 
 from __future__ import annotations
 
@@ -85,3 +86,23 @@ def test_what_waits_unread_is_read_from_the_bus():
     net.network = None
     assert health.reading_behind(net) is False
     assert np.isfinite(health.BEHIND_HEARTBEAT_GRACE)
+
+
+@pytest.mark.parametrize("silent_limits", [1.2, 2.5])
+def test_an_overdue_heartbeat_just_after_the_host_stalled_is_not_a_lost_node(
+    net, monkeypatch, silent_limits
+):
+    """The host's process did not run (a C call holding the GIL): the heartbeats may sit with
+    its reader, read from the port but not handled, so nothing says they wait unread."""
+    monkeypatch.setattr(health, "reading_behind", lambda _net: False)
+    net.heartbeat_at[2] = time.monotonic() - silent_limits * LIMIT
+    assert health.reason_to_stop(net, HEARTBEAT_S, FACTOR, 0.5, host_stalled=True) is None
+    lost = health.reason_to_stop(net, HEARTBEAT_S, FACTOR, 0.5, host_stalled=False)
+    assert lost.startswith("safety stop: node 3 (m3) lost: no heartbeat for")
+
+
+def test_past_the_grace_the_node_is_lost_whatever_the_host_did(net, monkeypatch):
+    monkeypatch.setattr(health, "reading_behind", lambda _net: False)
+    net.heartbeat_at[2] = time.monotonic() - (health.BEHIND_HEARTBEAT_GRACE + 0.2) * LIMIT
+    lost = health.reason_to_stop(net, HEARTBEAT_S, FACTOR, 0.5, host_stalled=True)
+    assert lost.startswith("safety stop: node 3 (m3) lost: no heartbeat for")
