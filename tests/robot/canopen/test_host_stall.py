@@ -61,7 +61,7 @@ def test_a_node_silent_after_the_stall_is_still_lost(arm):
     drives.stop_heartbeat(3)
     hold_the_gil(STALL_S)
     deadline = time.monotonic() + 3 * health.BEHIND_HEARTBEAT_GRACE * LIMIT_S
-    with pytest.raises(SafetyStop, match="node 3 .* lost: no heartbeat"):
+    with pytest.raises(SafetyStop, match=r"node 3 .* lost: no heartbeat"):
         while time.monotonic() < deadline:
             arm.command(start)
             time.sleep(0.025)
