@@ -169,10 +169,12 @@ def track_all(tracker, frames: np.ndarray, places: np.ndarray) -> dict[str, Any]
     figures), ``errors`` against its place (mm, NaN when not seen), ``outline`` (whether the
     outline's circle gave the position); and the largest blob's measures where it is
     significant: ``circularity``, and its outline's circle (``radius`` over the expected one,
-    ``fill``, ``outside``, ``arc``; NaN without one)."""
-    out: dict[str, list] = {k: [] for k in ("reasons", "errors", "outline", "circularity")}
-    for k in ("radius", "fill", "outside", "arc"):
-        out[k] = []
+    ``fill``, ``outside``, ``arc``, and how far its centre lies from the place, ``fit_error``
+    mm; NaN without one)."""
+    from vision.rectify import pixels_to_arena
+
+    keys = ("reasons", "errors", "outline", "circularity", "radius", "fill", "outside", "arc")
+    out: dict[str, list] = {k: [] for k in (*keys, "fit_error")}
     for frame, xy in zip(frames, places, strict=True):
         obs = tracker.track(frame)
         if obs.seen and obs.xy is not None:
@@ -190,6 +192,11 @@ def track_all(tracker, frames: np.ndarray, places: np.ndarray) -> dict[str, Any]
         out["fill"].append(fit.fill if fit is not None else np.nan)
         out["outside"].append(fit.outside if fit is not None else np.nan)
         out["arc"].append(fit.arc_deg if fit is not None else np.nan)
+        if fit is None:
+            out["fit_error"].append(np.nan)
+        else:
+            at = pixels_to_arena(tracker.arena, np.array(fit.centre), tracker.config.ball_radius_m)
+            out["fit_error"].append(float(np.hypot(*(at[0] - xy))) * 1000)
     return {k: (v if k == "reasons" else np.array(v)) for k, v in out.items()}
 
 
@@ -289,15 +296,15 @@ def main() -> int:
     for name in trackers:
         print(summary(f"all | {name}", hover[name]))
     whole = wall["after"]["circularity"] >= tracker.config.min_circularity
-    print("\nthe outline's measures (the tracker's outline_* gates):")
+    over = hover["after"]
+    everything = joined([wall["after"], over])
+    print("\nthe largest blob's outline circle (the tracker's outline_* gates):")
     for what, res, sel in (
         ("balls at rest, round blobs", wall["after"], whole),
         ("balls at rest, not round", wall["after"], ~whole),
-        (
-            "the arm over the ball, largest blob",
-            hover["after"],
-            np.ones(len(hover["after"]["fill"]), bool),
-        ),
+        ("the arm over the ball", over, np.ones(len(over["fill"]), bool)),
+        ("  of which the circle within 5 mm", over, over["fit_error"] <= WRONG_MM),
+        ("circles more than 5 mm off (any frame)", everything, everything["fit_error"] > WRONG_MM),
     ):
         measures = ", ".join(
             f"{label} {span(res, sel, key)}"

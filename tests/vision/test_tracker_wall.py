@@ -6,8 +6,10 @@ The scenes are rendered in one process as ``ergo twin serve --stand-in SEED`` se
 hidden camera's pose and lens, ``sim.standin.lens.ServedFrames``, then JPEG at the stream's
 quality); the arena is calibrated from the frame's markers as ``ergo calibrate arena`` does,
 with the stand-in's true intrinsics in place of a chessboard calibration (tests may read the
-hidden parameters). The places are ones the enclosing-circle test alone refused: found by the
-sweep of experiments/tracker_wall.py's kind over stand-ins 300-329 (docs/vision.md).
+hidden parameters). The places are the two that the enclosing-circle test alone refused when
+stand-ins 300-329 were rendered so with the ball against the wall every 3 degrees (120 places
+each); the served sweep with the guide's calibrations is experiments/tracker_wall.py
+(docs/vision.md).
 """
 
 from __future__ import annotations
