@@ -7,8 +7,8 @@ hidden camera's pose and lens, ``sim.standin.lens.ServedFrames``, then JPEG at t
 quality); the arena is calibrated from the frame's markers as ``ergo calibrate arena`` does,
 with the stand-in's true intrinsics in place of a chessboard calibration (tests may read the
 hidden parameters). The places are the two that the enclosing-circle test alone refused when
-stand-ins 300-329 were rendered so with the ball against the wall every 3 degrees (120 places
-each); the served sweep with the guide's calibrations is experiments/tracker_wall.py
+stand-ins 300-329 were rendered so with the ball against the wall every 3 to 5 degrees; the
+served sweep with the guide's calibrations is experiments/tracker_wall.py
 (docs/vision.md).
 """
 
