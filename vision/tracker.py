@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from vision.ball_outline import OutlineFit, fit_outline
 from vision.rectify import ArenaModel, arena_to_pixels, pixels_to_arena, polar
 
 # Original rig's ball range (the original implementation). Hue 0..179, saturation and value 0..255.
@@ -88,6 +89,15 @@ class TrackerConfig:
             blob's area makes the detection ambiguous.
         ball_radius_m: radius of the ball, metres: its centre is this high above the floor.
         arena_margin_m: how far beyond the arena radius a ball centre may be and still count.
+        outline_fit: a blob that fails ``min_circularity`` is still the ball when its outline
+            follows a circle of the ball's expected size there (``vision.ball_outline``):
+            within ``outline_radius_tolerance`` of it, going round at least
+            ``outline_min_arc_deg``, the blob filling at least ``outline_min_fill`` of the
+            circle and no more than ``outline_max_outside`` of its area outside it; its centre
+            is then the circle's. Needs an arena model with the camera's position (the
+            expected size); without one, such a blob is refused as before. A ball against the
+            arena's wall comes through a JPEG stream with a spur or a flattened side where
+            its edge blends with the wall's (circularity 0.79-0.81 measured, docs/vision.md).
     """
 
     ranges: tuple[HSVRange, ...] = (HSVRange(BALL_HSV_LOWER, BALL_HSV_UPPER),)
@@ -99,6 +109,20 @@ class TrackerConfig:
     ambiguity_ratio: float = 0.25
     ball_radius_m: float = BALL_RADIUS_M
     arena_margin_m: float = 0.02
+    outline_fit: bool = True
+    # The gates' figures: experiments/tracker_wall.py on served stand-ins (docs/vision.md).
+    # A ball's outline circle is within 0.98-1.05 of the expected radius: the circle is taken
+    # for a ball within +-10 % (chosen with a margin); the fits that went wrong on an arm over
+    # the ball were 0.75-0.86 of it (measured).
+    outline_radius_tolerance: float = 0.10
+    # Most of the ball is there (a quarter hidden at most; chosen): whole balls fill 0.93-0.99
+    # of their circle; a chord hiding the 120 degrees the arc gate leaves hides 20 %.
+    outline_min_fill: float = 0.75
+    # A second ball-coloured thing joined to the ball (another ball, a patch) lies outside its
+    # circle; a spur from a wall's edge covers under 0.01 of it (measured). Chosen.
+    outline_max_outside: float = 0.05
+    # The circle's centre is pinned from every side by 240 degrees of outline (chosen).
+    outline_min_arc_deg: float = 240.0
 
     def __post_init__(self) -> None:
         ranges = tuple(r if isinstance(r, HSVRange) else HSVRange.from_list(r) for r in self.ranges)
@@ -117,6 +141,11 @@ class TrackerConfig:
             "ambiguity_ratio": self.ambiguity_ratio,
             "ball_radius_m": self.ball_radius_m,
             "arena_margin_m": self.arena_margin_m,
+            "outline_fit": self.outline_fit,
+            "outline_radius_tolerance": self.outline_radius_tolerance,
+            "outline_min_fill": self.outline_min_fill,
+            "outline_max_outside": self.outline_max_outside,
+            "outline_min_arc_deg": self.outline_min_arc_deg,
         }
 
     @classmethod
@@ -136,6 +165,9 @@ class Blob:
         radius: radius of the minimum enclosing circle, pixels.
         circularity: area / (pi radius^2).
         touches_border: whether the region reaches the image's edge.
+        outline: the region's boundary points, (n, 2) raw pixels (``findContours``).
+        pixels: the region in its bounding box, (h, w) bool.
+        origin: (u, v) of that box's top-left pixel.
     """
 
     centroid: tuple[float, float]
@@ -143,6 +175,11 @@ class Blob:
     radius: float
     circularity: float
     touches_border: bool
+    outline: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False, compare=False)
+    pixels: np.ndarray = field(
+        default_factory=lambda: np.zeros((0, 0), bool), repr=False, compare=False
+    )
+    origin: tuple[int, int] = (0, 0)
 
 
 @dataclass(frozen=True)
@@ -160,6 +197,8 @@ class BallObservation:
         r: distance to the arena centre, metres, or None.
         theta: angle around the arena centre, radians in (-pi, pi], or None.
         blobs: every ball-coloured blob considered, largest first (for debugging).
+        outline: the circle fitted to the ball's outline when that, not the whole blob, gave
+            its centre (``TrackerConfig.outline_fit``), else None.
     """
 
     seen: bool
@@ -170,6 +209,7 @@ class BallObservation:
     r: float | None = None
     theta: float | None = None
     blobs: tuple[Blob, ...] = field(default=(), repr=False)
+    outline: OutlineFit | None = field(default=None, repr=False)
 
     @property
     def polar_features(self) -> np.ndarray | None:
@@ -184,6 +224,8 @@ class BallObservation:
             return f"not seen: {self.reason}"
         u, v = self.pixel
         text = f"seen at pixel ({u:.1f}, {v:.1f}) radius {self.radius_px:.1f} px"
+        if self.outline is not None:
+            text += f" (outline fit, {self.outline.arc_deg:.0f} deg of it)"
         if self.xy is not None:
             text += (
                 f"; arena ({self.xy[0] * 1000:+.1f}, {self.xy[1] * 1000:+.1f}) mm, "
@@ -213,6 +255,20 @@ class BallTracker:
         centre_px = arena_to_pixels(arena, arena.centre, height=rad)[0]
         edge_px = arena_to_pixels(arena, arena.centre + np.array((rad, 0.0)), height=rad)[0]
         return float(np.linalg.norm(edge_px - centre_px))
+
+    def expected_radius_at(self, pixel: tuple[float, float]) -> float | None:
+        """The ball's apparent radius where it is seen at ``pixel`` (u, v), pixels: its
+        centre's place on the arena, one radius up, and four points a radius from it on that
+        plane, through the lens (perspective and distortion); None without an arena model that
+        knows the camera's position."""
+        arena = self.arena
+        if arena is None or arena.camera_position is None:
+            return None
+        rad = self.config.ball_radius_m
+        xy = pixels_to_arena(arena, np.asarray(pixel, np.float64), height=rad)[0]
+        ring = xy + rad * np.array([(1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)])
+        px = arena_to_pixels(arena, np.vstack([xy, ring]), height=rad)
+        return float(np.linalg.norm(px[1:] - px[0], axis=1).mean())
 
     def area_gates(self, image_shape: tuple[int, ...]) -> tuple[float, float]:
         """(min, max) blob area in pixels for frames of this shape (H, W[, C])."""
@@ -275,7 +331,18 @@ class BallTracker:
             circularity = area / (math.pi * (radius + 0.5) ** 2)
             touches = x == 0 or y == 0 or x + bw >= w or y + bh >= h
             cu, cv_ = centroids[i]
-            out.append(Blob((float(cu), float(cv_)), area, radius + 0.5, circularity, touches))
+            out.append(
+                Blob(
+                    (float(cu), float(cv_)),
+                    area,
+                    radius + 0.5,
+                    circularity,
+                    touches,
+                    pts + np.array([x, y], np.float32),
+                    sub.astype(bool),
+                    (int(x), int(y)),
+                )
+            )
         out.sort(key=lambda b: b.area, reverse=True)
         return out
 
@@ -288,9 +355,17 @@ class BallTracker:
         significant = [b for b in blobs if b.area >= 0.25 * lo]
         if not significant:
             return BallObservation(False, "no ball-coloured blob", blobs=tuple(blobs))
-        plausible = [
-            b for b in significant if lo <= b.area <= hi and b.circularity >= cfg.min_circularity
-        ]
+        outlines: dict[int, OutlineFit | None] = {}  # by blob index: the outline's circle
+        plausible = []
+        for i, b in enumerate(significant):
+            if not lo <= b.area <= hi:
+                continue
+            if b.circularity >= cfg.min_circularity:
+                plausible.append(b)
+            elif cfg.outline_fit:
+                outlines[i] = self.outline(b)
+                if self.outline_refusal(b, outlines[i]) is None:
+                    plausible.append(b)
         if not plausible:
             b = significant[0]
             if b.area > hi:
@@ -300,10 +375,14 @@ class BallTracker:
             else:
                 why = (
                     f"ball-coloured blob not round (circularity {b.circularity:.2f} < "
-                    f"{cfg.min_circularity:.2f}): partly hidden?"
+                    f"{cfg.min_circularity:.2f}"
                 )
+                if 0 in outlines:
+                    why += f"; {self.outline_refusal(b, outlines[0])}"
+                why += "): partly hidden?"
             return BallObservation(False, why, blobs=tuple(blobs))
         best = plausible[0]
+        fit = outlines.get(significant.index(best))
         rivals = [
             b for b in significant if b is not best and b.area >= cfg.ambiguity_ratio * best.area
         ]
@@ -318,12 +397,46 @@ class BallTracker:
             return BallObservation(
                 False, "ball at the image border (partly out of view)", blobs=tuple(blobs)
             )
-        obs = BallObservation(
-            True, "", pixel=best.centroid, radius_px=best.radius, blobs=tuple(blobs)
-        )
+        if fit is None:
+            obs = BallObservation(
+                True, "", pixel=best.centroid, radius_px=best.radius, blobs=tuple(blobs)
+            )
+        else:
+            obs = BallObservation(
+                True, "", pixel=fit.centre, radius_px=fit.radius, blobs=tuple(blobs), outline=fit
+            )
         if self.arena is None:
             return obs
         return self._on_arena(obs)
+
+    def outline(self, blob: Blob) -> OutlineFit | None:
+        """The circle ``blob``'s outline follows (``vision.ball_outline.fit_outline``), or None
+        without an expected radius (no arena model with the camera's position) or circle."""
+        expected = self.expected_radius_at(blob.centroid)
+        if expected is None or len(blob.outline) < 3:
+            return None
+        return fit_outline(blob.outline, blob.pixels, blob.origin, blob.centroid, expected)
+
+    def outline_refusal(self, blob: Blob, fit: OutlineFit | None) -> str | None:
+        """Why ``fit`` (of ``blob``'s outline) does not make the blob a ball, in words; None
+        when it does (``TrackerConfig``'s ``outline_*`` gates)."""
+        cfg = self.config
+        if fit is None:
+            if self.arena is None or self.arena.camera_position is None:
+                return "no outline fit without an arena model"
+            return "its outline follows no circle"
+        expected = self.expected_radius_at(fit.centre)
+        assert expected is not None
+        ratio = fit.radius / expected
+        if abs(ratio - 1.0) > cfg.outline_radius_tolerance:
+            return f"its outline's circle is {ratio:.2f} of the ball's size"
+        if fit.arc_deg < cfg.outline_min_arc_deg:
+            return f"its outline goes {fit.arc_deg:.0f} deg round a circle"
+        if fit.fill < cfg.outline_min_fill:
+            return f"it fills {fit.fill:.2f} of its outline's circle"
+        if fit.outside > cfg.outline_max_outside:
+            return f"{fit.outside:.2f} of it lies outside its outline's circle"
+        return None
 
     def _on_arena(self, obs: BallObservation) -> BallObservation:
         arena = self.arena

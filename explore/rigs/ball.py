@@ -41,6 +41,11 @@ BallLocator = Callable[[np.ndarray], np.ndarray]
 #: a camera frame (H, W, 3) BGR uint8 and a side -> the observation image (side, side, 3)
 Observer = Callable[[np.ndarray, int], np.ndarray]
 UNKNOWN = np.full(2, np.nan)  # a position not seen, (2,)
+# Looks at rest (an episode's context and its outcome: two an episode) in a row without the
+# ball after which a physical rig's run says so as a warning, once a spell: ten episodes
+# (chosen: a moment's miss, the ball under the arm while it settles, stays an INFO line; a
+# ball off the arena or a tracker that cannot see it is said before a run is lost to it).
+UNSEEN_WARNING_LOOKS = 20
 NO_STATE = np.zeros(0)  # the state of a scene nothing can restore
 
 
@@ -86,31 +91,42 @@ class BallSensor(Protocol):
         ...
 
 
-def tracker_locator(arena: Any, tracker_config: Any = None) -> BallLocator:
-    """A locator backed by ``vision.tracker.BallTracker`` with an ``ArenaModel``. Why the
-    tracker did not see the ball is logged (INFO, logger ``explore.rigs.ball``) each time the
-    reason changes (its words, not its figures): a run's log says why its ball positions are
-    unknown, once per spell."""
-    from vision.tracker import BallTracker
+class TrackerLocator:
+    """A ``BallLocator`` backed by ``vision.tracker.BallTracker`` with an ``ArenaModel``. Why
+    the tracker did not see the ball is logged (INFO, logger ``explore.rigs.ball``) each time
+    the reason changes (its words, not its figures): a run's log says why its ball positions
+    are unknown, once per spell.
 
-    tracker = BallTracker(tracker_config, arena)
-    last_kind: list[str | None] = [None]  # the words of the last reason, None: seen
+    Attributes:
+        reason: why the last frame's ball was not seen, in the tracker's words; None when it
+            was.
+    """
 
-    def locate(frame: np.ndarray) -> np.ndarray:
-        obs = tracker.track(frame)
+    def __init__(self, arena: Any, tracker_config: Any = None) -> None:
+        from vision.tracker import BallTracker
+
+        self.tracker = BallTracker(tracker_config, arena)
+        self.reason: str | None = None
+        self._kind: str | None = None  # the words of the last reason, None: seen
+
+    def __call__(self, frame: np.ndarray) -> np.ndarray:
+        obs = self.tracker.track(frame)
         reason = None if obs.seen and obs.xy is not None else obs.reason or "not on the arena"
         kind = None if reason is None else reason.split("(")[0].strip()
-        if kind is not None and kind != last_kind[0]:
+        if kind is not None and kind != self._kind:
             blobs = ", ".join(
                 f"{b.area:.0f} px circularity {b.circularity:.2f}" for b in obs.blobs[:2]
             )
             log.info("ball not seen: %s%s", reason, f" (blobs: {blobs})" if blobs else "")
-        last_kind[0] = kind
+        self._kind, self.reason = kind, reason
         if reason is not None:
             return np.full(2, np.nan)
         return np.asarray(obs.xy, dtype=float)
 
-    return locate
+
+def tracker_locator(arena: Any, tracker_config: Any = None) -> TrackerLocator:
+    """The tracker's locator (``TrackerLocator``) on ``arena`` with ``tracker_config``."""
+    return TrackerLocator(arena, tracker_config)
 
 
 def locator_from_calibration(data: dict[str, Any]) -> BallLocator:
@@ -227,7 +243,12 @@ class TwinSensor:
 class CameraSensor:
     """A physical rig's camera and tracker (``locator``, from its arena calibration), or no
     tracker (``blind`` says why): the ball unknown (NaN) then, and always still. ``observe``
-    makes the observation image from a frame (default: its centre square)."""
+    makes the observation image from a frame (default: its centre square).
+
+    When the tracker misses the ball in ``UNSEEN_WARNING_LOOKS`` looks at rest in a row
+    (``locate``: an episode's context and outcome), one WARNING says so (logger
+    ``explore.rigs.ball``, with the tracker's last reason), once a spell; an INFO line says
+    when it is seen again."""
 
     def __init__(
         self,
@@ -241,6 +262,27 @@ class CameraSensor:
         self.blind = None if locator is not None else (blind or "no ball locator")
         self.observe = observe
         self._previous = UNKNOWN
+        self.unseen_looks = 0  # looks at rest in a row without the ball
+
+    def _count_unseen(self, ball: np.ndarray) -> None:
+        if self.locator is None:
+            return  # blind: said once by open_run
+        if np.all(np.isfinite(ball)):
+            if self.unseen_looks >= UNSEEN_WARNING_LOOKS:
+                log.info("ball seen again after %d looks at rest without it", self.unseen_looks)
+            self.unseen_looks = 0
+            return
+        self.unseen_looks += 1
+        if self.unseen_looks == UNSEEN_WARNING_LOOKS:
+            reason = getattr(self.locator, "reason", None)
+            log.warning(
+                "ball not seen in %d looks at rest in a row (%d episodes)%s: the episodes' "
+                "outcomes are unknown until it is seen again; is it off the arena or hidden? "
+                "`ergo track --camera SOURCE --arena FILE` shows what the tracker sees",
+                self.unseen_looks,
+                self.unseen_looks // 2,
+                f", last: {reason}" if reason else "",
+            )
 
     def _ball(self, frame: np.ndarray) -> np.ndarray:
         return UNKNOWN.copy() if self.locator is None else self.locator(frame)
@@ -248,6 +290,7 @@ class CameraSensor:
     def locate(self, image_side: int | None = None) -> Observation:
         frame = self.camera.read().image
         ball = self._ball(frame)
+        self._count_unseen(ball)
         if image_side is None:
             return Observation(ball=ball)
         return Observation(ball=ball, image=self.observe(frame, image_side), frame=frame)
