@@ -32,6 +32,7 @@ from explore.options import BadOption
 from explore.rigs.arena import TWIN_ARENA
 from explore.rigs.rig import NO_JOINT_CALIBRATION, RigConfig, RigError
 from explore.rigs.video import VideoOptions
+from robot.angles import wrap
 from robot.spec import ArmSpec, ergo_jr_spec
 from robot.torque_guardian import ON_DEATH
 from vision.camera import Camera, CameraError
@@ -40,8 +41,8 @@ from vision.make_camera import make_camera
 log = logging.getLogger(__name__)
 CAMERA = "a device index, video path or URL"
 TWIN_RIG_ID = RigConfig.rig_id  # the default id, the simulated twin's
-# Hand-typed offsets within this of the file's are the same offsets (rad): far below an
-# XL-320's position unit (0.005 rad), far above JSON round-off.
+# Hand-typed offsets within this of the file's, modulo whole turns, are the same offsets (rad):
+# far below an XL-320's position unit (0.005 rad), far above JSON round-off.
 SAME_OFFSET_RAD = 1e-6
 
 
@@ -192,7 +193,11 @@ def joint_setup(
         ("directions", directions, file_dirs),
         ("offsets", offsets, file_offsets),
     ):
-        if given is not None and not np.allclose(given, held, rtol=0.0, atol=SAME_OFFSET_RAD):
+        # offsets a whole turn apart are the same zero mark (robot.angles: the one rule)
+        apart = np.subtract(given, held) if given is not None else None
+        if key == "offsets" and apart is not None:
+            apart = wrap(apart)
+        if apart is not None and not np.all(np.abs(apart) <= SAME_OFFSET_RAD):
             raise RigError(
                 f"rig option {key} {list(given)} differs from {path} "
                 f"({[round(v, 4) for v in held]}): drop the option to use the file, or give "

@@ -121,6 +121,12 @@ def test_hand_typed_offsets_that_differ_from_the_file_are_refused_unless_told_wh
     # the same values as the file: no conflict
     arm = make_rig(rig(offsets=OFFSETS.tolist(), directions=DIRECTIONS.tolist())).arm
     np.testing.assert_allclose(arm.offsets, OFFSETS)
+    # a whole turn apart is the same zero mark (robot.angles): the file's offsets are used
+    turned = (OFFSETS + np.array([2 * np.pi, 0, -2 * np.pi, 0, 4 * np.pi, 0])).tolist()
+    arm = make_rig(rig(offsets=turned, directions=DIRECTIONS.tolist())).arm
+    np.testing.assert_allclose(arm.offsets, OFFSETS)
+    with pytest.raises(RigError, match="rig option offsets"):  # half a turn is not
+        make_rig(rig(offsets=(OFFSETS + np.pi).tolist(), directions=DIRECTIONS.tolist()))
     # the user says the options win: no file read, the spec's limits
     arm = make_rig(rig(offsets=[0.0] * 6, joint_calibration="none")).arm
     np.testing.assert_array_equal(arm.offsets, np.zeros(6))
