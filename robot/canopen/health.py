@@ -3,11 +3,11 @@
 
 A node stops the arm when it sent an EMCY error, when its heartbeat is silent for longer than
 the limit (heartbeat time x factor; not while frames wait unread by the host, which is then
-behind, nor just after the host itself did not run, nor while the serial line garbles lines and
-the node's TPDOs keep coming, each for at most a few limits) or says it left NMT OPERATIONAL,
-when it reports FAULT or QUICK STOP ACTIVE (its own quick-stop input, or its reaction to losing
-the host, 0x6007: it no longer follows the host's targets), or when it answered no SYNC for
-``max_position_age_s``.
+behind, nor just after the host itself did not run, nor while the node's TPDOs keep coming
+after the serial line garbled lines or the host fell behind, each for at most a few limits) or
+says it left NMT OPERATIONAL, when it reports FAULT or QUICK STOP ACTIVE (its own quick-stop
+input, or its reaction to losing the host, 0x6007: it no longer follows the host's targets), or
+when it answered no SYNC for ``max_position_age_s``.
 Pure reading: the arm's monitor thread and its calls ask, the arm turns torque off.
 """
 
@@ -70,6 +70,8 @@ def reason_to_stop(
     behind = host_stalled or reading_behind(net)  # before ``now``: it came before it
     now = time.monotonic()
     limit = heartbeat_factor * heartbeat_s
+    if behind:
+        net.behind_at = now
     n = len(net.node_ids)
     with net.cond:
         for i in range(n):
@@ -111,17 +113,19 @@ def reason_to_stop(
 
 
 def heartbeat_eaten_by_the_line(net: DriveNetwork, i: int, now: float, limit: float) -> bool:
-    """Whether node ``i``'s overdue heartbeat was most likely lost on the serial line between
-    the SLCAN adapter and the host rather than by the node: garbled lines were dropped since
-    its last heartbeat, and its TPDOs, which only a live node in NMT OPERATIONAL sends, kept
-    coming (the last within ``limit``, s). Excused for at most ``GARBLED_HEARTBEAT_GRACE``
-    times ``limit``: past that the node counts as lost whatever the line did. (On the CAN wire
-    itself a frame is not lost: the controllers retransmit it; an SLCAN line has no checksum
-    and no retransmission.) Call under ``net.cond``."""
+    """Whether node ``i``'s overdue heartbeat was most likely lost between the SLCAN adapter
+    and the host rather than by the node: garbled lines were dropped, or the host was behind
+    the adapter (whose buffer then overflows: an adapter, as the emulated one, drops what it
+    cannot pass on), since its last heartbeat, and its TPDOs, which only a live node in NMT
+    OPERATIONAL sends, kept coming (the last within ``limit``, s). Excused for at most
+    ``GARBLED_HEARTBEAT_GRACE`` times ``limit``: past that the node counts as lost whatever the
+    line did. (On the CAN wire itself a frame is not lost: the controllers retransmit it; an
+    SLCAN line has no checksum, no retransmission and a buffer of its own.) Call under
+    ``net.cond``."""
     silent = now - net.heartbeat_at[i]
     return bool(
         silent <= GARBLED_HEARTBEAT_GRACE * limit
-        and net.garbled_at > net.heartbeat_at[i]
+        and max(net.garbled_at, net.behind_at) > net.heartbeat_at[i]
         and net.rx_seq[i] >= 0
         and now - net.rx_time[i] <= limit
     )

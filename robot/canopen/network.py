@@ -185,6 +185,9 @@ class DriveNetwork:
         self.emcy_active: list[tuple[int, int] | None] = [None] * n
         self.heartbeat_at = np.zeros(n)
         self.nmt_state = np.zeros(n, dtype=int)
+        #: when the host last found itself behind the adapter (frames unread, or its own
+        #: stall: ``robot.canopen.health``), monotonic s; 0: never
+        self.behind_at = 0.0
         #: (increments per revolution, direction) per node, to turn TPDOs into joint speeds
         self.velocity_units: tuple[np.ndarray, np.ndarray] | None = None
         # What the next cycle sends: controlword and target of each node, the SYNC counter.
@@ -222,6 +225,7 @@ class DriveNetwork:
             self.velocity[:] = 0.0
             self.emcy_active = [None] * len(self.node_ids)
             self.nmt_state[:] = 0
+            self.behind_at = 0.0
         self.sync_since_read = False
 
     def open(self) -> None:

@@ -106,3 +106,27 @@ def test_past_the_grace_the_node_is_lost_whatever_the_host_did(net, monkeypatch)
     net.heartbeat_at[2] = time.monotonic() - (health.BEHIND_HEARTBEAT_GRACE + 0.2) * LIMIT
     lost = health.reason_to_stop(net, HEARTBEAT_S, FACTOR, 0.5, host_stalled=True)
     assert lost.startswith("safety stop: node 3 (m3) lost: no heartbeat for")
+
+
+def test_a_heartbeat_lost_while_the_host_was_behind_is_excused_while_the_node_talks(
+    net, monkeypatch
+):
+    """The host fell behind the adapter (its buffer overflowed and dropped a heartbeat), then
+    read everything: the node's TPDOs, which only a live operational node sends, still come,
+    so the missing heartbeat is the line's; a node whose TPDOs stopped too is lost."""
+    behind = [True]
+    monkeypatch.setattr(health, "reading_behind", lambda _net: behind[0])
+    now = time.monotonic()
+    net.heartbeat_at[2] = now - 0.5 * LIMIT  # heard, then the host fell behind
+    net.rx_seq[:] = 1
+    net.rx_time[:] = now
+    assert stop(net) is None  # behind: noted
+    behind[0] = False  # read everything; its next heartbeat had been dropped
+    net.heartbeat_at[2] = time.monotonic() - 1.5 * LIMIT
+    net.behind_at = net.heartbeat_at[2] + 0.1 * LIMIT
+    assert stop(net) is None
+    net.rx_time[2] = time.monotonic() - 1.2 * LIMIT  # its TPDOs stopped too: lost
+    assert stop(net).startswith("safety stop: node 3 (m3) lost: no heartbeat for")
+    net.rx_time[2] = time.monotonic()
+    net.heartbeat_at[2] = time.monotonic() - (health.GARBLED_HEARTBEAT_GRACE + 0.2) * LIMIT
+    assert stop(net).startswith("safety stop: node 3 (m3) lost: no heartbeat for")
