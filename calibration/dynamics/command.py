@@ -207,8 +207,19 @@ def describe(data: dict[str, Any]) -> str:
         for i, name in enumerate(ERGO_JR_JOINTS)
     )
     ratio = rms["nominal"] / rms["fitted"] if rms["fitted"] > 0 else math.inf
+    loose = [
+        name.replace(".", " ")
+        for name, why in data.get("unidentified", {}).items()
+        if not why.startswith("not recorded")
+    ]
     return (
         f"delay {s['delay_s'] * 1e3:.1f} ms; {per}; held-out RMS "
         f"{math.degrees(rms['fitted']):.3f} deg fitted, {math.degrees(rms['nominal']):.3f} deg "
         f"nominal ({ratio:.1f}x)"
+        + (
+            f"; not identified by the recording (wide intervals, no measurement): "
+            f"{', '.join(loose)}"
+            if loose
+            else ""
+        )
     )
