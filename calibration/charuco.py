@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from calibration.camera import INTRINSIC_NAMES, Intrinsics
+from calibration.camera import HELD_OUT_FOLDS, INTRINSIC_NAMES, Intrinsics
 from calibration.store import CalibrationError
 
 # Fewest views: the held-out check fits the intrinsics on all views but one group, so each fit
@@ -38,9 +38,9 @@ from calibration.store import CalibrationError
 # uncertainty. OpenCV's tutorial asks for 10-15 (docs/facts.md).
 MIN_VIEWS = 5
 MIN_CORNERS = 6  # per view; fewer constrain a homography poorly (guess; >= 4 is the minimum)
-# Held-out groups: every view is left out once (leave-one-out) up to this many views, then
-# views are dealt into this many groups (a fit per group: ~0.05 s each at 15 views).
-HELD_OUT_FOLDS = 15
+# Held-out groups (``HELD_OUT_FOLDS``, calibration/camera.py): every view is left out once
+# (leave-one-out) up to that many views, then views are dealt into that many groups (a fit per
+# group: ~0.05 s each at 15 views).
 # The largest standard deviation of fx, fy, cx or cy accepted, as a fraction of the focal
 # length: 0.5 % (3 px at fx 610). Reason: the project asks the focal length within 1 % of
 # the truth (the stand-in's check), which 0.5 % at one sd gives at two; the same fraction for

@@ -80,7 +80,7 @@ class FitResult:
     Attributes:
         servos: the fitted servo model (force limit: nominal).
         intervals: per fitted field, (6, 2) lower and upper 95 % bounds; ``delay_s``: (2,)
-            (``calibration.dynamics.uncertainty``: a block jackknife).
+            (``calibration.dynamics.uncertainty``: a block jackknife; within the fit's bounds).
         identified: per fitted field, (6,) one line each: "" for a parameter the recording
             identifies, else why it does not (a joint not recorded: "not recorded").
         held_out_rms_nominal, held_out_rms_fitted: RMS over the held-out segment of all
@@ -515,11 +515,13 @@ def _intervals(
     for f in FITTED:
         lo, hi = values[f].copy(), values[f].copy()
         identified[f] = ["not recorded: the nominal servo kept"] * len(JOINTS)
+        # no wider than the fit's bounds: the fit cannot put a value beyond them
+        floor, ceiling = (nominal[f] * r for r in RATIO_BOUNDS[f])
         for j in excited:
             i, k = names.index(f"{j}.{f}"), JOINTS.index(j)
-            with np.errstate(over="ignore"):
-                lo[k] = values[f][k] * math.exp(-iv.half[i])
-                hi[k] = values[f][k] * math.exp(min(iv.half[i], 700.0))
+            half = min(iv.half[i], 700.0)
+            lo[k] = max(values[f][k] * math.exp(-half), floor[k])
+            hi[k] = min(values[f][k] * math.exp(half), ceiling[k])
             identified[f][k] = why[f"{j}.{f}"].reason
         intervals[f] = np.stack([lo, hi], axis=1)
     dh = iv.half[-1] * DELAY_UNIT_S

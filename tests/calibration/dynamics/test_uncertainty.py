@@ -22,14 +22,18 @@ def test_a_rounded_reading_says_only_which_cell_the_angle_was_in():
     inside = noise.residual(np.array([0.0, 0.3 * h, -0.5 * h]), h, s)
     assert np.all(np.abs(inside) < 0.15)  # well inside the cell: (nearly) no residual
     assert abs(noise.residual(np.array([h]), h, s)[0]) < 1.5  # at its edge: about one sigma
-    far = noise.residual(np.array([0.05, -0.05]), h, s)
-    np.testing.assert_allclose(np.abs(far), (0.05 - h) / s, rtol=1e-2)  # beyond: the distance
-    assert far[0] > 0 > far[1]
+    beyond = noise.residual(np.array([h + 0.0012, -h - 0.0012]), h, s)
+    # beyond: at least the distance past the cell's edge over s (the Gaussian's tail, its log)
+    assert 2.4 < beyond[0] < 3.2 and beyond[1] == -beyond[0]
     # a fine grid (a drive's increments, the twin): the plain error over sigma
-    np.testing.assert_allclose(noise.residual(np.array([0.001, -0.002]), 0.0, s), [2.0, -4.0])
+    np.testing.assert_allclose(noise.residual(np.array([0.001, -0.0012]), 0.0, s), [2.0, -2.4])
     np.testing.assert_allclose(
         noise.residual(np.array([0.001]), 4.8e-5, s), [2.0], rtol=5e-3
     )  # CANopen's 2 pi / 65536
+    # far out (a reading stamped long after it was taken): Huber's tail, the cost linear
+    far = noise.residual(np.array([0.05, -0.05]), 0.0, s)
+    t = noise.TAIL
+    np.testing.assert_allclose(far, np.array([1, -1]) * math.sqrt(2 * t * 100 - t * t))
 
 
 def test_a_moving_reading_counts_its_timing_error():
