@@ -10,14 +10,15 @@ for ``ergo calibrate joints`` driven by the stand-in's hands, which recovers the
 0.03 deg (docs/standin.md); the dynamics fit itself never reads the hidden file.
 
     python experiments/standin_dynamics.py [--seeds 0 1 2] [--buses dynamixel canopen] [--out FILE]
-        [--keep DIR] [--refit LABEL [--code CHECKOUT]]
+        [--keep DIR] [--record-only] [--refit LABEL [--code CHECKOUT]] [--table LABEL ...]
 
 With ``--keep DIR`` each rig's result is also written to ``DIR/result-BUS-SEED.json`` as soon
 as it is measured, and a rig whose result is there is not measured again (run the same command
 again after a stop to finish the rest). Each result holds the served twin's real-time lines
 (``real-time loop: ...``, ``emulated drives: ...``) from the server's log.
 
-``--refit LABEL`` records nothing: it fits the recordings kept in ``DIR`` again
+``--record-only`` records and checks (``ergo calibrate dynamics --record-only``) and fits
+nothing; ``--refit LABEL`` records nothing: it fits the recordings kept in ``DIR`` again
 (``ergo calibrate dynamics --recording``, into ``DIR/refit-LABEL``; results
 ``DIR/result-BUS-SEED-LABEL.json``), with this checkout's code or, with ``--code CHECKOUT``,
 another's (a ``git worktree`` of an earlier commit: the fit before a change, on the same
@@ -44,6 +45,7 @@ sys.path.insert(0, str(ROOT))
 
 
 from calibration import store  # noqa: E402
+from calibration.dynamics.recording import Recording  # noqa: E402
 from robot.spec import ERGO_JR_JOINTS, ergo_jr_spec  # noqa: E402
 from testkit.standin_owner import ServedRig  # noqa: E402
 from testkit.standin_truth import read_hidden  # noqa: E402
@@ -97,7 +99,7 @@ def truth_floor(rec_path: Path, hidden_path: Path) -> dict:
     return {"held_out_rms_deg": best[0], "delay_s": best[1]}
 
 
-def one(bus: str, seed: int, work: Path) -> dict:
+def one(bus: str, seed: int, work: Path, record_only: bool = False) -> dict:
     hidden_path = work / f"hidden-{bus}-{seed}.json"
     rig = f"s{seed}-{bus}"
     log = hidden_path.with_suffix(".server.log")
@@ -115,6 +117,7 @@ def one(bus: str, seed: int, work: Path) -> dict:
                 "--dir",
                 str(work),
                 *served.bus_flags(),
+                *(["--record-only"] if record_only else []),
             ],
             cwd=ROOT,
             capture_output=True,
@@ -132,6 +135,10 @@ def one(bus: str, seed: int, work: Path) -> dict:
         out["error"] = (done.stderr.strip().splitlines() or ["?"])[-1]
         out["server_log_tail"] = log.read_text()[-1500:]
         out["server_rc"] = served.proc.returncode
+        return out
+    recording = Recording.load_file(work / rig / "dynamics_recording.npz")
+    out["record_s"] = recording.meta.get("record_s")
+    if record_only:
         return out
     data = store.load("dynamics", rig, work)
     out.update(judge(data, hidden_path))
@@ -291,13 +298,13 @@ def record_all(args: argparse.Namespace, tmp: Path) -> list[dict]:
                 results.append(json.loads(kept.read_text()))
                 print(f"== {bus} seed {seed}: measured before ({kept})", flush=True)
                 continue
-            r = one(bus, seed, tmp)
+            r = one(bus, seed, tmp, args.record_only)
             for _ in range(2):  # the link lost on a loaded machine: again, at most twice
                 if "error" not in r or "fit failed" in r["error"]:
                     break
                 print(f"== {bus} seed {seed}: {r['error'][:160]}... once more", flush=True)
                 first = r["error"]
-                r = one(bus, seed, tmp)
+                r = one(bus, seed, tmp, args.record_only)
                 r["first_attempt_error"] = first
             results.append(r)
             if args.keep and "error" not in r:
@@ -310,7 +317,8 @@ def record_all(args: argparse.Namespace, tmp: Path) -> list[dict]:
                 print(f"   server (rc {r['server_rc']}): {r['server_log_tail']}")
                 continue
             print(f"   record {r['record_s']} s")
-            show(r)
+            if not args.record_only:
+                show(r)
     return results
 
 
@@ -346,6 +354,9 @@ def main() -> int:
     p.add_argument("--refit", default=None, metavar="LABEL", help="fit the kept recordings again")
     p.add_argument("--code", type=Path, default=None, help="with --refit: this checkout's code")
     p.add_argument("--table", nargs="+", default=None, metavar="LABEL", help="print tables")
+    p.add_argument(
+        "--record-only", action="store_true", help="record and keep, fit later with --refit"
+    )
     args = p.parse_args()
     if (args.refit is not None or args.table is not None) and args.keep is None:
         p.error("--refit and --table need --keep DIR")
@@ -365,7 +376,8 @@ def main() -> int:
         tmp = Path(args.keep or scratch)
         tmp.mkdir(parents=True, exist_ok=True)
         results = refit_all(args, tmp) if args.refit is not None else record_all(args, tmp)
-        print(table(results, args.refit or "the recordings' own fits"))
+        if not args.record_only:
+            print(table(results, args.refit or "the recordings' own fits"))
     if args.out:
         args.out.write_text(json.dumps(results, indent=2))
     print(json.dumps([{k: v for k, v in r.items() if k != "params"} for r in results]))

@@ -424,14 +424,13 @@ def fit(rec: Recording, max_iters: int = MAX_ITERS, verbose: bool = False) -> Fi
         servos = _servos_from(values, min(delay, MAX_DELAY_S))
     except ValueError as exc:
         raise FitError(f"the fitted servos are not valid ({exc})") from None
-    intervals, identified = _intervals(values, delay, rec, segments, spec, excited)
     nominal_err = segment_error(NOMINAL, rec, HELD_OUT, spec)
     fitted_err = segment_error(servos, rec, HELD_OUT, spec)
     train = np.concatenate([segment_error(servos, rec, s, spec) for s in segments])
     out = FitResult(
         servos=servos,
-        intervals=intervals,
-        identified=identified,
+        intervals={},
+        identified={},
         held_out_rms_nominal=_rms(nominal_err),
         held_out_rms_fitted=_rms(fitted_err),
         held_out_rms_per_joint={
@@ -450,6 +449,9 @@ def fit(rec: Recording, max_iters: int = MAX_ITERS, verbose: bool = False) -> Fi
             f"{math.degrees(out.held_out_rms_nominal):.2f} deg): the recording does not "
             "show the servos' dynamics (an arm blocked, loose, or not this model)"
         )
+    # the intervals last: a fit refused above needs none (their rollouts cost a fit's third)
+    out.intervals, out.identified = _intervals(values, delay, rec, segments, spec, excited)
+    out.fit_s = time.monotonic() - t_start
     if len(excited) < len(JOINTS):
         kept = [j for j in JOINTS if j not in excited]
         out.notes.append(f"{', '.join(kept)} not recorded: nominal servos kept")
