@@ -479,12 +479,13 @@ def _intervals(
 
     names = [f"{j}.{f}" for f in FITTED for j in excited] + ["delay"]
     data = []
-    for name in segments:
+    for name in [*segments, HELD_OUT]:
         _, _, mt, meas = rec.segment(name)
         data.append((name, mt, meas, uncertainty.block_ids(mt)))
     blocks = np.concatenate(
         [np.repeat(b + 1000 * k, len(JOINTS)) for k, (*_, b) in enumerate(data)]
     )
+    fitted = np.concatenate([np.full(len(mt) * len(JOINTS), n != HELD_OUT) for n, mt, *_ in data])
     nominal = {f: NOMINAL.array(f) for f in FITTED}
     x0 = np.array(
         [
@@ -508,7 +509,7 @@ def _intervals(
             ]
         )
 
-    lin = uncertainty.linearise(residuals, x0, names, blocks)
+    lin = uncertainty.linearise(residuals, x0, names, blocks, fitted)
     iv = uncertainty.jackknife(lin)
     bounds = {n: tuple(math.log(b) for b in RATIO_BOUNDS[n.split(".")[1]]) for n in names[:-1]}
     why = uncertainty.identification(iv, bounds)

@@ -5,8 +5,8 @@ Why not the textbook interval (``mujoco.sysid.calculate_intervals``: the Jacobia
 optimum and the residuals' variance, as if every reading were an independent draw): the
 residuals are correlated over hundreds of milliseconds (an XL-320's rounding is the same
 while a joint is held; a late reading and a late command move several readings together) and
-carry what the model does not (the bus's timing). On the stand-ins those intervals held the
-hidden value on 4-9 of 24 (parameter, joint) pairs (docs/dynamics.md, "Measured").
+carry what the model does not (the bus's timing). On the stand-ins those intervals excluded
+the hidden value on most joints (docs/dynamics.md, "Measured").
 
 The method, a delete-a-block jackknife (Kuensch, Ann. Stat. 17, 1217 (1989)), linearised at the
 optimum:
@@ -18,19 +18,23 @@ optimum:
    correlation (measured: under 0.2 at 0.4 s on the stand-ins); for each block ``k``, the
    Gauss-Newton step that deleting it makes, ``d_k = (H - J_k' J_k)^-1 J_k' r_k``
    (``H = J' J``);
-3. the covariance ``(K - 1) / K * sum_k (d_k - mean)(d_k - mean)'``: what the estimate would
+3. the held-out segment's blocks join in, each with the step deleting it would make had it
+   been fitted, ``(H + J_k' J_k)^-1 J_k' r_k``: a held-out motion the model fits worse than the
+   training (a mismatch the training's own blocks share) widens the intervals;
+4. the covariance ``(K - 1) / K * sum_k (d_k - mean)(d_k - mean)'``: what the estimate would
    move by had another stretch of the same arm been recorded. It holds the noise, its
    correlation and whatever makes one stretch of the recording disagree with another (the
    model's mismatch), and assumes neither the weights nor the noise's shape;
-4. Student's t with the blocks that carry each parameter (``dof``: sum(d^2)^2 / sum(d^4),
+5. Student's t with the blocks that carry each parameter (``dof``: sum(d^2)^2 / sum(d^4),
    less one): a joint's parameters rest on the few blocks of its own segment;
-5. the interval on the log-ratio, turned back into values (not symmetric).
+6. the interval on the log-ratio, turned back into values (not symmetric).
 
 A parameter is *not identified* (``Identification``) when its interval spans more than
-``MAX_SPAN`` (a factor of 2.0 between its ends: the recording leaves it free), or when it
-trades against another: correlation beyond ``MAX_CORRELATION`` (only their combination is
-fitted). The fitted value still serves the twin (it reproduces the arm as well as any other
-value along that direction); the report and ``dynamics.json`` say it is not a measurement.
+``MAX_SPAN`` (a factor of 2.0 between its ends: the recording leaves it free); the reason
+names the parameter it trades against when their correlation passes ``MAX_CORRELATION``
+(only their combination is fitted). The fitted value still serves the twin (it reproduces
+the arm as well as any other value along that direction); the report and ``dynamics.json``
+say it is not a measurement.
 
 Units: log-ratios (dimensionless), the delay in ``fit.DELAY_UNIT_S``; values in the servo
 model's units.
@@ -67,12 +71,15 @@ class Linearisation:
         names: the free parameters ("m2.kp", ..., "delay"), (P,).
         jac: (N, P); residual: (N,) (dimensionless: ``calibration.dynamics.noise``).
         block: (N,) int, the jackknife block of each residual.
+        fitted: (N,) bool, the residuals the fit minimised (None: all); the others (the
+            held-out segment's) join the jackknife as blocks the fit did not see.
     """
 
     names: list[str]
     jac: np.ndarray
     residual: np.ndarray
     block: np.ndarray
+    fitted: np.ndarray | None = None
 
 
 @dataclass
@@ -109,14 +116,17 @@ def jackknife(lin: Linearisation, alpha: float = ALPHA) -> Intervals:
     """The delete-a-block jackknife's intervals (module docstring)."""
     jac, r = lin.jac, lin.residual
     p = jac.shape[1]
-    hess = jac.T @ jac
+    fitted = np.ones(len(r), bool) if lin.fitted is None else np.asarray(lin.fitted, bool)
+    hess = jac[fitted].T @ jac[fitted]
     ids = np.unique(lin.block)
     steps = np.empty((len(ids), p))
     for i, b in enumerate(ids):
         m = lin.block == b
         jk = jac[m]
-        reduced = hess - jk.T @ jk
-        steps[i] = np.linalg.lstsq(reduced, jk.T @ r[m], rcond=None)[0]
+        # a block the fit saw: the step deleting it makes; one it did not: the step deleting
+        # it would make had it been fitted (its pull on the estimate, same sign)
+        sign = -1.0 if fitted[m].all() else 1.0
+        steps[i] = np.linalg.lstsq(hess + sign * jk.T @ jk, jk.T @ r[m], rcond=None)[0]
     k = len(ids)
     dev = steps - steps.mean(axis=0)
     cov = (k - 1) / k * dev.T @ dev
@@ -166,9 +176,16 @@ def identification(
     return out
 
 
-def linearise(residuals: Any, x: np.ndarray, names: list[str], blocks: np.ndarray) -> Linearisation:
+def linearise(
+    residuals: Any,
+    x: np.ndarray,
+    names: list[str],
+    blocks: np.ndarray,
+    fitted: np.ndarray | None = None,
+) -> Linearisation:
     """The Jacobian of ``residuals(x) -> (N,)`` at ``x`` (P,) by central differences
-    (``LOG_STEP``, the delay ``DELAY_STEP``); ``blocks`` (N,) the jackknife's blocks."""
+    (``LOG_STEP``, the delay ``DELAY_STEP``); ``blocks`` (N,) the jackknife's blocks, ``fitted``
+    (N,) which residuals the fit minimised (``Linearisation``)."""
     r0 = np.asarray(residuals(x), float)
     cols = []
     for i, name in enumerate(names):
@@ -177,4 +194,4 @@ def linearise(residuals: Any, x: np.ndarray, names: list[str], blocks: np.ndarra
         up[i] += h
         down[i] -= h
         cols.append((np.asarray(residuals(up)) - np.asarray(residuals(down))) / (2 * h))
-    return Linearisation(list(names), np.stack(cols, axis=1), r0, np.asarray(blocks))
+    return Linearisation(list(names), np.stack(cols, axis=1), r0, np.asarray(blocks), fitted)
