@@ -45,6 +45,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="excite only these joints (default all); the others keep the nominal servos",
     )  # fmt: skip
     p.add_argument("--no-report", action="store_true", help="write no report")
+    p.add_argument(
+        "--record-only", action="store_true",
+        help="record and check the recording, fit nothing (fit it later with --recording)",
+    )  # fmt: skip
 
 
 def _arm(args: argparse.Namespace) -> tuple[Any, Any, str]:
@@ -172,6 +176,12 @@ def run(args: argparse.Namespace) -> int:
         )
     try:
         checks.check_recording(rec)
+        if getattr(args, "record_only", False):
+            print(
+                f"recording checked, not fitted: fit it with ergo calibrate dynamics --rig-id "
+                f"{args.rig_id} --recording {rec_path}"
+            )
+            return 0
         print("fitting the servos (mujoco.sysid) ...", flush=True)
         result = fit(rec)
     except (RecordingError, FitError) as exc:
@@ -207,8 +217,19 @@ def describe(data: dict[str, Any]) -> str:
         for i, name in enumerate(ERGO_JR_JOINTS)
     )
     ratio = rms["nominal"] / rms["fitted"] if rms["fitted"] > 0 else math.inf
+    loose = [
+        name.replace(".", " ")
+        for name, why in data.get("unidentified", {}).items()
+        if not why.startswith("not recorded")
+    ]
     return (
         f"delay {s['delay_s'] * 1e3:.1f} ms; {per}; held-out RMS "
         f"{math.degrees(rms['fitted']):.3f} deg fitted, {math.degrees(rms['nominal']):.3f} deg "
         f"nominal ({ratio:.1f}x)"
+        + (
+            f"; not identified by the recording (wide intervals, no measurement): "
+            f"{', '.join(loose)}"
+            if loose
+            else ""
+        )
     )

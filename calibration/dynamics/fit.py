@@ -16,7 +16,8 @@ its time plus the delay, averaged over the physics step it lands in (so that the
 continuous in the delay; ``delayed_control``).
 
 Residual: predicted minus measured joint angles at the measured times, every joint, over
-every training segment (one ``ModelSequences`` per segment), divided by ``POSITION_SCALE``.
+every training segment (one ``ModelSequences`` per segment), as the likelihood of a rounded,
+slightly mistimed reading (``calibration.dynamics.noise``).
 Confidence intervals: ``mujoco.sysid.calculate_intervals`` (95 %) on the log-parameters, from
 the Jacobian at the optimum, turned back into values (so they are not symmetric).
 
@@ -26,6 +27,7 @@ Units: rad, s, N.m, kg.m^2.
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import logging
 import math
@@ -35,9 +37,11 @@ from typing import Any
 
 import numpy as np
 
+from calibration.dynamics import noise, uncertainty
 from calibration.dynamics.excitation import HELD_OUT_NAME as HELD_OUT
-from calibration.dynamics.recording import Recording, RecordingError
+from calibration.dynamics.recording import Recording, RecordingError, servo_goals
 from calibration.store import CalibrationError
+from robot.spec import ERGO_JR_JOINTS
 from sim.servo_model import NOMINAL, ServoModel
 
 log = logging.getLogger(__name__)
@@ -55,12 +59,14 @@ RATIO_BOUNDS = {
 DELAY_UNIT_S = 0.01
 MAX_DELAY_S = 0.08  # the fit's bound on the delay (guess: no USB-serial link is slower)
 DELAY_GRID_S = 0.005  # the first estimate's grid: the twin's physics step
-POSITION_SCALE = 0.01  # rad: residuals are in units of about half a degree
+# The first estimate's factors on the nominal damping: a stand-in's time constant damping / kp
+# lies within 0.19-5.3x the nominal's (sim/standin/hidden.py's ranges; guess for an arm),
+# covered a factor of 2 apart.
+DAMPING_GRID = (0.25, 0.5, 1.0, 2.0, 4.0)
 MAX_ITERS = 40  # Gauss-Newton iterations (measured: 8-15 reach the optimum on the twin)
 # A fitted twin this close to the arm on the held-out trajectory is good whatever the nominal
 # does (an arm like the nominal twin): a tenth of an XL-320 position step (0.29 deg; guess)
 RMS_FLOOR_RAD = math.radians(0.03)
-ALPHA = 0.05  # confidence level of the intervals: 95 %
 
 
 class FitError(CalibrationError):
@@ -73,7 +79,10 @@ class FitResult:
 
     Attributes:
         servos: the fitted servo model (force limit: nominal).
-        intervals: per fitted field, (6, 2) lower and upper 95 % bounds; ``delay_s``: (2,).
+        intervals: per fitted field, (6, 2) lower and upper 95 % bounds; ``delay_s``: (2,)
+            (``calibration.dynamics.uncertainty``: a block jackknife; within the fit's bounds).
+        identified: per fitted field, (6,) one line each: "" for a parameter the recording
+            identifies, else why it does not (a joint not recorded: "not recorded").
         held_out_rms_nominal, held_out_rms_fitted: RMS over the held-out segment of all
             joints, rad.
         held_out_rms_per_joint: {"nominal": (6,), "fitted": (6,)}, rad.
@@ -84,6 +93,7 @@ class FitResult:
 
     servos: ServoModel
     intervals: dict[str, np.ndarray]
+    identified: dict[str, list[str]]
     held_out_rms_nominal: float
     held_out_rms_fitted: float
     held_out_rms_per_joint: dict[str, np.ndarray]
@@ -98,6 +108,13 @@ class FitResult:
         return {
             "servos": self.servos.to_dict(),
             "intervals_95": {k: np.asarray(v).tolist() for k, v in self.intervals.items()},
+            "identifiable": {k: [not why for why in v] for k, v in self.identified.items()},
+            "unidentified": {
+                f"{joint}.{k}": why
+                for k, v in self.identified.items()
+                for joint, why in zip(ERGO_JR_JOINTS, v, strict=True)
+                if why
+            },
             "held_out_rms_rad": {
                 "nominal": self.held_out_rms_nominal,
                 "fitted": self.held_out_rms_fitted,
@@ -220,16 +237,46 @@ def segment_error(servos: ServoModel, rec: Recording, name: str, spec: Any = Non
     return pred - meas
 
 
-def first_delay(rec: Recording, spec: Any) -> float:
-    """The delay on ``DELAY_GRID_S`` steps whose nominal rollout fits the training best, s."""
-    best, best_cost = 0.0, math.inf
-    for d in np.arange(0.0, MAX_DELAY_S / 2 + 1e-9, DELAY_GRID_S):
-        cost = sum(
-            float(np.sum(segment_error(NOMINAL.replace(delay_s=float(d)), rec, s, spec) ** 2))
-            for s in _segments(rec)
-        )
-        if cost < best_cost:
-            best, best_cost = float(d), cost
+def reading_noise(rec: Recording, mt: np.ndarray, meas: np.ndarray) -> tuple[np.ndarray, Any]:
+    """What the fit's residual needs of a segment's readings (``calibration.dynamics.noise``):
+    half a raw unit per joint (n,) and each reading's noise before rounding (M, n), rad."""
+    return noise.half_steps(rec.meta, meas.shape[1]), noise.reading_sigma(
+        mt, meas, noise.timed(rec.meta)
+    )
+
+
+def readings_residual(err: np.ndarray, rec: Recording, mt: np.ndarray, meas: np.ndarray):
+    """The fit's residual of a segment's errors (predicted minus measured, (M, n) rad):
+    ``noise.residual``, dimensionless, (M, n)."""
+    half, sigma = reading_noise(rec, mt, meas)
+    return noise.residual(err, half, sigma)
+
+
+def training_cost(servos: ServoModel, rec: Recording, segments: list[str], spec: Any) -> float:
+    """The fit's cost of ``servos`` over ``segments``: the sum of the squared residuals
+    (``readings_residual``)."""
+    total = 0.0
+    for name in segments:
+        _, _, mt, meas = rec.segment(name)
+        err = segment_error(servos, rec, name, spec)
+        total += float(np.sum(readings_residual(err, rec, mt, meas) ** 2))
+    return total
+
+
+def first_guess(rec: Recording, spec: Any) -> tuple[float, float]:
+    """Where the fit starts: the delay (s, on ``DELAY_GRID_S`` steps up to ``MAX_DELAY_S / 2``)
+    and the factor on the nominal damping (one of ``DAMPING_GRID``: a slower or faster servo)
+    whose rollout fits the training best. Started from the nominal servos alone, the delay took
+    the grid's end on the stand-ins (their servos 2-3x slower than nominal: a late response
+    looks like a long delay), and Gauss-Newton stopped 2-3 ms of delay and half the armature
+    away from a better optimum (measured, docs/dynamics.md)."""
+    best, best_cost = (0.0, 1.0), math.inf
+    for c in DAMPING_GRID:
+        damped = NOMINAL.replace(damping=tuple(NOMINAL.array("damping") * c))
+        for d in np.arange(0.0, MAX_DELAY_S / 2 + 1e-9, DELAY_GRID_S):
+            cost = training_cost(damped.replace(delay_s=float(d)), rec, _segments(rec), spec)
+            if cost < best_cost:
+                best, best_cost = (float(d), float(c)), cost
     return best
 
 
@@ -253,8 +300,9 @@ def fit(rec: Recording, max_iters: int = MAX_ITERS, verbose: bool = False) -> Fi
     logging.getLogger("absl").setLevel(logging.INFO if verbose else logging.ERROR)
     if HELD_OUT not in rec.segment_names:
         raise RecordingError("the recording has no held-out segment: record again")
+    rec = dataclasses.replace(rec, command=servo_goals(rec))  # as the servos held them
     spec = arm_spec()
-    delay0 = first_delay(rec, spec)
+    delay0, damping0 = first_guess(rec, spec)
     params = sysid.ParameterDict()
     # a joint without its own segment keeps the nominal servo (frozen: not fitted)
     excited = [name for name in JOINTS if name in rec.segment_names]
@@ -262,9 +310,10 @@ def fit(rec: Recording, max_iters: int = MAX_ITERS, verbose: bool = False) -> Fi
         for field_name in FITTED:
             lo, hi = RATIO_BOUNDS[field_name]
             nominal = NOMINAL.array(field_name)[k]
+            start = math.log(damping0) if field_name == "damping" and name in excited else 0.0
             params.add(
                 sysid.Parameter(
-                    f"{name}.{field_name}", 0.0, math.log(lo), math.log(hi),
+                    f"{name}.{field_name}", start, math.log(lo), math.log(hi),
                     frozen=name not in excited,
                     modifier=_modifier(name, field_name, nominal),
                 )
@@ -284,6 +333,7 @@ def fit(rec: Recording, max_iters: int = MAX_ITERS, verbose: bool = False) -> Fi
     # only that index (the rollout builds the delayed targets from the commands themselves)
     raw: list[tuple[np.ndarray, np.ndarray]] = []
     sequences = []
+    noise_of: dict[int, tuple[np.ndarray, ...]] = {}  # by the measured series' id
     model0 = spec.compile()
     _, _, qpos_idx = _indices(model0)
     dt = float(model0.opt.timestep)
@@ -299,6 +349,7 @@ def fit(rec: Recording, max_iters: int = MAX_ITERS, verbose: bool = False) -> Fi
         )
         raw.append((ct - t0, cmd))
         measured = sysid.TimeSeries.from_names(mt - t0, meas, model0, names=sensors)
+        noise_of[id(measured)] = (mt - t0, *reading_noise(rec, mt, meas))
         sequences.append(
             sysid.ModelSequences(
                 name, spec, name, state0, control, measured, allow_missing_sensors=True
@@ -322,10 +373,12 @@ def fit(rec: Recording, max_iters: int = MAX_ITERS, verbose: bool = False) -> Fi
         # The joint angles from the rolled-out states, stamped with their own times (a
         # rollout's sensor rows are computed before each step, a step earlier than the times
         # they are given: 5 ms of delay the fit would miss).
+        times, half, sigma = noise_of[id(meas)]
         pred = sysid.TimeSeries(state[:, 0], state[:, 1 + qpos_idx], meas.signal_mapping)
         meas = sysid.apply_delayed_ts_window(meas, pred, 0.0, 0.0)
         pred = pred.resample(meas.times)
-        return (pred.data - meas.data) / POSITION_SCALE, pred, meas
+        sigma = sigma[np.clip(np.searchsorted(times, meas.times - 1e-9), 0, len(times) - 1)]
+        return noise.residual(pred.data - meas.data, half, sigma), pred, meas
 
     residual_fn = sysid.build_residual_fn(
         models_sequences=sequences,
@@ -335,6 +388,18 @@ def fit(rec: Recording, max_iters: int = MAX_ITERS, verbose: bool = False) -> Fi
     )
     try:
         quiet = {} if verbose else {"output": io.StringIO()}  # the backend's iteration log
+        # The armature last: its effect is nearly a delay's (its time constant, armature /
+        # damping, is a few ms), so fitted together from afar the two slide along one valley
+        # (measured: 2-3 ms of delay traded for half the armature, docs/dynamics.md). First
+        # everything else with the armature nominal, then all from there.
+        for name in excited:
+            params[f"{name}.armature"].frozen = True
+        params, _ = sysid.optimize(
+            params, residual_fn, optimizer="mujoco", verbose=verbose, max_iters=max_iters,
+            **quiet,
+        )  # fmt: skip
+        for name in excited:
+            params[f"{name}.armature"].frozen = False
         opt_params, result = sysid.optimize(
             params, residual_fn, optimizer="mujoco", verbose=verbose, max_iters=max_iters,
             **quiet,
@@ -349,30 +414,12 @@ def fit(rec: Recording, max_iters: int = MAX_ITERS, verbose: bool = False) -> Fi
                 max_iters=max_iters, **quiet,
             )  # fmt: skip
         x = opt_params.as_vector()
-        residuals, _, _ = residual_fn(x, opt_params)
-        jac = np.asarray(result.jac)
-        _, half = sysid.calculate_intervals(residuals, jac, alpha=ALPHA)
     except (ValueError, RuntimeError, FloatingPointError, np.linalg.LinAlgError) as exc:
         raise FitError(f"the optimiser failed ({type(exc).__name__}: {exc})") from None
     if not np.all(np.isfinite(x)):
         raise FitError(f"the fit diverged (parameters {x.tolist()})")
-    values: dict[str, np.ndarray] = {}
-    intervals: dict[str, np.ndarray] = {}
-    names = opt_params.get_non_frozen_parameter_names()  # the Jacobian's columns
-    for field_name in FITTED:
-        nominal = NOMINAL.array(field_name)
-        xs = np.array([float(opt_params[f"{j}.{field_name}"].value[0]) for j in JOINTS])
-        hs = np.array(
-            [half[names.index(f"{j}.{field_name}")] if j in excited else 0.0 for j in JOINTS]
-        )
-        values[field_name] = nominal * np.exp(xs)
-        with np.errstate(over="ignore"):
-            intervals[field_name] = np.stack(
-                [nominal * np.exp(xs - hs), nominal * np.exp(xs + hs)], axis=1
-            )
+    values = _values(opt_params)
     delay = float(opt_params["delay"].value[0]) * DELAY_UNIT_S
-    dh = half[names.index("delay")] * DELAY_UNIT_S
-    intervals["delay_s"] = np.array([max(0.0, delay - dh), delay + dh])
     try:
         servos = _servos_from(values, min(delay, MAX_DELAY_S))
     except ValueError as exc:
@@ -382,7 +429,8 @@ def fit(rec: Recording, max_iters: int = MAX_ITERS, verbose: bool = False) -> Fi
     train = np.concatenate([segment_error(servos, rec, s, spec) for s in segments])
     out = FitResult(
         servos=servos,
-        intervals=intervals,
+        intervals={},
+        identified={},
         held_out_rms_nominal=_rms(nominal_err),
         held_out_rms_fitted=_rms(fitted_err),
         held_out_rms_per_joint={
@@ -401,6 +449,9 @@ def fit(rec: Recording, max_iters: int = MAX_ITERS, verbose: bool = False) -> Fi
             f"{math.degrees(out.held_out_rms_nominal):.2f} deg): the recording does not "
             "show the servos' dynamics (an arm blocked, loose, or not this model)"
         )
+    # the intervals last: a fit refused above needs none (their rollouts cost a fit's third)
+    out.intervals, out.identified = _intervals(values, delay, rec, segments, spec, excited)
+    out.fit_s = time.monotonic() - t_start
     if len(excited) < len(JOINTS):
         kept = [j for j in JOINTS if j not in excited]
         out.notes.append(f"{', '.join(kept)} not recorded: nominal servos kept")
@@ -411,6 +462,74 @@ def fit(rec: Recording, max_iters: int = MAX_ITERS, verbose: bool = False) -> Fi
         if at:
             out.notes.append(f"{field_name} of {', '.join(at)} at the fit's bound")
     return out
+
+
+def _intervals(
+    values: dict[str, np.ndarray],
+    delay: float,
+    rec: Recording,
+    segments: list[str],
+    spec: Any,
+    excited: list[str],
+) -> tuple[dict[str, np.ndarray], dict[str, list[str]]]:
+    """The 95 % intervals of the fitted values (per field (6, 2), the delay (2,)) and, per
+    field, why each joint's value is not identified ("" where it is); the block jackknife of
+    ``calibration.dynamics.uncertainty`` on the fit's own weighted residuals."""
+    from sim.twin import JOINTS
+
+    names = [f"{j}.{f}" for f in FITTED for j in excited] + ["delay"]
+    data = []
+    for name in [*segments, HELD_OUT]:
+        _, _, mt, meas = rec.segment(name)
+        data.append((name, mt, meas, uncertainty.block_ids(mt)))
+    blocks = np.concatenate(
+        [np.repeat(b + 1000 * k, len(JOINTS)) for k, (*_, b) in enumerate(data)]
+    )
+    fitted = np.concatenate([np.full(len(mt) * len(JOINTS), n != HELD_OUT) for n, mt, *_ in data])
+    nominal = {f: NOMINAL.array(f) for f in FITTED}
+    x0 = np.array(
+        [
+            math.log(values[f][JOINTS.index(j)] / nominal[f][JOINTS.index(j)])
+            for f in FITTED
+            for j in excited
+        ]
+        + [delay / DELAY_UNIT_S]
+    )
+
+    def residuals(x: np.ndarray) -> np.ndarray:
+        v = {f: values[f].copy() for f in FITTED}
+        for i, name in enumerate(names[:-1]):
+            joint, f = name.split(".")
+            v[f][JOINTS.index(joint)] = nominal[f][JOINTS.index(joint)] * math.exp(x[i])
+        servos = _servos_from(v, max(0.0, float(x[-1]) * DELAY_UNIT_S))
+        return np.concatenate(
+            [
+                readings_residual(segment_error(servos, rec, name, spec), rec, mt, meas).ravel()
+                for name, mt, meas, _ in data
+            ]
+        )
+
+    lin = uncertainty.linearise(residuals, x0, names, blocks, fitted)
+    iv = uncertainty.jackknife(lin)
+    bounds = {n: tuple(math.log(b) for b in RATIO_BOUNDS[n.split(".")[1]]) for n in names[:-1]}
+    why = uncertainty.identification(iv, bounds)
+    intervals: dict[str, np.ndarray] = {}
+    identified: dict[str, list[str]] = {}
+    for f in FITTED:
+        lo, hi = values[f].copy(), values[f].copy()
+        identified[f] = ["not recorded: the nominal servo kept"] * len(JOINTS)
+        # no wider than the fit's bounds: the fit cannot put a value beyond them
+        floor, ceiling = (nominal[f] * r for r in RATIO_BOUNDS[f])
+        for j in excited:
+            i, k = names.index(f"{j}.{f}"), JOINTS.index(j)
+            half = min(iv.half[i], 700.0)
+            lo[k] = max(values[f][k] * math.exp(-half), floor[k])
+            hi[k] = min(values[f][k] * math.exp(half), ceiling[k])
+            identified[f][k] = why[f"{j}.{f}"].reason
+        intervals[f] = np.stack([lo, hi], axis=1)
+    dh = iv.half[-1] * DELAY_UNIT_S
+    intervals["delay_s"] = np.array([max(0.0, delay - dh), delay + dh])
+    return intervals, identified
 
 
 def _values(opt_params: Any) -> dict[str, np.ndarray]:
@@ -430,10 +549,7 @@ def _refine_delay(opt_params: Any, rec: Recording, segments: list[str], spec: An
     grid = fitted + np.arange(-2 * DELAY_GRID_S, 2 * DELAY_GRID_S + 1e-9, 0.001)
     grid = grid[(grid >= 0.0) & (grid <= MAX_DELAY_S)]
     costs = [
-        sum(
-            float(np.sum(segment_error(_servos_from(values, float(d)), rec, s, spec) ** 2))
-            for s in segments
-        )
+        training_cost(_servos_from(values, float(d)), rec, segments, spec)
         for d in np.append(grid, fitted)
     ]
     best = int(np.argmin(costs))

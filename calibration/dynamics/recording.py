@@ -12,7 +12,12 @@ twin calibration that was fitted from it. The layout (``FORMAT``, version ``VERS
 - ``measured_t``: (M,) s; ``measured``: (M, n) rad; ``load``: (M, n), signed fraction of the
   servo's maximum torque (NaN where the servo does not report it); ``measured_segment``: (M,);
 - ``meta``: a JSON string: format, version, rig id, backend, control rate, reads per tick,
-  base pose, limits, complete (False for a recording cut short), created (UTC), notes.
+  base pose, limits, complete (False for a recording cut short), created (UTC),
+  ``position_resolution`` (one raw unit of each joint's position, rad: ``Arm.position_resolution``;
+  0 where continuous), notes.
+
+A servo holds its goal in the same raw units it reports its position in (an XL-320's 10-bit
+register, a drive's increments): ``servo_goals`` gives the commands as the servos held them.
 
 Times are seconds from the first command, on the arm's clock (the twin's simulated time, or
 ``time.monotonic`` of the host); joint angles are the calibrated joint angles (rad).
@@ -140,6 +145,28 @@ class Recording:
         return rec
 
 
+def servo_goals(rec: Recording) -> np.ndarray:
+    """The commands as the servos held them, shape (C, n), rad: each rounded to the servo's
+    own position grid (a goal register holds whole raw units, as the positions it reports), the
+    grid's step ``meta["position_resolution"]`` and its phase that of the joint's readings
+    (they lie on the same grid: one raw unit is one step of both). A joint whose resolution is
+    0 or unknown (the twin, a recording without it) keeps its commands as sent.
+
+    An XL-320's step is 0.29 deg: as large as the dead band its friction leaves (0.0026 rad at
+    kp 3.5 N.m/rad is 0.009 N.m), so a fit that ignored it would read the goals' rounding as
+    friction (measured on the stand-ins: docs/dynamics.md).
+    """
+    step = np.asarray(rec.meta.get("position_resolution") or [0.0] * len(rec.joint_names), float)
+    goals = np.array(rec.command, float)
+    for j, s in enumerate(step):
+        if not s > 0.0 or not len(rec.measured):
+            continue
+        # the readings' phase on the grid: a circular mean (every reading lies on it)
+        phase = np.angle(np.mean(np.exp(2j * np.pi * rec.measured[:, j] / s))) * s / (2 * np.pi)
+        goals[:, j] = phase + s * np.rint((goals[:, j] - phase) / s)
+    return goals
+
+
 def approach(arm: Arm, clock: Any, target: np.ndarray, rate_hz: float = CONTROL_RATE_HZ) -> None:
     """Take the arm from where it is to ``target`` (n,) rad at ``APPROACH_SPEED``, then hold
     0.5 s (not recorded)."""
@@ -191,6 +218,7 @@ def record(
         upper=arm.spec.upper.tolist(),
         created=datetime.now(UTC).isoformat(timespec="seconds"),
         complete=False,
+        position_resolution=np.asarray(arm.position_resolution, float).tolist(),
     )
 
     def build() -> Recording:

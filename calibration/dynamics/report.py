@@ -62,21 +62,26 @@ def _html(rec: Recording, result: FitResult, png: str) -> str:
     for f in FITTED:
         for j, name in enumerate(rec.joint_names):
             lo, hi = result.intervals[f][j]
+            why = result.identified[f][j]
             rows.append(
                 f"<tr><td>{name}</td><td>{f} ({UNITS[f]})</td><td>{NOMINAL.array(f)[j]:.4g}</td>"
-                f"<td>{result.servos.array(f)[j]:.4g}</td><td>{lo:.4g} .. {hi:.4g}</td></tr>"
+                f"<td>{result.servos.array(f)[j]:.4g}</td><td>{lo:.4g} .. {hi:.4g}</td>"
+                f"<td class=l>{'yes' if not why else 'no: ' + html.escape(why)}</td></tr>"
             )
     lo, hi = result.intervals["delay_s"]
     rows.append(
         f"<tr><td>all</td><td>delay (ms)</td><td>0</td><td>{result.servos.delay_s * 1e3:.2f}</td>"
-        f"<td>{lo * 1e3:.2f} .. {hi * 1e3:.2f}</td></tr>"
+        f"<td>{lo * 1e3:.2f} .. {hi * 1e3:.2f}</td><td class=l>the whole command path</td></tr>"
     )
     notes = "".join(f"<li>{html.escape(n)}</li>" for n in result.notes) or "<li>none</li>"
     ratio = result.held_out_rms_nominal / max(result.held_out_rms_fitted, 1e-12)
     rig = html.escape(str(rec.meta.get("rig_id")))
     backend = html.escape(str(rec.meta.get("backend")))
     created = html.escape(str(rec.meta.get("created")))
-    style = "body{font-family:sans-serif;max-width:60em}td,th{padding:2px 8px;text-align:right}"
+    style = (
+        "body{font-family:sans-serif;max-width:70em}td,th{padding:2px 8px;text-align:right}"
+        "td.l{text-align:left}"
+    )
     return f"""<!doctype html>
 <html><head><meta charset="utf-8"><title>servo fit: {rig}</title>
 <style>{style}</style>
@@ -88,8 +93,11 @@ fit with mujoco.sysid in {result.fit_s:.1f} s. Held-out RMS error: nominal twin
 {math.degrees(result.held_out_rms_fitted):.3f} deg ({ratio:.1f}x lower); training RMS
 {math.degrees(result.train_rms_fitted):.3f} deg.</p>
 <img src="{png}" alt="held-out trajectories" width="100%">
-<h2>Parameters (95 % intervals from the Jacobian at the optimum)</h2>
-<table><tr><th>joint</th><th>parameter</th><th>nominal</th><th>fitted</th><th>interval</th></tr>
+<h2>Parameters (95 % intervals: a block jackknife, docs/dynamics.md)</h2>
+<p>"identified: no": the recording does not pin that parameter (its interval is wide); its
+fitted value reproduces the arm as well as others would, and is no measurement of the servo.</p>
+<table><tr><th>joint</th><th>parameter</th><th>nominal</th><th>fitted</th><th>95 % interval</th>
+<th>identified</th></tr>
 {"".join(rows)}
 </table>
 <h2>Notes</h2><ul>{notes}</ul>

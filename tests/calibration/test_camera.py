@@ -205,3 +205,36 @@ def test_cli_from_recorded_video(views, tmp_path, capsys):
     out = capsys.readouterr()
     assert rc == 0, out.err
     assert store.load("camera", "vid", tmp_path)["rms_px"] < 0.5
+
+
+def test_an_error_every_view_shares_is_in_the_standard_deviations():
+    """Each board corner moved by the same small error in every view (a print or a lens that
+    errs the same way at that corner; 0.05 px sd): the views' jackknife, which takes the views
+    as independent, cannot see it; leaving each corner out of every view does, and the reported
+    sd and 95 % intervals carry it (with those errors absent they stay OpenCV's size)."""
+    spec = BoardSpec()
+    board = cv2.aruco.CharucoBoard(
+        spec.squares, spec.square_m, spec.marker_m,
+        cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, spec.dictionary)),
+    )  # fmt: skip
+    obj = np.asarray(board.getChessboardCorners(), float)
+    flags = cv2.CALIB_FIX_K3
+    rng = np.random.default_rng(3)
+    shared = rng.normal(0.0, 0.05, (len(obj), 2))
+    poses = random_views(spec.size_m, 15, seed=5)
+    views = []
+    for i, (rvec, tvec) in enumerate(poses):
+        px, _ = cv2.projectPoints(obj, rvec, tvec, K_TRUE, D_TRUE)
+        noise = rng.normal(0.0, 0.02, (len(obj), 2))
+        views.append(charuco.BoardView(obj, px.reshape(-1, 2) + shared + noise, f"v{i}"))
+    by_views, _ = charuco.held_out(views, (SIZE[1], SIZE[0]), flags)
+    by_corners = charuco.corner_spread(views, (SIZE[1], SIZE[0]), flags)
+    # the principal point most (views spread over the image pin the focal lengths' share)
+    assert np.all(by_corners[2:] > 2 * by_views[2:]), (by_corners, by_views)  # cx, cy
+    res = calibrate(views, (SIZE[1], SIZE[0]))
+    sd = np.array([res.std_px[n] for n in ("fx", "fy", "cx", "cy")])
+    assert np.all(sd >= by_corners - 1e-9)
+    truth = {"fx": K_TRUE[0, 0], "fy": K_TRUE[1, 1], "cx": K_TRUE[0, 2], "cy": K_TRUE[1, 2]}
+    for name, (lo, hi) in res.intervals_95().items():
+        assert lo <= truth[name] <= hi, (name, lo, truth[name], hi)
+    assert res.to_dict()["intervals_95"]["cx"] == list(res.intervals_95()["cx"])

@@ -23,8 +23,6 @@ ROOT = Path(__file__).resolve().parents[2]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 # The results pages: findings with their statistics, which the manual pages link to.
 RESULTS = re.compile(r"results(_\w+)?\.md")
-# docs/reliability.md is kept by the run store's and the CAN safety's owners, who are changing
-# its rows; its notebook marks (two "no longer", three "other jobs") go with their change.
 MANUAL_PAGES = [p for p in PAGES if not RESULTS.fullmatch(p.name)]
 MAX_LINES = {"README.md": 150}
 MAX_LINES_DOCS = 350

@@ -31,7 +31,16 @@ def test_the_command_records_fits_and_saves(calibrated, capsys):
     np.testing.assert_allclose(data["servos"]["kp"], 3.5, rtol=0.02)
     assert data["recording"]["sha256"] == store.file_sha256(folder / "dynamics_recording.npz")
     assert (folder / "dynamics_report" / "held_out.png").stat().st_size > 10_000
-    assert "Held-out RMS error" in (folder / "dynamics_report" / "report.html").read_text()
+    page = (folder / "dynamics_report" / "report.html").read_text()
+    assert "Held-out RMS error" in page and "<th>identified</th>" in page
+    # the twin's exact readings pin m3's servo; the joints not recorded keep the nominal one
+    # and say so, in the file as in the report
+    assert [data["identifiable"][f][2] for f in ("kp", "damping")] == [True, True]
+    assert data["identifiable"]["kp"][0] is False
+    assert data["unidentified"]["m1.kp"].startswith("not recorded")
+    assert not any(k.startswith("m3.") for k in data["unidentified"])
+    lo, hi = np.asarray(data["intervals_95"]["kp"])[2]
+    assert lo <= data["servos"]["kp"][2] <= hi
     assert main(["calibrate", "show", "--rig-id", "tw", "--dir", str(calibrated)]) == 0
     line = capsys.readouterr().out.strip().splitlines()[-1]
     assert line.startswith("dynamics: delay ") and "m3 kp 3.5" in line and "sha256 " in line
