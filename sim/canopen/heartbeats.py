@@ -19,9 +19,9 @@ network, ``sim.canopen.faulty``), and gets a ``HeartbeatTask`` that tells the pr
 node's period and NMT state byte (0x1017, boot-up, NMT commands, a stopped heartbeat: as
 before). Heartbeats go out only while the host has the adapter open, as the bridge's frames.
 
-The producer keeps, per node: heartbeats written, dropped (the pty full: the host not
-reading), late (a gap over ``LATE_FACTOR`` x the period) and the longest gap, in a shared
-memory block that ``summary`` reads (``ergo twin serve``'s last log line).
+The producer keeps, per node: heartbeats written, dropped (the pty full for ``WRITE_RETRY_S``:
+the host not reading), late (a gap over ``LATE_FACTOR`` x the period) and the longest gap, in a
+shared memory block that ``summary`` reads (``ergo twin serve``'s last log line).
 
 ``ergo twin serve --heartbeats threads`` leaves them to the serving process's threads (the
 ``canopen`` library's periodic tasks), for comparison; ``BridgeRecord`` then keeps the same
@@ -56,6 +56,14 @@ RT_PRIORITY = 10
 # at once once it runs; a bound against a hang, long enough for a producer still starting up
 # on a loaded machine).
 ACK_S = 10.0
+# How long the producer tries to write a heartbeat before it counts it dropped, s. The pty's
+# descriptor is non-blocking (shared with the bridge), and a write finds the tty's write lock
+# held whenever the bridge writes a line at that instant (EAGAIN from the kernel, not a full
+# buffer): such a heartbeat was dropped while the host read everything, and the host stopped
+# on it (0.75 s of silence, 1 heartbeat dropped in 976). A real adapter never drops a frame
+# because the host writes to it. Retried every millisecond for this long (chosen: a tenth of
+# the shortest heartbeat the stand-ins use, 0.1 s; a buffer full for longer is dropped).
+WRITE_RETRY_S = 0.01
 # Shared block: u32 real-time (1 when the producer got SCHED_FIFO), then per node id 0..127:
 # u32 written, u32 dropped, u32 late, f32 longest gap (s).
 _HEAD = struct.Struct("<I")
@@ -66,6 +74,7 @@ PRODUCER = r"""
 import mmap, os, select, socket, struct, sys, time
 sock_fd, shm_fd, rt = map(int, sys.argv[1:4])
 factor = float(sys.argv[4])
+RETRY_S = float(sys.argv[5])
 sock = socket.socket(fileno=sock_fd)
 shm = mmap.mmap(shm_fd, 0)
 NODE = struct.Struct("<IIIf")
@@ -85,12 +94,19 @@ def close_master():
 def write(node, v, now):
     s = stats.setdefault(node, [0, 0, 0, 0.0])
     line = b"t%03X1%02X\r" % (0x700 + node, v[0])
-    try:
-        writable = select.select([], [master], [], 0)[1]
-        if writable:
-            os.write(master, line)
-    except OSError:
-        writable = False
+    writable, end = False, time.monotonic() + RETRY_S
+    while master is not None and not writable:
+        try:
+            if select.select([], [master], [], max(0.0, end - time.monotonic()))[1]:
+                os.write(master, line)
+                writable = True
+        except BlockingIOError:
+            pass  # the bridge holds the tty's write lock this instant: again in a moment
+        except OSError:
+            break
+        if writable or time.monotonic() >= end:
+            break
+        time.sleep(0.001)
     if not writable:
         s[1] += 1
     else:
@@ -182,7 +198,7 @@ class HeartbeatProducer:
         try:
             self.process = subprocess.Popen(
                 [sys.executable, "-S", "-c", PRODUCER, str(child.fileno()),
-                 str(self._shm_fd), str(rt_priority), repr(late_factor)],
+                 str(self._shm_fd), str(rt_priority), repr(late_factor), repr(WRITE_RETRY_S)],
                 pass_fds=(child.fileno(), self._shm_fd),
                 stdin=subprocess.DEVNULL,
             )  # fmt: skip

@@ -200,3 +200,45 @@ def test_the_bridges_record_of_heartbeats_from_the_serving_process():
     assert record.written == 3 and record.late == 1
     assert 0.09 < record.longest < 0.5 and record.longest_produced == pytest.approx(0.09)
     assert "3 written to the host, 1 late" in record.summary()
+
+
+def test_no_heartbeat_is_dropped_while_the_bridge_writes_to_the_same_pty(pty):
+    """The pty's descriptor is non-blocking and shared with the bridge: a write that finds the
+    tty's write lock held by the bridge's (EAGAIN, the buffer not full) is tried again, not
+    counted dropped; the host, reading everything, misses no heartbeat."""
+    master, slave = pty
+    os.set_blocking(master, False)
+    stop = threading.Event()
+    got = bytearray()
+
+    def bridge() -> None:  # TPDO-like lines as fast as the tty takes them
+        while not stop.is_set():
+            try:
+                os.write(master, b"t1858000000000000FF00\r")
+            except BlockingIOError:
+                time.sleep(0.0005)
+
+    def host() -> None:  # reads everything, at once
+        while not stop.is_set():
+            try:
+                got.extend(os.read(slave, 65536))
+            except BlockingIOError:
+                time.sleep(0.0005)
+
+    threads = [threading.Thread(target=f, daemon=True) for f in (bridge, host)]
+    with HeartbeatProducer() as producer:
+        producer.set_port(master)
+        producer.set_open(True)
+        for node in range(1, 7):
+            producer.task(node, b"\x05", PERIOD_S / 2)
+        for t in threads:
+            t.start()
+        time.sleep(20 * PERIOD_S)
+        stats = producer.stats()
+        stop.set()
+        for t in threads:
+            t.join()
+    for node, (written, dropped, _late, _longest) in stats.items():
+        assert dropped == 0 and written >= 30, (node, stats[node])
+    heard = {n: bytes(got).count(b"t%03X105\r" % (0x700 + n)) for n in range(1, 7)}
+    assert min(heard.values()) >= 30, heard
