@@ -104,7 +104,7 @@ def test_the_guide_calibrates_a_rig_never_seen_and_explores_with_it(bus, tmp_pat
                   "--no-progress")  # fmt: skip
         owner.explore(warm, episodes=WARM_EPISODES, seed=0, extra=["--warm-start", str(twin)])
         report = owner.run("report", str(warm))
-        _learned_goal_spaces(owner, tmp_path, run)
+        _learned_goal_spaces(owner, tmp_path, run, whole=bus == "dynamixel")
     _warmed_by_its_twin(warm, twin, report.stdout)
     history = read_history(run)
     assert len(history.records) == EPISODES
@@ -146,10 +146,13 @@ def _folder_bytes(folder) -> dict[str, str]:
     }  # fmt: skip
 
 
-def _learned_goal_spaces(owner: Owner, tmp_path, run) -> None:
+def _learned_goal_spaces(owner: Owner, tmp_path, run, whole: bool = True) -> None:
     """Step 10 over the bus: the arm's own database from a run (read, never changed), a spatial
     autoencoder on it, rge-sae killed (SIGKILL) and resumed, reported and exported, seeing the
-    twin's view; rge-online after its switch; rge-sae warmed by a twin run of the same model."""
+    twin's view; rge-online after its switch; rge-sae warmed by a twin run of the same model.
+    Not ``whole``: the steps that drive the arm only (the run folder's report, export and
+    replay, and rge-online, which no bus changes, are checked once, on the other bus: the
+    suite's time)."""
     from testkit.standin_views import pixel_correlation, twin_renders
 
     before = _folder_bytes(run)
@@ -174,23 +177,25 @@ def _learned_goal_spaces(owner: Owner, tmp_path, run) -> None:
     meta = json.loads((learned / RUN_FILE).read_text())
     assert {i["kind"] for i in meta["inputs"]} == {"joints", "camera", "arena", "model"}
     assert len(list(learned.glob("recording*.rrd"))) == 2  # one per session, as on the twin
-    owner.run("report", str(learned))
-    assert (learned / "report" / "summary.md").exists()
-    owner.run("export", "lerobot", str(learned), "--out", str(tmp_path / "lerobot"))
-    assert "recording-2.rrd" in owner.run("replay", str(learned), "--print").stdout
+    if whole:
+        owner.run("report", str(learned))
+        assert (learned / "report" / "summary.md").exists()
+        owner.run("export", "lerobot", str(learned), "--out", str(tmp_path / "lerobot"))
+        assert "recording-2.rrd" in owner.run("replay", str(learned), "--print").stdout
     balls = np.stack([r.ball for r in records])
     assert np.isfinite(balls).all()
     twin = twin_renders(balls)  # the twin's view of the same scenes: the arm at rest, the ball
     same = [pixel_correlation(r.image, t) for r, t in zip(records, twin, strict=True)]
     assert min(same) > SAME_VIEW_CORRELATION, same
 
-    online = tmp_path / "online"
-    owner.explore(online, episodes=ONLINE_EPISODES, seed=0, strategy="rge-online", extra=[
-        "--strategy-option", f"bootstrap={ONLINE_BOOTSTRAP}",
-        "--strategy-option", f"vae_iterations={SAE_ITERATIONS}"])  # fmt: skip
-    sizes = [r.goal.size for r in read_history(online).records]
-    # random until the switch, then goals in its VAE's 10 latents (and some random episodes)
-    assert sizes[:ONLINE_BOOTSTRAP] == [0] * ONLINE_BOOTSTRAP and 10 in sizes, sizes
+    if whole:
+        online = tmp_path / "online"
+        owner.explore(online, episodes=ONLINE_EPISODES, seed=0, strategy="rge-online", extra=[
+            "--strategy-option", f"bootstrap={ONLINE_BOOTSTRAP}",
+            "--strategy-option", f"vae_iterations={SAE_ITERATIONS}"])  # fmt: skip
+        sizes = [r.goal.size for r in read_history(online).records]
+        # random until the switch, then goals in its VAE's 10 latents (and some random ones)
+        assert sizes[:ONLINE_BOOTSTRAP] == [0] * ONLINE_BOOTSTRAP and 10 in sizes, sizes
 
     twin_run, warm = tmp_path / "twin-sae", tmp_path / "warm-sae"
     extra = [*sae, "--strategy-option", f"bootstrap={LEARNED_BOOTSTRAP}"]
