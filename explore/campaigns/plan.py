@@ -164,6 +164,25 @@ def plan_trials(
     return todo
 
 
+def check_options(
+    strategy: str, options: dict[str, Any], rig: dict[str, Any], episodes: int
+) -> None:
+    """Raise ``CampaignError`` naming ``--option KEY`` when ``strategy`` refuses one of its
+    ``options`` (an unknown key, a wrong type), as each trial's run config would."""
+    from explore.runs.config import RunConfig, RunConfigError, flag_of
+
+    def label(path: str) -> str:
+        parent, _, key = path.rpartition(".")
+        return f"--option {key}" if parent == "config.strategy.options" else flag_of(path)
+
+    config = {"rig": rig, "strategy": {"name": strategy, "options": options}, "seed": 0,
+              "episodes": episodes}  # fmt: skip
+    try:
+        RunConfig.from_dict(config, "", label=label)
+    except RunConfigError as exc:
+        raise CampaignError(f"{strategy}: {exc}") from None
+
+
 def run_campaign(
     out: Path,
     strategies: list[str],
@@ -218,6 +237,8 @@ def run_campaign(
         raise CampaignError("--ray-address goes with --backend ray")
     run = load_backend(backend)
     opts = {s: strategy_options(s, models or {}, options or {}, preset) for s in strategies}
+    for s in strategies:  # a bad option: one line naming --option, before anything is written
+        check_options(s, opts[s], rig, episodes)
     out = out.resolve()  # workers elsewhere see the same absolute path
     todo = plan_trials(out, strategies, seeds, episodes, opts, rig, campaign_id(out), warm_start)
     if todo:

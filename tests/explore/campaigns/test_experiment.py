@@ -65,6 +65,21 @@ def test_an_option_can_go_to_one_strategy_of_the_campaign(tmp_path, capsys):
     assert "'rge-vae' is not a strategy of this campaign" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(
+    "option, said",
+    [("stall_window=\"x\"", "--option stall_window must be an integer"),
+     ("nosuch=1", "--option nosuch is unknown; known: ")],
+)  # fmt: skip
+def test_a_bad_option_is_one_line_naming_it_and_nothing_is_written(tmp_path, capsys, option, said):
+    out = tmp_path / "c"
+    code = main(["experiment", "--strategies", "rge-efr", "--seeds", "0-0", "--episodes", "2",
+                 "--out", str(out), "--option", option, "--no-progress",
+                 "--no-report"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 2 and said in err and err.count("\n") == 1, err
+    assert "config." not in err and not out.exists()
+
+
 def test_a_vae_strategy_without_a_model_names_the_command(tmp_path, capsys):
     code = main(["experiment", "--strategies", "rge-vae", "--episodes", "5",
                  "--out", str(tmp_path / "c"), "--no-progress"])  # fmt: skip
