@@ -62,7 +62,7 @@ ACK_S = 10.0
 # buffer): such a heartbeat was dropped while the host read everything, and the host stopped
 # on it (0.75 s of silence, 1 heartbeat dropped in 976). A real adapter never drops a frame
 # because the host writes to it. Retried every millisecond for this long (chosen: a tenth of
-# the shortest heartbeat the stand-ins use, 0.1 s; a buffer full for longer is dropped).
+# the shortest heartbeat the tests give a drive, 0.1 s; a buffer full for longer is dropped).
 WRITE_RETRY_S = 0.01
 # Shared block: u32 real-time (1 when the producer got SCHED_FIFO), then per node id 0..127:
 # u32 written, u32 dropped, u32 late, f32 longest gap (s).
