@@ -8,7 +8,8 @@ after the serial line garbled lines or the host fell behind, each for at most a 
 says it left NMT OPERATIONAL, when it reports FAULT or QUICK STOP ACTIVE (its own quick-stop
 input, or its reaction to losing the host, 0x6007: it no longer follows the host's targets), or
 when it answered no SYNC for ``max_position_age_s``.
-Pure reading: the arm's monitor thread and its calls ask, the arm turns torque off.
+Reading, and noting when the host found itself behind (``DriveNetwork.behind_at``): the arm's
+monitor thread and its calls ask, the arm turns torque off.
 """
 
 from __future__ import annotations

@@ -5,7 +5,6 @@ right after its own stall is excused within ``health.BEHIND_HEARTBEAT_GRACE``
 
 from __future__ import annotations
 
-import ctypes
 import time
 import uuid
 from collections.abc import Iterator
@@ -18,15 +17,11 @@ from robot.canopen import health
 from robot.canopen.arm import CanArm, CanArmConfig
 from sim.canopen.drives import EmulatedDrives
 from sim.twin import Twin
+from testkit.gil import hold_the_gil
 
 HEARTBEAT_MS = 200
 LIMIT_S = 1.5 * HEARTBEAT_MS / 1000  # CanArmConfig's heartbeat_factor default
 STALL_S = 2 * LIMIT_S  # past the limit, within the grace (3 limits)
-
-
-def hold_the_gil(seconds: float) -> None:
-    """Sleep in C without releasing the GIL: no Python thread of this process runs."""
-    ctypes.PyDLL(None).usleep(int(seconds * 1e6))
 
 
 @pytest.fixture

@@ -22,6 +22,7 @@ from sim.canopen.drives import EmulatedDrives
 from sim.canopen.heartbeats import BridgeRecord, HeartbeatProducer
 from sim.canopen.server import SlcanPtyBridge
 from sim.twin import Twin
+from testkit.gil import hold_the_gil
 
 PERIOD_S = 0.2
 BOUND_S = 10.0  # against hangs
@@ -34,17 +35,6 @@ IN_PROCESS = {
     "consumer_ms": 2000,
     "max_position_age_s": 3.0,
 }
-
-
-def hold_the_gil(seconds: float) -> float:
-    """Run one C call that keeps the GIL for about ``seconds``: no other thread of this process
-    runs meanwhile (as an emulator starved of the CPU or its GIL). Returns how long it held."""
-    t0 = time.perf_counter()
-    sum(range(10**6))
-    n = int(10**6 * seconds / max(time.perf_counter() - t0, 1e-4))
-    t0 = time.perf_counter()
-    sum(range(n))
-    return time.perf_counter() - t0
 
 
 def heartbeat_lines(fd: int) -> list[bytes]:
