@@ -103,3 +103,25 @@ class BusArm:
         rc = main(argv)
         if rc != 0:
             raise SystemExit(rc)
+
+
+class OnTheBus:
+    """What a LeRobot device on a bus shares, robot or leader: its joint calibration is the rig's
+    file (``bus_arm``), made by ``ergo calibrate joints`` with the device closed meanwhile
+    (torque off) and opened again after if it was open. The class it is mixed into gives
+    ``bus_arm``, ``is_connected``, ``disconnect`` and ``_open``."""
+
+    def bus_arm(self) -> BusArm:
+        raise NotImplementedError
+
+    @property
+    def is_calibrated(self) -> bool:
+        return self.bus_arm().is_calibrated
+
+    def calibrate(self) -> None:
+        """``ergo calibrate joints`` for this rig id and bus (``BusArm.calibrate``)."""
+        reopen = self.is_connected  # type: ignore[attr-defined]
+        self.disconnect()  # type: ignore[attr-defined]
+        self.bus_arm().calibrate()
+        if reopen:
+            self._open()  # type: ignore[attr-defined]

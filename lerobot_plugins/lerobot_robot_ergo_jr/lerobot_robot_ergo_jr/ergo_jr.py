@@ -29,7 +29,7 @@ from lerobot.cameras.utils import make_cameras_from_configs
 from lerobot.robots import Robot
 from lerobot.utils.errors import DeviceAlreadyConnectedError, DeviceNotConnectedError
 
-from lerobot_robot_ergo_jr.bus_arm import BusArm
+from lerobot_robot_ergo_jr.bus_arm import BusArm, OnTheBus
 from lerobot_robot_ergo_jr.config_ergo_jr import (
     ErgoJrBaseConfig,
     ErgoJrBusConfig,
@@ -185,26 +185,10 @@ class ErgoJrRobot(Robot):
         raise NotImplementedError
 
 
-class ErgoJrBusRobot(ErgoJrRobot):
-    """An arm on a bus; its joint calibration is the rig's file (``bus_arm``)."""
+class ErgoJrBusRobot(OnTheBus, ErgoJrRobot):
+    """An arm on a bus; its joint calibration is the rig's file (``bus_arm``, ``OnTheBus``)."""
 
     config: ErgoJrBusConfig
-
-    def bus_arm(self) -> BusArm:
-        raise NotImplementedError
-
-    @property
-    def is_calibrated(self) -> bool:
-        return self.bus_arm().is_calibrated
-
-    def calibrate(self) -> None:
-        """``ergo calibrate joints`` for this rig id and bus (``BusArm.calibrate``): the arm is
-        closed meanwhile (torque off) and opened again with the new calibration."""
-        reopen = self.is_connected
-        self.disconnect()
-        self.bus_arm().calibrate()
-        if reopen:
-            self._open()
 
     def _build(self) -> tuple[Arm, Camera | None]:
         arm, camera = self.bus_arm().build(self.config.max_relative_target)

@@ -15,7 +15,7 @@ from typing import Any
 
 from lerobot.teleoperators.teleoperator import Teleoperator
 from lerobot.utils.errors import DeviceAlreadyConnectedError, DeviceNotConnectedError
-from lerobot_robot_ergo_jr.bus_arm import BusArm
+from lerobot_robot_ergo_jr.bus_arm import BusArm, OnTheBus
 from lerobot_robot_ergo_jr.features import action_features, joints_dict
 
 from lerobot_teleoperator_ergo_jr.config_ergo_jr_teleop import ErgoJrLeaderConfig
@@ -24,7 +24,7 @@ from robot.arm import Arm
 log = logging.getLogger(__name__)
 
 
-class ErgoJrLeader(Teleoperator):
+class ErgoJrLeader(OnTheBus, Teleoperator):
     """A leader Ergo Jr on a Dynamixel or CAN bus (see the module docstring)."""
 
     config_class = ErgoJrLeaderConfig
@@ -53,19 +53,6 @@ class ErgoJrLeader(Teleoperator):
     @property
     def is_connected(self) -> bool:
         return self.arm is not None and self.arm.is_connected
-
-    @property
-    def is_calibrated(self) -> bool:
-        return self.bus_arm().is_calibrated
-
-    def calibrate(self) -> None:
-        """``ergo calibrate joints`` for the leader's rig id and bus; reopened after if it was
-        open."""
-        reopen = self.is_connected
-        self.disconnect()
-        self.bus_arm().calibrate()
-        if reopen:
-            self._open()
 
     def connect(self, calibrate: bool = True) -> None:
         if self.is_connected:
