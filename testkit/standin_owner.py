@@ -229,6 +229,8 @@ class Owner:
         calibration_dir: the calibration root (``ERGO_CALIBRATION_DIR`` of every step).
         log: told each command and what it printed (default: nothing).
         rng_seed: the owner's own randomness (where the board is held).
+        hand_speed: how fast the owner's hands turn a joint, rad/s (None: the careful person
+            of ``sim.standin.hands.HAND_SPEED_RAD_S``; tests take a brisker one).
     """
 
     def __init__(
@@ -238,8 +240,10 @@ class Owner:
         calibration_dir: Path,
         log: Callable[[str], None] | None = None,
         rng_seed: int = 0,
+        hand_speed: float | None = None,
     ) -> None:
         self.rig = rig
+        self.hand_speed = hand_speed
         self.rig_id = rig_id
         self.calibration_dir = Path(calibration_dir)
         self.log = log or (lambda text: None)
@@ -409,8 +413,8 @@ class Owner:
 
     def _to_zero(self, hands: HandsClient) -> None:
         """Back to the zero pose, m2 first (it may be forward with m3 folded back)."""
-        hands.move({"m2": 0.0})
-        hands.move({name: 0.0 for name in self.spec.names})
+        hands.move({"m2": 0.0}, self.hand_speed)
+        hands.move({name: 0.0 for name in self.spec.names}, self.hand_speed)
 
     def _pose_for(self, hands: HandsClient, names: list[str], what: str) -> None:
         """Move the joints as a prompt's words ask: "the arm in its zero pose", "m3 at its
@@ -427,8 +431,8 @@ class Owner:
         else:
             raise HandsError(f"cannot read the prompt {what!r}")
         if name == "m2" and target > 0:
-            hands.move(FOLD_FOR_M2_UPPER)
-        hands.move({name: target})
+            hands.move(FOLD_FOR_M2_UPPER, self.hand_speed)
+        hands.move({name: target}, self.hand_speed)
 
     def board_poses(
         self, n: int

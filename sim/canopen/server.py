@@ -297,7 +297,7 @@ def serve(args: argparse.Namespace) -> int:
 
     import can
 
-    from sim.realtime import RealtimeLoop
+    from sim.realtime import RealtimeLoop, serve_ahead_of_the_host
     from sim.standin.served import (
         SERVED_IDS,
         StandinError,
@@ -305,6 +305,9 @@ def serve(args: argparse.Namespace) -> int:
         serve_until_interrupted,
     )
 
+    # first, in the main thread: the physics, bus and camera threads inherit the priority (said
+    # once serving, so that a bad flag stays one line)
+    priority = serve_ahead_of_the_host()
     drop_rate = float(getattr(args, "drop_rate", 0.0) or 0.0)
     delay_ms = float(getattr(args, "delay_ms", 0.0) or 0.0)
     overload = getattr(args, "overload_servo", None)
@@ -360,6 +363,7 @@ def serve(args: argparse.Namespace) -> int:
             announce = [f"canopen bus (slcan) on {bridge.path}"]
             if bridge.link:
                 announce.append(f"canopen bus link {bridge.link}")
+            log.info("%s", priority)
             return serve_until_interrupted(
                 rig, args, announce, lambda: unanswered_nodes(bridge, SERVED_IDS)
             )

@@ -154,7 +154,7 @@ def faults_from_args(args: argparse.Namespace) -> FaultConfig:
 def serve(args: argparse.Namespace) -> int:
     """Serve until interrupted; returns the exit code. Prints the pty path and the camera URL
     (one line each, flushed) so that a parent process can read them."""
-    from sim.realtime import RealtimeLoop
+    from sim.realtime import RealtimeLoop, serve_ahead_of_the_host
     from sim.standin.served import (
         SERVED_IDS,
         StandinError,
@@ -162,6 +162,9 @@ def serve(args: argparse.Namespace) -> int:
         serve_until_interrupted,
     )
 
+    # first, in the main thread: the physics, bus and camera threads inherit the priority (said
+    # once serving, so that a bad flag stays one line)
+    priority = serve_ahead_of_the_host()
     try:
         faults = faults_from_args(args)
     except ValueError as exc:
@@ -182,6 +185,7 @@ def serve(args: argparse.Namespace) -> int:
         announce = [f"dynamixel bus on {server.path}"]
         if server.link:
             announce.append(f"dynamixel bus link {server.link}")
+        log.info("%s", priority)
         return serve_until_interrupted(
             rig, args, announce, lambda: unanswered_ids(server, SERVED_IDS)
         )

@@ -55,8 +55,11 @@ from sim.twin import Twin
 
 log = logging.getLogger(__name__)
 
-# How fast a hand turns a joint: about 90 degrees in 1.5 s (guess for a careful person).
+# How fast a hand turns a joint: about 90 degrees in 1.5 s (guess for a careful person); a move
+# may ask for another speed up to the quickest hand, 90 degrees in a quarter second (guess: a
+# brisk flick, about half the XL-320's no-load 11.9 rad/s, ROBOTIS datasheet).
 HAND_SPEED_RAD_S = 1.0
+MAX_HAND_SPEED_RAD_S = 6.0
 # A held joint counts as there within this (the hand's grip holds it within 0.01 deg under
 # the arm's weight, tests/sim/standin/test_hands.py).
 REACHED_RAD = math.radians(0.5)
@@ -84,19 +87,21 @@ class HandsError(RuntimeError):
 
 @dataclass
 class _Grip:
-    """A hand on one joint: from ``start`` to ``goal`` (rad) from simulated time ``t0``."""
+    """A hand on one joint: from ``start`` to ``goal`` (rad) from simulated time ``t0`` at
+    ``speed`` rad/s."""
 
     start: float
     goal: float
     t0: float
+    speed: float = HAND_SPEED_RAD_S
 
     def angle(self, now: float) -> float:
-        travel = max(0.0, now - self.t0) * HAND_SPEED_RAD_S
+        travel = max(0.0, now - self.t0) * self.speed
         step = min(abs(self.goal - self.start), travel)
         return self.start + math.copysign(step, self.goal - self.start)
 
     def done_at(self) -> float:
-        return self.t0 + abs(self.goal - self.start) / HAND_SPEED_RAD_S
+        return self.t0 + abs(self.goal - self.start) / self.speed
 
 
 def euler_matrix(euler_deg: Sequence[float]) -> np.ndarray:
@@ -227,11 +232,18 @@ class Hands:
             raise HandsError(f"no joint {name!r}: the arm has {', '.join(ERGO_JR_JOINTS)}")
         return ERGO_JR_JOINTS.index(name)
 
-    def move(self, joints: Mapping[str, float]) -> dict[str, Any]:
-        """Move limp joints (name -> angle, rad) to their angles and hold them there; returns
-        once they are there (what was done, and where the joints are)."""
+    def move(self, joints: Mapping[str, float], speed: Any = HAND_SPEED_RAD_S) -> dict[str, Any]:
+        """Move limp joints (name -> angle, rad) to their angles at ``speed`` (rad/s, up to
+        ``MAX_HAND_SPEED_RAD_S``) and hold them there; returns once they are there (what was
+        done, and where the joints are)."""
         if not isinstance(joints, Mapping) or not joints:
             raise HandsError('move needs "joints": an object of joint name -> angle (rad)')
+        number = isinstance(speed, int | float) and not isinstance(speed, bool)
+        if not number or not 0.0 < speed <= MAX_HAND_SPEED_RAD_S:
+            raise HandsError(
+                f"move: speed must be a number in (0, {MAX_HAND_SPEED_RAD_S:g}] rad/s, "
+                f"got {speed!r}"
+            )
         goals: dict[int, float] = {}
         for name, angle in joints.items():
             j = self._joint_index(name)
@@ -257,7 +269,7 @@ class Hands:
             for j, goal in goals.items():
                 grip = self._grips.get(j)
                 start = grip.angle(now) if grip is not None else float(q[j])
-                self._grips[j] = _Grip(start, goal, now)
+                self._grips[j] = _Grip(start, goal, now, float(speed))
                 self.twin.model.eq_data[self._eq[j], 0] = start
                 self.twin.data.eq_active[self._eq[j]] = 1
             self._wake.set()
@@ -432,7 +444,7 @@ class Hands:
             cmd = request.get("cmd")
             fields = {k: v for k, v in request.items() if k != "cmd"}
             allowed = {
-                "move": {"joints"},
+                "move": {"joints", "speed"},
                 "release": {"joints"},
                 "board": {"board", "position", "euler_deg"},
                 "board_away": set(),
@@ -445,7 +457,7 @@ class Hands:
             if extra:
                 raise HandsError(f"{cmd}: unknown field(s) {', '.join(extra)}")
             if cmd == "move":
-                reply = self.move(fields.get("joints"))
+                reply = self.move(fields.get("joints"), fields.get("speed", HAND_SPEED_RAD_S))
             elif cmd == "release":
                 joints = fields.get("joints")
                 if joints is not None and not isinstance(joints, list):

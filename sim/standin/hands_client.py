@@ -40,9 +40,13 @@ class HandsClient:
             raise HandsError(reply.get("error", "the hands refused"))
         return reply
 
-    def move(self, joints: Mapping[str, float]) -> dict[str, Any]:
-        """Move limp joints (name -> true joint angle, rad) there and hold them."""
-        return self.request("move", joints={k: float(v) for k, v in joints.items()})
+    def move(self, joints: Mapping[str, float], speed: float | None = None) -> dict[str, Any]:
+        """Move limp joints (name -> true joint angle, rad) there and hold them; ``speed``:
+        the hand's, rad/s (None: the server's careful person)."""
+        fields: dict[str, Any] = {"joints": {k: float(v) for k, v in joints.items()}}
+        if speed is not None:
+            fields["speed"] = float(speed)
+        return self.request("move", **fields)
 
     def release(self, joints: Sequence[str] | None = None) -> dict[str, Any]:
         """Let go of the named joints (None: all)."""

@@ -197,3 +197,45 @@ def test_between_two_physics_steps_a_reading_is_carried_on_and_a_command_counts_
     assert np.allclose(moved, twin.timestep * np.linspace(-1.0, 1.0, 6), atol=1e-12)
     twin.pacer = None
     assert np.array_equal(twin.joint_positions_now(), twin.joint_positions())
+
+
+def _may_raise_priority() -> bool:
+    """Whether this process may lower its nice value (root or CAP_SYS_NICE), asked of a child."""
+    import subprocess
+    import sys
+
+    probe = "import os; os.setpriority(os.PRIO_PROCESS, 0, -1)"
+    return subprocess.run([sys.executable, "-c", probe], capture_output=True).returncode == 0
+
+
+def test_a_served_rig_runs_ahead_of_the_host_and_its_threads_inherit_it():
+    """``serve_ahead_of_the_host`` in a child (this test's own priority is left alone): the
+    main thread, a thread started before and one started after it at ``SERVED_NICE`` where
+    the system allows it, else one line saying the rig runs at the ordinary priority."""
+    import json
+    import subprocess
+    import sys
+
+    child = (
+        "import json, os, threading\n"
+        "from sim.realtime import serve_ahead_of_the_host\n"
+        "go, before = threading.Event(), []\n"
+        "def earlier():\n"
+        "    go.wait(); before.append(os.getpriority(os.PRIO_PROCESS, 0))\n"
+        "e = threading.Thread(target=earlier); e.start()\n"
+        "line = serve_ahead_of_the_host()\n"
+        "go.set(); e.join()\n"
+        "seen = []\n"
+        "t = threading.Thread(target=lambda: seen.append(os.getpriority(os.PRIO_PROCESS, 0)))\n"
+        "t.start(); t.join()\n"
+        "print(json.dumps([line, os.getpriority(os.PRIO_PROCESS, 0), seen[0], before[0]]))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", child], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    line, main_nice, thread_nice, earlier_nice = json.loads(done.stdout)
+    assert "\n" not in line
+    if _may_raise_priority():
+        assert main_nice == thread_nice == earlier_nice == realtime.SERVED_NICE, line
+        assert line.startswith(f"served at nice {realtime.SERVED_NICE}")
+    else:
+        assert line.startswith("served at the ordinary priority"), line

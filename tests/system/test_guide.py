@@ -38,6 +38,9 @@ CENTRE_BOUND_PX = 3.0
 # experiments/rehearse_real_arm.py)
 ARENA_BOUND_MM = 4.0
 EPISODES = 6
+# The owner's hands turn joints at 4 rad/s, not a careful person's 1 (sim.standin.hands): the
+# joint calibration reads the same stops, a few times sooner.
+HAND_SPEED_RAD_S = 4.0
 # Step 9 (the arm warmed by its twin): the twin run's episodes, the bootstrap's 100 so that the
 # arm starts on goals from its first episode (docs/warm_start.md), and the warmed bus run's
 WARM_TWIN_EPISODES = 100
@@ -67,7 +70,7 @@ def test_the_guide_calibrates_a_rig_never_seen_and_explores_with_it(bus, tmp_pat
     hidden_path = tmp_path / "hidden.json"
     with ServedRig(bus, seed, hidden_path) as rig:
         truth = read_hidden(hidden_path)
-        owner = Owner(rig, "mine", tmp_path / "cal", rng_seed=seed)
+        owner = Owner(rig, "mine", tmp_path / "cal", rng_seed=seed, hand_speed=HAND_SPEED_RAD_S)
 
         scan = owner.scan()
         assert scan.stdout.count("CiA 402" if bus == "canopen" else "XL-320") == 6, scan.stdout

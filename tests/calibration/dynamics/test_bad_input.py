@@ -15,6 +15,10 @@ from sim.servo_model import NOMINAL
 
 from .conftest import TRUTH, record_on
 
+# Gauss-Newton iterations of the refused fit: a few move the servos off the nominal ones that
+# made the spliced held-out motion, which is all the refusal needs (the full fit: 40)
+FEW_ITERS = 3
+
 
 class StopAfter:
     """A clock that raises KeyboardInterrupt (Ctrl-C) after ``n`` advances."""
@@ -88,7 +92,7 @@ def test_a_fit_that_does_not_reach_the_held_out_motion_is_refused(truth_recordin
     np.testing.assert_array_equal(spliced.measured_t[mask], other.measured_t[mask])
     spliced.measured[mask] = other.measured[mask]
     with pytest.raises(FitError, match=r"no closer to the arm than the nominal one"):
-        fit(spliced)
+        fit(spliced, max_iters=FEW_ITERS)
 
 
 def test_a_hole_in_the_readings_ends_a_run_at_the_ceiling():

@@ -19,7 +19,7 @@ import pytest
 from robot.spec import ERGO_JR_JOINTS
 from sim.realtime import RealtimeLoop
 from sim.standin.board import BoardGeometry
-from sim.standin.hands import Hands, HandsError, HandsServer, board_to_world
+from sim.standin.hands import MAX_HAND_SPEED_RAD_S, Hands, HandsError, HandsServer, board_to_world
 from sim.standin.hands_client import HandsClient
 from sim.standin.hidden import draw_hidden
 from sim.standin.lens import ServedFrames
@@ -81,6 +81,22 @@ def test_hands_move_a_limp_joint_hold_it_and_let_go(limp):
     wait_simulated(twin, 1.0)
     # let go, the arm leaning forward falls under its own weight
     assert abs(twin.joint_positions()[index("m2")] - 0.6) > np.radians(2)
+
+
+def test_a_quicker_hand_gets_there_sooner_and_holds_as_well(limp):
+    twin, hands, *_ = limp
+    t0 = twin.time
+    hands.move({"m3": -0.9})  # 0.9 rad at the careful 1 rad/s
+    careful = twin.time - t0
+    t0 = twin.time
+    hands.move({"m3": 0.9}, speed=MAX_HAND_SPEED_RAD_S)  # 1.8 rad back, six times as fast
+    quick = twin.time - t0
+    assert quick < careful, (quick, careful)
+    wait_simulated(twin, 0.5)  # held as a careful hand holds it
+    assert abs(np.degrees(twin.joint_positions()[index("m3")] - 0.9)) < 0.05
+    for bad in (0, -1.0, MAX_HAND_SPEED_RAD_S * 1.01, "fast", True, float("nan")):
+        message = hands.handle({"cmd": "move", "joints": {"m3": 0.0}, "speed": bad})["error"]
+        assert message.startswith("move: speed must be a number") and "\n" not in message
 
 
 def test_a_powered_joint_is_refused_in_one_line(limp):
