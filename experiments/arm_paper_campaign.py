@@ -167,7 +167,7 @@ def figure(args: argparse.Namespace) -> None:
         for arm in ARMS:
             cells = curve(rig / f"{arm}-e{args.explore_seed}")
             if cells:
-                ax.plot(range(1, len(cells) + 1), cells, label=arm)
+                ax.plot(range(1, len(cells) + 1), cells, label=arm, color=f"C{ARMS.index(arm)}")
         ax.set_title(rig.name, fontsize=9)
         ax.set_xlabel("episodes")
         ax.set_ylabel("ball cells (30 x 30)")
