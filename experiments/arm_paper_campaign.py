@@ -29,8 +29,8 @@ the ball cells against episodes, a panel per rig (the paper's layout), from the 
         --twin-sae models/sae --out /tmp/arm-paper-dev
     # the final campaign: stand-ins 210-212 over Dynamixel, one over CANopen
     .venv/bin/python experiments/arm_paper_campaign.py --buses dynamixel --seeds 210 211 212 \\
-        --episodes 600 --explore-seed 820 --twin-sae models/sae --out runs/arm-paper \\
-        --figure docs/img/arm_paper.png
+        --episodes 600 --explore-seed 820 --twin-sae models/sae --arm-sae-seeds 820-823 \\
+        --out runs/arm-paper --figure docs/img/arm_paper.png
     .venv/bin/python experiments/arm_paper_campaign.py --buses canopen --seeds 210 \\
         --arms rge-efr sae-twin --episodes 600 --explore-seed 820 --twin-sae models/sae \\
         --out runs/arm-paper
@@ -186,7 +186,11 @@ def main() -> None:
                    help="the table's checkpoints (default 100,300,600)")  # fmt: skip
     p.add_argument("--explore-seed", type=int, default=0)
     p.add_argument("--twin-sae", type=Path, help="the twin-trained autoencoder (sae-twin, warm)")
-    p.add_argument("--arm-sae-seeds", default="0-3", help="training seeds of the arm's model")
+    p.add_argument(
+        "--arm-sae-seeds",
+        default="0-3",
+        help="training seeds of the arm's model (0-3: development; final: 820-823)",
+    )
     p.add_argument("--online-bootstrap", type=int, default=300, help="rge-online's switch")
     p.add_argument("--twin-episodes", type=int, default=1000, help="the warm arm's twin run")
     p.add_argument("--twin-seed", type=int, default=0)
