@@ -62,9 +62,8 @@ def test_calibrate_teleoperate_and_record_over_the_bus_with_a_leader_arm(bus, tm
         ServedRig(bus, None, log=tmp_path / "follower.log") as follower,
         ServedRig(bus, None, flags=["--no-camera"], log=tmp_path / "leader.log") as leader,
     ):
-        # brisk hands (4 rad/s, not a careful person's 1): the same stops, read sooner
-        f_owner = Owner(follower, follower_id, CALIBRATION, hand_speed=4.0)
-        l_owner = Owner(leader, leader_id, CALIBRATION, hand_speed=4.0)
+        f_owner = Owner(follower, follower_id, CALIBRATION)
+        l_owner = Owner(leader, leader_id, CALIBRATION)
         # The two pairs of hands at once on the Dynamixel bus; one after the other over SLCAN,
         # where two at once lost a drive's heartbeat (0.86 s against 0.75 s) at load 13 on 2 cores
         with ThreadPoolExecutor(2 if bus == "dynamixel" else 1) as pool:
