@@ -26,6 +26,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import os
 import threading
 import time
 
@@ -52,8 +53,6 @@ def serve_ahead_of_the_host(nice: int = SERVED_NICE) -> str:
     """Raise every thread of this process (those started before, such as the BLAS library's
     pool, and, by inheritance, those the calling thread starts after) to ``nice`` where
     allowed. Returns one line saying which priority the served rig runs at."""
-    import os
-
     try:
         tasks = [int(t) for t in os.listdir("/proc/self/task")]
     except OSError:  # no /proc: the calling thread only
