@@ -52,6 +52,22 @@ def _own_calibration_dir(tmp_path_factory: pytest.TempPathFactory, monkeypatch) 
     return folder
 
 
+@pytest.fixture(autouse=True)
+def _ordinary_scheduling() -> None:
+    """No test leaves the suite's own process at another scheduling policy: every later test,
+    and every process it starts (bus emulators, served rigs, ``ergo`` commands), would inherit
+    it. (SVT-AV1 run as root once left it at SCHED_FIFO 99 after the export tests:
+    explore/export/video.py.) The policy is put back and the test fails."""
+    before = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)
+    yield
+    after = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)
+    if after != before:
+        os.sched_setscheduler(0, before[0], os.sched_param(before[1]))
+        pytest.fail(
+            f"the test left the suite's process at (policy, priority) {after}, not {before}"
+        )
+
+
 @pytest.fixture
 def twin() -> Twin:
     t = Twin(render_size=(96, 96))

@@ -6,10 +6,19 @@ frame every 2 frames (``g``), constant rate factor 30, preset 12 (SVT-AV1 4.x ru
 preset 11). The same settings here, so that what reads LeRobot videos reads these: rerun's viewer
 decodes AV1 itself (no ffmpeg needed); PyAV, torchcodec and torchvision's VideoReader (up to
 0.25) decode it to the same frames (measured: docs/ecosystem.md, bench/bench_video_readers.py).
+
+Run as root, SVT-AV1 takes the highest real-time priority: its encoder threads and the thread
+that feeds it frames become SCHED_FIFO at 99 (measured with PyAV 18.1.0's libSvtAv1Enc 4.1.0:
+``os.sched_getscheduler`` on every thread of ``/proc/self/task`` after the first frame; SVT-AV1's
+``EbThreads.c`` asks for priority 99 whenever ``geteuid()`` is 0). A CPU-bound encoder at 99
+outranks an arm's controller and its signal watcher (SCHED_FIFO 10, ``robot.signals``) on every
+core, and every process the exporting process starts after inherits the policy. So after each
+call into the encoder, ``Mp4Writer`` puts every thread that changed back (``ordinary_threads``).
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 from pathlib import Path
 from types import TracebackType
@@ -38,6 +47,36 @@ def encoder_info() -> dict[str, object]:
     }
 
 
+def thread_schedules() -> dict[int, tuple[int, int]]:
+    """{thread id: (scheduling policy, real-time priority)} of this process's threads (empty
+    where there is no ``/proc`` or no ``sched_getscheduler``)."""
+    out: dict[int, tuple[int, int]] = {}
+    try:
+        tids = [int(t) for t in os.listdir("/proc/self/task")]
+        for tid in tids:
+            with contextlib.suppress(ProcessLookupError):  # a thread that ended meanwhile
+                out[tid] = (os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority)
+    except (AttributeError, OSError):
+        return {}
+    return out
+
+
+def ordinary_threads(before: dict[int, tuple[int, int]]) -> int:
+    """Undo what a library did to this process's scheduling since ``before``
+    (``thread_schedules()``): a thread of ``before`` whose policy or priority changed gets its
+    own back, a thread started since at a real-time policy (FIFO, RR) gets the ordinary one
+    (SCHED_OTHER). Returns how many threads were changed (0 where not permitted)."""
+    changed = 0
+    for tid, now in thread_schedules().items():
+        was = before.get(tid, (os.SCHED_OTHER, 0))
+        if now == was or (tid not in before and now[0] not in (os.SCHED_FIFO, os.SCHED_RR)):
+            continue
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.sched_setscheduler(tid, was[0], os.sched_param(was[1]))
+            changed += 1
+    return changed
+
+
 class Mp4Writer:
     """Appends episodes of frames to one MP4 file (AV1, ``fps`` frames per second).
 
@@ -56,6 +95,7 @@ class Mp4Writer:
         self.fps = fps
         self.side = side
         self.frames = 0
+        self._schedules = thread_schedules()  # what the encoder may change (module docstring)
         self._container = av.open(str(path), mode="w", options={"movflags": "faststart"})
         options = {"g": str(GOP), "crf": str(CRF), "preset": str(PRESET)}
         self._stream = self._container.add_stream(CODEC, rate=fps, options=options)
@@ -72,8 +112,11 @@ class Mp4Writer:
         for image in frames:
             frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(image[..., ::-1]), "rgb24")
             frame.pts = self.frames
-            for packet in self._stream.encode(frame):
-                self._container.mux(packet)
+            try:
+                for packet in self._stream.encode(frame):
+                    self._container.mux(packet)
+            finally:
+                ordinary_threads(self._schedules)
             self.frames += 1
         return start, self.frames / self.fps
 
@@ -81,10 +124,13 @@ class Mp4Writer:
         """Flush the encoder and close the file."""
         if self._container is None:
             return
-        for packet in self._stream.encode():
-            self._container.mux(packet)
-        self._container.close()
-        self._container = None
+        try:
+            for packet in self._stream.encode():
+                self._container.mux(packet)
+            self._container.close()
+        finally:
+            self._container = None
+            ordinary_threads(self._schedules)
 
     def __enter__(self) -> Mp4Writer:
         return self
