@@ -68,7 +68,7 @@ def test_an_overload_alert_stops_the_arm_with_torque_off():
 def test_a_short_soak_over_the_serial_bus_loses_no_episode(tmp_path):
     from testkit.fault_soak import soak
 
-    result = soak(episodes=25, rate=0.05, bus="serial", seed=1, out=tmp_path / "run")
+    result = soak(episodes=15, rate=0.05, bus="serial", seed=1, out=tmp_path / "run")
     print("\n", result)
     assert result["lost_episodes"] == 0 and result["history_ok"]
     assert result["counters"]["bus_retries"] > 0

@@ -37,20 +37,20 @@ CENTRE_BOUND_PX = 3.0
 # of a 20 mm ball needs (measured 0.6-2 mm on seeds 31-33 and 41-42,
 # experiments/rehearse_real_arm.py)
 ARENA_BOUND_MM = 4.0
-EPISODES = 6
+EPISODES = 4
 # The owner's hands turn joints at 4 rad/s, not a careful person's 1 (sim.standin.hands): the
 # joint calibration reads the same stops, a few times sooner.
 HAND_SPEED_RAD_S = 4.0
 # Step 9 (the arm warmed by its twin): the twin run's episodes, the bootstrap's 100 so that the
 # arm starts on goals from its first episode (docs/warm_start.md), and the warmed bus run's
 WARM_TWIN_EPISODES = 100
-WARM_EPISODES = 4
+WARM_EPISODES = 2
 # Step 10 (learned goal spaces), a few episodes each: the autoencoder's training iterations (the
 # plumbing, not a model worth exploring with), the learned run (killed after its first stored
 # episode, then resumed), rge-online's bootstrap and run, the twin run that warms the last one
 # and that one's bootstrap (the twin run's episodes count towards it: the arm starts on goals)
 SAE_ITERATIONS = 5
-LEARNED_EPISODES = 3
+LEARNED_EPISODES = 2
 ONLINE_BOOTSTRAP, ONLINE_EPISODES = 2, 4
 LEARNED_TWIN_EPISODES, LEARNED_BOOTSTRAP = 20, 10
 # An outcome image over the bus against the twin's render of the same scene (the arm at rest,

@@ -171,7 +171,7 @@ def test_dropped_and_corrupted_replies_are_absorbed_by_retries() -> None:
     faults = FaultConfig(drop_rate=0.1, corrupt_rate=0.1, seed=3)
     # 30 ms of slack per exchange: at 10 ms, 7 timeouts in a row were seen at load 10
     with hil(faults) as (_, _, port), DynamixelArm(port, latency_s=0.03, retries=6) as arm:
-        for _ in range(40):
+        for _ in range(20):
             assert np.all(np.isfinite(arm.read().positions))
         c = arm.bus.counters
         assert c.retries > 0 and (c.timeouts > 0 or c.crc_errors > 0)
