@@ -62,7 +62,8 @@ CHILD = textwrap.dedent(
         arm = DynamixelArm(port, latency_s=0.02)
     else:
         from robot.canopen.arm import CanArm, CanArmConfig
-        arm = CanArm(f"slcan:{port}", config=CanArmConfig(heartbeat_ms=500, pdo_timeout_s=0.05))
+        arm = CanArm(f"slcan:{port}", config=CanArmConfig(
+            heartbeat_ms=500, pdo_timeout_s=0.05, sdo_timeout_s=2.0))
     work = np.random.default_rng(0).standard_normal((600, 600))
     with arm:
         while True:

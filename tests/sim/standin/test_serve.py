@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from robot.canopen.config import PTY_SETTINGS
 from robot.errors import SafetyStop
 from robot.spec import ERGO_JR_JOINTS
 from sim.standin.board import BoardGeometry
@@ -26,6 +27,10 @@ from sim.standin.hands import HandsError, board_to_world
 from sim.standin.hands_client import HandsClient
 from testkit.standin_owner import ServedRig
 from testkit.standin_truth import read_hidden
+
+# The pty rig's SDO timeout (robot/canopen/config.py: a served emulator shares the machine; at
+# canopen's 0.3 s a reopen's SDO went unanswered with the suite on two workers)
+PTY_SDO_TIMEOUT_S = PTY_SETTINGS["sdo_timeout_s"]
 
 ROOT = Path(__file__).resolve().parents[3]
 ERGO_SERVE = [sys.executable, "-m", "explore.cli", "twin", "serve"]
@@ -142,7 +147,7 @@ def test_canopen_raw_positions_follow_the_hidden_mounting(tmp_path):
         hidden = hidden_of(lines)
         assert "camera" not in lines
         # the pty rig's heartbeat (explore/rigs/canopen.py; tests/sim/canopen/test_server.py)
-        config = CanArmConfig(heartbeat_ms=500, pdo_timeout_s=0.05)
+        config = CanArmConfig(heartbeat_ms=500, pdo_timeout_s=0.05, sdo_timeout_s=PTY_SDO_TIMEOUT_S)
         with CanArm(f"slcan:{lines['bus'].split()[-1]}", config=config) as arm:
             for pose in POSES:
                 hands.move(pose)
