@@ -15,7 +15,7 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY"):
@@ -53,7 +53,7 @@ def _own_calibration_dir(tmp_path_factory: pytest.TempPathFactory, monkeypatch) 
 
 
 @pytest.fixture(autouse=True)
-def _ordinary_scheduling() -> None:
+def _ordinary_scheduling() -> Iterator[None]:
     """No test leaves the suite's own process at another scheduling policy: every later test,
     and every process it starts (bus emulators, served rigs, ``ergo`` commands), would inherit
     it. (SVT-AV1 run as root once left it at SCHED_FIFO 99 after the export tests:
