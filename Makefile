@@ -39,12 +39,8 @@ install: $(STAMP)
 run: $(STAMP)
 	$(BIN)/ergo explore --rig sim --strategy rpe --episodes $(EPISODES) --seed 0 --out runs/demo --resume-or-new
 
-# Two workers (pytest-xdist), a test file each at a time: the suite's files share no state, and
-# the reliability tests hold at load 8 on 2 cores (docs/reliability.md). A plain `pytest` runs
-# them in one process (about 13 minutes on 2 cores, 7 on two workers: measured).
-TEST_WORKERS ?= 2
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile
+	$(BIN)/python -m pytest -q
 	@if [ -f $(LEROBOT_STAMP) ]; then $(MAKE) --no-print-directory test-lerobot; else echo \
 	  "LeRobot plugin tests skipped: no $(LEROBOT_VENV); build it with 'make lerobot-venv'"; fi
 
