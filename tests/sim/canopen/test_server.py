@@ -22,8 +22,8 @@ from robot.canopen.scan import scan_cli
 ROOT = Path(__file__).resolve().parents[3]  # the repository (tests/sim/canopen/ is 3 deep)
 START_BOUND_S = 30.0  # a bound against hangs (the server imports MuJoCo), not an expectation
 
-# The pty rig's SDO timeout (robot/canopen/config.py: a served emulator shares the machine; at
-# canopen's 0.3 s a reopen's SDO went unanswered with the suite on two workers)
+# The pty rig's SDO timeout (robot/canopen/config.py PTY_SETTINGS: a served emulator shares the
+# machine, and canopen's 0.3 s was missed at load 6-8)
 PTY_SDO_TIMEOUT_S = PTY_SETTINGS["sdo_timeout_s"]
 
 pytestmark = pytest.mark.slow

@@ -28,8 +28,8 @@ from sim.standin.hands_client import HandsClient
 from testkit.standin_owner import ServedRig
 from testkit.standin_truth import read_hidden
 
-# The pty rig's SDO timeout (robot/canopen/config.py: a served emulator shares the machine; at
-# canopen's 0.3 s a reopen's SDO went unanswered with the suite on two workers)
+# The pty rig's SDO timeout (robot/canopen/config.py PTY_SETTINGS: a served emulator shares the
+# machine, and canopen's 0.3 s was missed at load 6-8)
 PTY_SDO_TIMEOUT_S = PTY_SETTINGS["sdo_timeout_s"]
 
 ROOT = Path(__file__).resolve().parents[3]
