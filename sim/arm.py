@@ -9,6 +9,13 @@ from robot.spec import ArmSpec, ergo_jr_spec
 from robot.watchdog import Watchdog
 from sim.twin import Twin
 
+# The twin does not heat (room temperature, constant) and reports no error flags: one
+# read-only array of each, shared by every reading (shape (6,)).
+_ROOM_C = np.full(6, 25.0)
+_ROOM_C.setflags(write=False)
+_NO_ERRORS = np.zeros(6, dtype=int)
+_NO_ERRORS.setflags(write=False)
+
 
 class SimArm(Arm):
     """The twin's arm. Commands become actuator targets; physics advances only when the rig's
@@ -26,16 +33,8 @@ class SimArm(Arm):
         pass
 
     def _read(self) -> JointState:
-        t = self.twin
-        with t.lock:
-            tau = t.joint_torques()
-            return JointState.from_positions(
-                t.joint_positions(),
-                t.time,
-                velocities=t.joint_velocities(),
-                loads=tau / self._max_torques,
-                temperatures=np.full(6, 25.0),  # the twin does not heat (constant, room temp)
-            )
+        q, qd, tau, now = self.twin.joint_reading()
+        return JointState(q, qd, tau / self._max_torques, _ROOM_C, _NO_ERRORS, now)
 
     def _send(self, positions: np.ndarray) -> None:
         self.twin.set_targets(positions)

@@ -56,6 +56,14 @@ class Pacer(Protocol):
         ...
 
 
+def _as_slice(index: np.ndarray) -> slice | np.ndarray:
+    """``index`` (ascending ints) as a slice where it is a contiguous run, else itself."""
+    first = int(index[0])
+    if np.array_equal(index, np.arange(first, first + len(index))):
+        return slice(first, first + len(index))
+    return index
+
+
 class TwinError(RuntimeError):
     """The twin's model could not be loaded or its state restored."""
 
@@ -91,6 +99,9 @@ class Twin:
         self._qpos_idx = np.array([m.joint(j).qposadr[0] for j in JOINTS])
         self._qvel_idx = np.array([m.joint(j).dofadr[0] for j in JOINTS])
         self._act_idx = np.array([m.actuator(j).id for j in JOINTS])
+        # the same as slices where the six are contiguous (the scene's order): a slice and a
+        # copy cost a third of an index array's gather (``joint_reading``, every control tick)
+        self._reading = tuple(_as_slice(i) for i in (self._qpos_idx, self._qvel_idx, self._act_idx))
         ball = m.joint("ball")
         self._ball_qpos = int(ball.qposadr[0])
         self._ball_qvel = int(ball.dofadr[0])
@@ -285,6 +296,18 @@ class Twin:
     def joint_positions(self) -> np.ndarray:
         """Shape (6,), rad."""
         return self.data.qpos[self._qpos_idx]
+
+    def joint_reading(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """Joint angles (6,) rad, velocities (6,) rad/s, actuator torques (6,) N.m (new
+        arrays) and the simulated time, s, taken together under ``lock``: what an arm reads
+        each control tick, in one call."""
+        qpos, qvel, act = self._reading
+        with self.lock:
+            d = self.data
+            return (
+                d.qpos[qpos].copy(), d.qvel[qvel].copy(), d.actuator_force[act].copy(),
+                float(d.time),
+            )  # fmt: skip
 
     def joint_velocities(self) -> np.ndarray:
         """Shape (6,), rad/s."""

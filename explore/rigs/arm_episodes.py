@@ -91,8 +91,10 @@ class EpisodeRunner:
         if start is None:
             start = arm.read().positions
         n = max(1, round(self.config.reset_s / self.dt))
-        for i in range(1, n + 1):
-            arm.command(start + (rest - start) * (i / n))
+        # every tick's pose at once (the same bits as start + (rest - start) * (i / n))
+        path = start + (rest - start) * (np.arange(1, n + 1)[:, None] / n)
+        for q in path:
+            arm.command(q)
             clock.advance(self.dt)
 
     def observe(self, render: bool = True) -> Observation:
