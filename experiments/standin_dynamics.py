@@ -10,7 +10,8 @@ for ``ergo calibrate joints`` driven by the stand-in's hands, which recovers the
 0.03 deg (docs/standin.md); the dynamics fit itself never reads the hidden file.
 
     python experiments/standin_dynamics.py [--seeds 0 1 2] [--buses dynamixel canopen] [--out FILE]
-        [--keep DIR] [--record-only] [--refit LABEL [--code CHECKOUT]] [--table LABEL ...]
+        [--keep DIR] [--record-only] [--repeats N] [--refit LABEL [--code CHECKOUT]]
+        [--table LABEL ...]
 
 With ``--keep DIR`` each rig's result is also written to ``DIR/result-BUS-SEED.json`` as soon
 as it is measured, and a rig whose result is there is not measured again (run the same command
@@ -99,7 +100,9 @@ def truth_floor(rec_path: Path, hidden_path: Path) -> dict:
     return {"held_out_rms_deg": best[0], "delay_s": best[1]}
 
 
-def one(bus: str, seed: int, work: Path, record_only: bool = False) -> dict:
+def one(
+    bus: str, seed: int, work: Path, record_only: bool = False, repeats: int | None = None
+) -> dict:
     hidden_path = work / f"hidden-{bus}-{seed}.json"
     rig = f"s{seed}-{bus}"
     log = hidden_path.with_suffix(".server.log")
@@ -118,14 +121,18 @@ def one(bus: str, seed: int, work: Path, record_only: bool = False) -> dict:
                 str(work),
                 *served.bus_flags(),
                 *(["--record-only"] if record_only else []),
+                *(["--repeats", str(repeats)] if repeats is not None else []),
             ],
             cwd=ROOT,
             capture_output=True,
             text=True,
-            timeout=1800,
+            timeout=1800 * (repeats or 3),
         )
         wall = time.monotonic() - t0
-    out = {"bus": bus, "seed": seed, "rc": done.returncode, "wall_s": round(wall, 1)}
+    out = {
+        "bus": bus, "seed": seed, "repeats": repeats, "rc": done.returncode,
+        "wall_s": round(wall, 1),
+    }  # fmt: skip
     out["server_lines"] = [
         line.split(": ", 1)[1]
         for line in log.read_text().splitlines()
@@ -208,6 +215,26 @@ def refit(bus: str, seed: int, work: Path, label: str, code: Path | None) -> dic
     out.update(judge(store.load("dynamics", rig, into), work / f"hidden-{bus}-{seed}.json"))
     out["truth_floor"] = truth_floor(recording, work / f"hidden-{bus}-{seed}.json")
     return out
+
+
+def mismatch(results: list[dict]) -> str:
+    """Per bus and field, the RMS of the log errors (fitted / hidden) over the rigs' joints
+    whose value the fit calls identified: ``calibration.dynamics.uncertainty.MISMATCH_SD``'s
+    measurement (a value the recording does not pin is off by more than the model's mismatch,
+    and its interval is already wide)."""
+    lines = ["| bus | parameter | RMS log error | joints |", "|---|---|---|---|"]
+    good = [r for r in results if "params" in r]
+    for bus in sorted({r["bus"] for r in good}):
+        for f in FIELDS:
+            p = [r["params"][f] for r in good if r["bus"] == bus]
+            err = [
+                math.log1p(e)
+                for v in p
+                for e, known in zip(v["rel_err"], v["identified"], strict=True)
+                if known
+            ]
+            lines.append(f"| {bus} | {f} | {math.sqrt(np.mean(np.square(err))):.4f} | {len(err)} |")
+    return "\n".join(lines)
 
 
 def table(results: list[dict], title: str) -> str:
@@ -298,13 +325,13 @@ def record_all(args: argparse.Namespace, tmp: Path) -> list[dict]:
                 results.append(json.loads(kept.read_text()))
                 print(f"== {bus} seed {seed}: measured before ({kept})", flush=True)
                 continue
-            r = one(bus, seed, tmp, args.record_only)
+            r = one(bus, seed, tmp, args.record_only, args.repeats)
             for _ in range(2):  # the link lost on a loaded machine: again, at most twice
                 if "error" not in r or "fit failed" in r["error"]:
                     break
                 print(f"== {bus} seed {seed}: {r['error'][:160]}... once more", flush=True)
                 first = r["error"]
-                r = one(bus, seed, tmp, args.record_only)
+                r = one(bus, seed, tmp, args.record_only, args.repeats)
                 r["first_attempt_error"] = first
             results.append(r)
             if args.keep and "error" not in r:
@@ -357,6 +384,13 @@ def main() -> int:
     p.add_argument(
         "--record-only", action="store_true", help="record and keep, fit later with --refit"
     )
+    p.add_argument(
+        "--repeats", type=int, default=None, help="ergo calibrate dynamics --repeats (excitation)"
+    )
+    p.add_argument(
+        "--mismatch", action="store_true",
+        help="with --table: also the RMS log errors per bus and parameter (MISMATCH_SD)",
+    )  # fmt: skip
     args = p.parse_args()
     if (args.refit is not None or args.table is not None) and args.keep is None:
         p.error("--refit and --table need --keep DIR")
@@ -371,6 +405,9 @@ def main() -> int:
             ]
             print(table(found, label or "the recordings' own fits"))
             print()
+            if args.mismatch:
+                print(mismatch(found))
+                print()
         return 0
     with tempfile.TemporaryDirectory(prefix="standin-dynamics-") as scratch:
         tmp = Path(args.keep or scratch)

@@ -27,6 +27,7 @@ BUS_READS_PER_TICK = 2
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The flags of ``ergo calibrate dynamics`` (besides --rig-id and --dir)."""
+    from calibration.dynamics.excitation import REPEATS
     from robot.bus_flags import add_bus_arguments
 
     add_bus_arguments(p, required=False)
@@ -43,6 +44,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--joints", nargs="+", default=None, metavar="NAME",
         help="excite only these joints (default all); the others keep the nominal servos",
+    )  # fmt: skip
+    p.add_argument(
+        "--repeats", type=int, default=REPEATS, metavar="N",
+        help=f"play each joint's steps and multi-sine N times (default {REPEATS}: 107 s in all; "
+        "each repeat 32 s, docs/dynamics.md)",
     )  # fmt: skip
     p.add_argument("--no-report", action="store_true", help="write no report")
     p.add_argument(
@@ -137,6 +143,8 @@ def run(args: argparse.Namespace) -> int:
     from calibration.dynamics.fit import FitError, fit
     from calibration.dynamics.recording import Recording, RecordingError, record
 
+    if args.repeats < 1:  # before the bus is opened
+        raise store.CalibrationError(f"--repeats must be 1 or more, got {args.repeats}")
     path = store.calibration_path("dynamics", args.rig_id, args.dir)
     kept = f"{path} unchanged" if path.exists() else f"no {path.name} written"
     folder = path.parent
@@ -148,7 +156,9 @@ def run(args: argparse.Namespace) -> int:
         reads = args.reads_per_tick or (
             TWIN_READS_PER_TICK if backend == "twin" else BUS_READS_PER_TICK
         )
-        segments = excitation.plan(arm.spec, _joint_indices(arm.spec, args.joints))
+        segments = excitation.plan(
+            arm.spec, _joint_indices(arm.spec, args.joints), repeats=args.repeats
+        )
         total = sum(len(s.commands) for s in segments) / 40.0
         print(f"recording on {backend}: {len(segments)} segments, {total:.0f} s; Ctrl-C stops")
         import time
@@ -158,7 +168,8 @@ def run(args: argparse.Namespace) -> int:
             with arm:
                 arm.set_torque(True)
                 rec = record(
-                    arm, clock, segments, reads, {"rig_id": args.rig_id, "backend": backend},
+                    arm, clock, segments, reads,
+                    {"rig_id": args.rig_id, "backend": backend, "repeats": args.repeats},
                     notify=lambda m: print(m, flush=True),
                 )  # fmt: skip
         except RecordingError as exc:

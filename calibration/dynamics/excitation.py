@@ -42,6 +42,16 @@ HELD_OUT_TONES_HZ = (0.6, 1.7)
 HELD_OUT_S = 3.0
 HELD_OUT_NAME = "held_out"
 HOLD_S = 0.5  # the base pose held before each segment: the arm starts still
+# How many times a recording plays each joint's steps and multi-sine (``ergo calibrate
+# dynamics --repeats``). Measured on served stand-ins (docs/dynamics.md): with one (42 s in
+# all) the intervals were 31.8 % of their value (median), the jackknife resting on four
+# blocks a joint; with three (107 s) each fit rests on twelve, and what is left of the error
+# is the model's mismatch (``uncertainty.MISMATCH_SD``), which a longer recording does not
+# shrink.
+REPEATS = 3
+# Each further repeat of a joint's steps and multi-sine plays the tones at other phases (rad,
+# per repeat; a guess: far from a multiple of 2 pi for every tone's multiple).
+REPEAT_PHASE = 1.3
 
 
 @dataclass(frozen=True)
@@ -75,16 +85,30 @@ def base_pose(spec: ArmSpec) -> np.ndarray:
     return np.clip(np.asarray(BASE_POSE, float), spec.lower, spec.upper)
 
 
-def joint_segment(spec: ArmSpec, joint: int, rate_hz: float = CONTROL_RATE_HZ) -> Segment:
-    """Steps then a multi-sine on one joint, the others at the base pose."""
+def joint_segment(
+    spec: ArmSpec, joint: int, rate_hz: float = CONTROL_RATE_HZ, repeats: int = 1
+) -> Segment:
+    """Steps then a multi-sine on one joint, the others at the base pose; with ``repeats`` > 1
+    the steps and the multi-sine are played that many times in a row, each repeat's tones at
+    other phases (``REPEAT_PHASE``): a longer segment, more blocks of the intervals' jackknife
+    (``calibration.dynamics.uncertainty``). 5.4 s a repeat, plus 1 s of holds."""
+    if repeats < 1:
+        raise ValueError(f"repeats must be at least 1, got {repeats}")
     base = base_pose(spec)
     dt = 1.0 / rate_hz
     hold = np.zeros(round(HOLD_S * rate_hz))
     levels = (STEP_RAD, 0.0, -STEP_RAD, 0.0)
     steps = np.concatenate([np.full(round(STEP_HOLD_S * rate_hz), v) for v in levels])
     t = np.arange(round(SINE_S * rate_hz)) * dt
-    sine = _multisine(t, SINE_TONES_HZ, SINE_RAD, phase=0.3 * (joint + 1))
-    offset = np.concatenate([hold, steps, sine, hold])
+    played = [
+        part
+        for r in range(repeats)
+        for part in (
+            steps,
+            _multisine(t, SINE_TONES_HZ, SINE_RAD, phase=0.3 * (joint + 1) + REPEAT_PHASE * r),
+        )
+    ]
+    offset = np.concatenate([hold, *played, hold])
     commands = np.tile(base, (len(offset), 1))
     commands[:, joint] = np.clip(base[joint] + offset, spec.lower[joint], spec.upper[joint])
     return Segment(spec.names[joint], commands)
@@ -106,7 +130,8 @@ def held_out_segment(spec: ArmSpec, rate_hz: float = CONTROL_RATE_HZ) -> Segment
     return Segment(HELD_OUT_NAME, commands)
 
 
-def plan(spec: ArmSpec, joints: list[int] | None = None) -> list[Segment]:
-    """The whole recording: one segment per joint (all by default), then the held-out one."""
+def plan(spec: ArmSpec, joints: list[int] | None = None, repeats: int = 1) -> list[Segment]:
+    """The whole recording: one segment per joint (all by default; each with ``repeats`` of
+    its steps and multi-sine), then the held-out one."""
     chosen = list(range(spec.n)) if joints is None else joints
-    return [joint_segment(spec, j) for j in chosen] + [held_out_segment(spec)]
+    return [joint_segment(spec, j, repeats=repeats) for j in chosen] + [held_out_segment(spec)]

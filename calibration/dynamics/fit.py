@@ -522,7 +522,7 @@ def _intervals(
         floor, ceiling = (nominal[f] * r for r in RATIO_BOUNDS[f])
         for j in excited:
             i, k = names.index(f"{j}.{f}"), JOINTS.index(j)
-            half = min(iv.half[i], 700.0)
+            half = uncertainty.with_mismatch(min(iv.half[i], 700.0), rec.meta.get("backend"), f)
             lo[k] = max(values[f][k] * math.exp(-half), floor[k])
             hi[k] = min(values[f][k] * math.exp(half), ceiling[k])
             identified[f][k] = why[f"{j}.{f}"].reason

@@ -19,7 +19,9 @@ from .conftest import TRUTH
 @pytest.fixture(scope="module")
 def calibrated(tmp_path_factory):
     root = tmp_path_factory.mktemp("cal")
-    rc = main(["calibrate", "dynamics", "--rig-id", "tw", "--dir", str(root), "--joints", "m3"])
+    # one repeat (the default's three cost the suite a longer fit; test_fit.py checks them)
+    rc = main(["calibrate", "dynamics", "--rig-id", "tw", "--dir", str(root), "--joints", "m3",
+               "--repeats", "1"])  # fmt: skip
     assert rc == 0
     return root
 
@@ -92,6 +94,14 @@ def test_an_unknown_joint_is_one_line(tmp_path, capsys):
     assert main(["calibrate", "dynamics", "--rig-id", "q", "--dir", str(tmp_path),
                  "--joints", "m9"]) == 2  # fmt: skip
     assert "--joints: unknown joint(s) m9" in capsys.readouterr().err
+
+
+def test_no_repeats_is_one_line(tmp_path, capsys):
+    assert main(["calibrate", "dynamics", "--rig-id", "q", "--dir", str(tmp_path),
+                 "--repeats", "0"]) == 2  # fmt: skip
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["ergo: error: --repeats must be 1 or more, got 0"], err
+    assert not (tmp_path / "q").exists()
 
 
 def test_a_damaged_dynamics_file_is_refused_by_show(tmp_path, capsys):

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from calibration.dynamics import excitation
 from calibration.dynamics.fit import delayed_control, simulate
@@ -19,7 +20,7 @@ def test_the_excitation_stays_small_slow_and_inside_the_limits():
 
     spec = ergo_jr_spec()
     base = excitation.base_pose(spec)
-    for seg in excitation.plan(spec):
+    for seg in [*excitation.plan(spec), *excitation.plan(spec, [1], repeats=3)]:
         c = seg.commands
         assert np.all(c >= spec.lower) and np.all(c <= spec.upper)
         assert np.max(np.abs(c - base)) <= excitation.STEP_RAD + 1e-9
@@ -84,3 +85,22 @@ def test_simulate_with_the_truth_reproduces_the_twin(truth_recording):
     # the twin's scene against the arm alone: the same dynamics where nothing touches (the
     # simulation starts at rest, the twin still settling from its approach: 1.4e-5 rad)
     assert np.max(np.abs(pred - meas)) < 1e-4
+
+
+def test_repeats_lengthen_each_joint_segment_with_new_phases():
+    from robot.spec import ergo_jr_spec
+
+    spec = ergo_jr_spec()
+    one, three = excitation.plan(spec, [2]), excitation.plan(spec, [2], repeats=3)
+    a, b = one[0].commands[:, 2], three[0].commands[:, 2]
+    rate = 40.0
+    repeat = round((4 * excitation.STEP_HOLD_S + excitation.SINE_S) * rate)  # 5.4 s
+    assert len(b) == len(a) + 2 * repeat
+    lead = len(a) - round(excitation.HOLD_S * rate)  # the first repeat as in one: the recording
+    np.testing.assert_array_equal(b[:lead], a[:lead])  # checks read its steps from the start
+    sine = slice(lead - round(excitation.SINE_S * rate), lead)
+    later = b[sine.start + repeat : sine.stop + repeat]
+    assert np.max(np.abs(later - b[sine])) > 0.05  # rad: another phase, not the same motion
+    np.testing.assert_array_equal(three[1].commands, one[1].commands)  # the held-out one
+    with pytest.raises(ValueError, match="repeats"):
+        excitation.plan(spec, [2], repeats=0)

@@ -97,7 +97,7 @@ def test_the_fit_over_a_served_standin_finds_its_hidden_servo(tmp_path):
             }, tmp_path)  # fmt: skip
             done = subprocess.run(
                 [*ERGO, "calibrate", "dynamics", "--rig-id", "s", "--dir", str(tmp_path),
-                 "--port", port, "--joints", "m3", "--no-report"],
+                 "--port", port, "--joints", "m3", "--repeats", "1", "--no-report"],
                 cwd=ROOT, env=env, capture_output=True, text=True, timeout=900,
             )  # fmt: skip
         finally:

@@ -132,3 +132,21 @@ def test_a_parameter_the_data_leave_free_is_said_to_be_unidentified():
     assert "does not pin it" in why["m1.armature"].reason
     assert "wider than the fit's bounds" in why["m1.armature"].reason
     assert "delay" not in why
+
+
+def test_the_models_mismatch_widens_a_bus_interval_never_the_twins():
+    z = stats.norm.ppf(0.975)
+    for field in ("kp", "damping", "armature", "frictionloss"):
+        assert uncertainty.with_mismatch(0.05, "twin", field) == 0.05  # the twin is the model
+        sds = {bus: uncertainty.MISMATCH_SD[bus][field] for bus in ("dynamixel", "canopen")}
+        for bus, sd in sds.items():
+            assert sd > 0.0
+            # in quadrature: a narrow jackknife interval becomes the mismatch's, a wide one
+            # stays about as it was
+            assert uncertainty.with_mismatch(0.0, bus, field) == pytest.approx(z * sd)
+            wide = uncertainty.with_mismatch(1.0, bus, field)
+            assert 1.0 < wide < 1.0 + (z * sd) ** 2
+        # a bus not measured: the larger of the two
+        assert uncertainty.with_mismatch(0.0, "other", field) == pytest.approx(
+            z * max(sds.values())
+        )
