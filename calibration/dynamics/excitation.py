@@ -86,7 +86,7 @@ def base_pose(spec: ArmSpec) -> np.ndarray:
 
 
 def joint_segment(
-    spec: ArmSpec, joint: int, rate_hz: float = CONTROL_RATE_HZ, repeats: int = 1
+    spec: ArmSpec, joint: int, rate_hz: float = CONTROL_RATE_HZ, repeats: int = REPEATS
 ) -> Segment:
     """Steps then a multi-sine on one joint, the others at the base pose; with ``repeats`` > 1
     the steps and the multi-sine are played that many times in a row, each repeat's tones at
@@ -130,7 +130,7 @@ def held_out_segment(spec: ArmSpec, rate_hz: float = CONTROL_RATE_HZ) -> Segment
     return Segment(HELD_OUT_NAME, commands)
 
 
-def plan(spec: ArmSpec, joints: list[int] | None = None, repeats: int = 1) -> list[Segment]:
+def plan(spec: ArmSpec, joints: list[int] | None = None, repeats: int = REPEATS) -> list[Segment]:
     """The whole recording: one segment per joint (all by default; each with ``repeats`` of
     its steps and multi-sine), then the held-out one."""
     chosen = list(range(spec.n)) if joints is None else joints

@@ -53,7 +53,7 @@ def record_on(
         if clock_hook:
             clock = clock_hook(clock)
         return record(
-            arm, clock, excitation.plan(arm.spec, joints), reads_per_tick=5,
+            arm, clock, excitation.plan(arm.spec, joints, repeats=1), reads_per_tick=5,
             meta={"rig_id": "t", "backend": "twin"},
         )  # fmt: skip
 

@@ -20,7 +20,7 @@ def test_the_excitation_stays_small_slow_and_inside_the_limits():
 
     spec = ergo_jr_spec()
     base = excitation.base_pose(spec)
-    for seg in [*excitation.plan(spec), *excitation.plan(spec, [1], repeats=3)]:
+    for seg in [*excitation.plan(spec, repeats=1), *excitation.plan(spec, [1])]:
         c = seg.commands
         assert np.all(c >= spec.lower) and np.all(c <= spec.upper)
         assert np.max(np.abs(c - base)) <= excitation.STEP_RAD + 1e-9
@@ -91,7 +91,7 @@ def test_repeats_lengthen_each_joint_segment_with_new_phases():
     from robot.spec import ergo_jr_spec
 
     spec = ergo_jr_spec()
-    one, three = excitation.plan(spec, [2]), excitation.plan(spec, [2], repeats=3)
+    one, three = excitation.plan(spec, [2], repeats=1), excitation.plan(spec, [2], repeats=3)
     a, b = one[0].commands[:, 2], three[0].commands[:, 2]
     rate = 40.0
     repeat = round((4 * excitation.STEP_HOLD_S + excitation.SINE_S) * rate)  # 5.4 s
