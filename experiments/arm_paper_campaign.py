@@ -46,6 +46,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # testkit/, not installed
 
+from calibration.dynamics.excitation import REPEATS
 from explore.runs.metrics import read_metrics
 from explore.runs.store import RunStore, read_history
 from testkit.standin_owner import Owner, ServedRig
@@ -86,7 +87,8 @@ def warm_prior(owner: Owner, rig_id: str, work: Path, args: argparse.Namespace) 
     """The fitted twin's rge-sae run with the twin-trained model (fitting the servos first)."""
     if not (owner.calibration_dir / rig_id / "dynamics.json").is_file():
         owner.run("calibrate", "dynamics", "--rig-id", rig_id, *owner.rig.bus_flags(),
-                  "--no-report", timeout=DYNAMICS_BOUND_S)  # fmt: skip
+                  "--no-report", "--repeats", str(args.dynamics_repeats),
+                  timeout=DYNAMICS_BOUND_S)  # fmt: skip
     twin = work / "twin-warm"
     if stored(twin) < args.twin_episodes:
         owner.run("explore", "--rig", "sim", "--rig-id", rig_id, "--strategy", "rge-sae",
@@ -194,6 +196,10 @@ def main() -> None:
     p.add_argument("--online-bootstrap", type=int, default=300, help="rge-online's switch")
     p.add_argument("--twin-episodes", type=int, default=1000, help="the warm arm's twin run")
     p.add_argument("--twin-seed", type=int, default=0)
+    p.add_argument(
+        "--dynamics-repeats", type=int, default=REPEATS,
+        help=f"ergo calibrate dynamics --repeats (default {REPEATS}; the results pages: 1)",
+    )  # fmt: skip
     p.add_argument("--resumes", type=int, default=5, help="safety stops resumed, as the guide says")
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--figure", type=Path, default=None)

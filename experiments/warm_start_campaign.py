@@ -40,6 +40,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # testkit/, not installed
 
+from calibration.dynamics.excitation import REPEATS
 from explore.runs.layout import METRICS_FILE
 from explore.runs.store import RunStore, read_history
 from testkit.standin_owner import Owner, ServedRig
@@ -145,7 +146,8 @@ def one_rig(bus: str, seed: int, args: argparse.Namespace, work: Path) -> dict[s
         if "fitted" in args.arms and not (cal / rig_id / "dynamics.json").is_file():
             t = time.monotonic()
             owner.run("calibrate", "dynamics", "--rig-id", rig_id, *rig.bus_flags(),
-                      "--no-report", timeout=DYNAMICS_BOUND_S)  # fmt: skip
+                      "--no-report", "--repeats", str(args.dynamics_repeats),
+                      timeout=DYNAMICS_BOUND_S)  # fmt: skip
             row["dynamics s"] = round(time.monotonic() - t, 1)
         for arm in args.arms:
             extra = ["--resume-or-new", "--no-progress"]
@@ -193,6 +195,10 @@ def main() -> None:
     p.add_argument("--strategy", default=TWIN_STRATEGY)
     p.add_argument("--twin-episodes", type=int, default=TWIN_EPISODES)
     p.add_argument("--twin-seed", type=int, default=0)
+    p.add_argument(
+        "--dynamics-repeats", type=int, default=REPEATS,
+        help=f"ergo calibrate dynamics --repeats (default {REPEATS}; docs/warm_start.md: 1)",
+    )  # fmt: skip
     p.add_argument("--resumes", type=int, default=3, help="safety stops resumed, as the guide says")
     p.add_argument("--out", type=Path, required=True)
     args = p.parse_args()
