@@ -93,7 +93,7 @@ fit with mujoco.sysid in {result.fit_s:.1f} s. Held-out RMS error: nominal twin
 {math.degrees(result.held_out_rms_fitted):.3f} deg ({ratio:.1f}x lower); training RMS
 {math.degrees(result.train_rms_fitted):.3f} deg.</p>
 <img src="{png}" alt="held-out trajectories" width="100%">
-<h2>Parameters (95 % intervals: a block jackknife, docs/dynamics.md)</h2>
+<h2>Parameters (95 % intervals: a block jackknife and the model's mismatch, docs/dynamics.md)</h2>
 <p>"identified: no": the recording does not pin that parameter (its interval is wide); its
 fitted value reproduces the arm as well as others would, and is no measurement of the servo.</p>
 <table><tr><th>joint</th><th>parameter</th><th>nominal</th><th>fitted</th><th>95 % interval</th>
