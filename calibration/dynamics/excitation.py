@@ -43,11 +43,11 @@ HELD_OUT_S = 3.0
 HELD_OUT_NAME = "held_out"
 HOLD_S = 0.5  # the base pose held before each segment: the arm starts still
 # How many times a recording plays each joint's steps and multi-sine (``ergo calibrate
-# dynamics --repeats``). Measured on served stand-ins (docs/dynamics.md): with one (42 s in
-# all) the intervals were 31.8 % of their value (median), the jackknife resting on four
-# blocks a joint; with three (107 s) each fit rests on twelve, and what is left of the error
-# is the model's mismatch (``uncertainty.MISMATCH_SD``), which a longer recording does not
-# shrink.
+# dynamics --repeats``). Measured on stand-ins 213-215 over both buses
+# (docs/results_dynamics.md): with three (107 s in all; eleven jackknife blocks a joint
+# against four) 137 of 144 values identified against 102 with one (42 s), the intervals
+# (with the model's mismatch, ``uncertainty.MISMATCH_SD``) a median 25.6 % of their value
+# against 51.9 %; the mismatch is what is left, and a longer recording does not shrink it.
 REPEATS = 3
 # Each further repeat of a joint's steps and multi-sine plays the tones at other phases (rad,
 # per repeat; a guess: far from a multiple of 2 pi for every tone's multiple).

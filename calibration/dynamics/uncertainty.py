@@ -6,7 +6,7 @@ optimum and the residuals' variance, as if every reading were an independent dra
 residuals are correlated over hundreds of milliseconds (an XL-320's rounding is the same
 while a joint is held; a late reading and a late command move several readings together) and
 carry what the model does not (the bus's timing). On the stand-ins those intervals excluded
-the hidden value on most joints (docs/dynamics.md, "Measured").
+the hidden value on most joints (docs/results_dynamics.md).
 
 The method, a delete-a-block jackknife (Kuensch, Ann. Stat. 17, 1217 (1989)), linearised at the
 optimum:
