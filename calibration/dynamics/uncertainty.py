@@ -34,7 +34,8 @@ optimum:
    ``with_mismatch``);
 7. the interval on the log-ratio, turned back into values (not symmetric).
 
-A parameter is *not identified* (``Identification``) when its interval spans more than
+A parameter is *not identified* (``Identification``) when its jackknife interval (what the
+recording says, before item 6) spans more than
 ``MAX_SPAN`` (a factor of 2.0 between its ends: the recording leaves it free); the reason
 names the parameter it trades against when their correlation passes ``MAX_CORRELATION``
 (only their combination is fitted). The fitted value still serves the twin (it reproduces
