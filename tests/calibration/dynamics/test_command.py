@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import copy
 import json
+import math
 
 import numpy as np
 import pytest
@@ -157,3 +158,25 @@ def test_the_gymnasium_env_takes_the_rig_id(tmp_path, monkeypatch):
         assert env.unwrapped.rig.sensor.twin.servos == TRUTH
     finally:
         env.close()
+
+
+def test_a_bus_recording_gets_the_models_mismatch_in_its_intervals(calibrated, tmp_path):
+    from calibration.dynamics.uncertainty import MISMATCH_SD
+
+    twin = store.load("dynamics", "tw", calibrated)
+    bus = _rec_with(calibrated, tmp_path, lambda r: r.meta.update(backend="dynamixel"))
+    assert main(["calibrate", "dynamics", "--rig-id", "bus", "--dir", str(tmp_path),
+                 "--recording", str(bus), "--no-report"]) == 0  # fmt: skip
+    fitted = store.load("dynamics", "bus", tmp_path)
+    for field in ("kp", "damping"):
+        value = fitted["servos"][field][2]
+        _, hi = np.asarray(fitted["intervals_95"][field])[2]
+        # the same readings: about the same fit (a bus's readings are weighted for its
+        # timing); the interval at least the mismatch's on that bus
+        assert value == pytest.approx(twin["servos"][field][2], rel=1e-3)
+        half = math.log(hi / value)
+        assert half >= 1.959 * MISMATCH_SD["dynamixel"][field], (field, half)
+        _, t_hi = np.asarray(twin["intervals_95"][field])[2]
+        assert (
+            math.log(t_hi / twin["servos"][field][2]) < half
+        )  # the twin's own, without a mismatch, narrower
