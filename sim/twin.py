@@ -64,6 +64,11 @@ def _as_slice(index: np.ndarray) -> slice | np.ndarray:
     return index
 
 
+def _take(values: np.ndarray, where: slice | np.ndarray) -> np.ndarray:
+    """``values[where]`` as a new array (a slice's view copied; an index array gathers)."""
+    return values[where].copy() if isinstance(where, slice) else values[where]
+
+
 class TwinError(RuntimeError):
     """The twin's model could not be loaded or its state restored."""
 
@@ -100,7 +105,7 @@ class Twin:
         self._qvel_idx = np.array([m.joint(j).dofadr[0] for j in JOINTS])
         self._act_idx = np.array([m.actuator(j).id for j in JOINTS])
         # the same as slices where the six are contiguous (the scene's order): a slice and a
-        # copy cost a third of an index array's gather (``joint_reading``, every control tick)
+        # copy cost a third of an index array's gather (the joint queries, every control tick)
         self._reading = tuple(_as_slice(i) for i in (self._qpos_idx, self._qvel_idx, self._act_idx))
         ball = m.joint("ball")
         self._ball_qpos = int(ball.qposadr[0])
@@ -295,27 +300,25 @@ class Twin:
     # ---- queries (index arrays: every one returns a new array) ------------------------------
     def joint_positions(self) -> np.ndarray:
         """Shape (6,), rad."""
-        return self.data.qpos[self._qpos_idx]
+        return _take(self.data.qpos, self._reading[0])
 
     def joint_reading(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
         """Joint angles (6,) rad, velocities (6,) rad/s, actuator torques (6,) N.m (new
         arrays) and the simulated time, s, taken together under ``lock``: what an arm reads
         each control tick, in one call."""
-        qpos, qvel, act = self._reading
         with self.lock:
-            d = self.data
             return (
-                d.qpos[qpos].copy(), d.qvel[qvel].copy(), d.actuator_force[act].copy(),
-                float(d.time),
+                self.joint_positions(), self.joint_velocities(), self.joint_torques(),
+                float(self.data.time),
             )  # fmt: skip
 
     def joint_velocities(self) -> np.ndarray:
         """Shape (6,), rad/s."""
-        return self.data.qvel[self._qvel_idx]
+        return _take(self.data.qvel, self._reading[1])
 
     def joint_torques(self) -> np.ndarray:
         """Actuator torques, shape (6,), N.m."""
-        return self.data.actuator_force[self._act_idx]
+        return _take(self.data.actuator_force, self._reading[2])
 
     def max_torques(self) -> np.ndarray:
         """Actuator force limits, shape (6,), N.m."""
