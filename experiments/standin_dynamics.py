@@ -46,6 +46,7 @@ sys.path.insert(0, str(ROOT))
 
 
 from calibration import store  # noqa: E402
+from calibration.dynamics.excitation import REPEATS  # noqa: E402
 from calibration.dynamics.recording import Recording  # noqa: E402
 from robot.spec import ERGO_JR_JOINTS, ergo_jr_spec  # noqa: E402
 from testkit.standin_owner import ServedRig  # noqa: E402
@@ -126,7 +127,7 @@ def one(
             cwd=ROOT,
             capture_output=True,
             text=True,
-            timeout=1800 * (repeats or 3),
+            timeout=1800 * (repeats or REPEATS),
         )
         wall = time.monotonic() - t0
     out = {

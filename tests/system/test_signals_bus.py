@@ -61,9 +61,8 @@ CHILD = textwrap.dedent(
         from robot.dynamixel.arm import DynamixelArm
         arm = DynamixelArm(port, latency_s=0.02)
     else:
-        from robot.canopen.arm import CanArm, CanArmConfig
-        arm = CanArm(f"slcan:{port}", config=CanArmConfig(
-            heartbeat_ms=500, pdo_timeout_s=0.05, sdo_timeout_s=2.0))
+        from robot.canopen.arm import CanArm, config_for
+        arm = CanArm(f"slcan:{port}", config=config_for(f"slcan:{port}", pdo_timeout_s=0.05))
     work = np.random.default_rng(0).standard_normal((600, 600))
     with arm:
         while True:

@@ -15,16 +15,11 @@ import numpy as np
 import pytest
 
 from explore.rigs.clock import RealClock
-from robot.canopen.arm import CanArm, CanArmConfig
-from robot.canopen.config import PTY_SETTINGS
+from robot.canopen.arm import CanArm, config_for
 from robot.canopen.scan import scan_cli
 
 ROOT = Path(__file__).resolve().parents[3]  # the repository (tests/sim/canopen/ is 3 deep)
 START_BOUND_S = 30.0  # a bound against hangs (the server imports MuJoCo), not an expectation
-
-# The pty rig's SDO timeout (robot/canopen/config.py PTY_SETTINGS: a served emulator shares the
-# machine, and canopen's 0.3 s was missed at load 6-8)
-PTY_SDO_TIMEOUT_S = PTY_SETTINGS["sdo_timeout_s"]
 
 pytestmark = pytest.mark.slow
 
@@ -53,9 +48,10 @@ def server() -> Iterator[str]:
 
 
 def test_arm_over_slcan_follows_and_turns_torque_off(server: str) -> None:
-    # the pty rig's heartbeat (explore/rigs/canopen.py): at 200 ms a loaded CI machine
-    # stalled the server's heartbeats past 0.3 s twice in a full suite on 2026-11-23
-    cfg = CanArmConfig(heartbeat_ms=500, pdo_timeout_s=0.05, sdo_timeout_s=PTY_SDO_TIMEOUT_S)
+    # the pty rig's settings (robot/canopen/config.py PTY_SETTINGS: its heartbeat, as at 200 ms
+    # a loaded CI machine stalled the server's heartbeats past 0.3 s; its SDO timeout, as
+    # canopen's 0.3 s was missed at load 6-8), as ergo explore takes them on a pty
+    cfg = config_for(f"slcan:{server}", pdo_timeout_s=0.05)
     target = np.array([0.3, 0.2, -0.3, 0.3, 0.2, -0.2])
     clock = RealClock()
     with CanArm(f"slcan:{server}", config=cfg) as arm:

@@ -19,7 +19,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from robot.canopen.config import PTY_SETTINGS
 from robot.errors import SafetyStop
 from robot.spec import ERGO_JR_JOINTS
 from sim.standin.board import BoardGeometry
@@ -27,10 +26,6 @@ from sim.standin.hands import HandsError, board_to_world
 from sim.standin.hands_client import HandsClient
 from testkit.standin_owner import ServedRig
 from testkit.standin_truth import read_hidden
-
-# The pty rig's SDO timeout (robot/canopen/config.py PTY_SETTINGS: a served emulator shares the
-# machine, and canopen's 0.3 s was missed at load 6-8)
-PTY_SDO_TIMEOUT_S = PTY_SETTINGS["sdo_timeout_s"]
 
 ROOT = Path(__file__).resolve().parents[3]
 ERGO_SERVE = [sys.executable, "-m", "explore.cli", "twin", "serve"]
@@ -137,7 +132,7 @@ def test_dynamixel_raw_positions_follow_the_hidden_mounting(tmp_path):
 
 
 def test_canopen_raw_positions_follow_the_hidden_mounting(tmp_path):
-    from robot.canopen.arm import CanArm, CanArmConfig
+    from robot.canopen.arm import CanArm, config_for
 
     flags = ["--no-camera", "--overload-servo", "2", "--overload-after", "1.0"]
     with (
@@ -146,9 +141,9 @@ def test_canopen_raw_positions_follow_the_hidden_mounting(tmp_path):
     ):
         hidden = hidden_of(lines)
         assert "camera" not in lines
-        # the pty rig's heartbeat (explore/rigs/canopen.py; tests/sim/canopen/test_server.py)
-        config = CanArmConfig(heartbeat_ms=500, pdo_timeout_s=0.05, sdo_timeout_s=PTY_SDO_TIMEOUT_S)
-        with CanArm(f"slcan:{lines['bus'].split()[-1]}", config=config) as arm:
+        # the pty rig's settings, as ergo explore takes them (tests/sim/canopen/test_server.py)
+        address = f"slcan:{lines['bus'].split()[-1]}"
+        with CanArm(address, config=config_for(address, pdo_timeout_s=0.05)) as arm:
             for pose in POSES:
                 hands.move(pose)
                 arm.read()  # a fresh SYNC's positions
