@@ -13,7 +13,9 @@ arm also ``ergo calibrate dynamics``), then the arms asked by ``--arms``:
 - ``online``: ``rge-online`` switching at ``--online-bootstrap`` (300; the paper's 2000 on its
   longer runs);
 - ``warm``: ``rge-sae`` with the twin-trained model, warmed by a run of it on the twin fitted to
-  this arm (``--rig sim --rig-id sSEED``, ``--twin-episodes``; docs/warm_start.md).
+  this arm (``--rig sim --rig-id sSEED``, ``--twin-episodes``; docs/warm_start.md);
+- ``warm-efr``: ``rge-efr`` warmed by an ``rge-efr`` run on the fitted twin (the recipe of
+  docs/warm_start.md), against the ``rge-efr`` arm from scratch.
 
 Resumable: everything is kept under ``--out``; calibrations that exist are kept, a finished run
 is not run again, an unfinished one is resumed (``--resume-or-new``), a safety stop is resumed
@@ -51,9 +53,9 @@ from explore.runs.metrics import read_metrics
 from explore.runs.store import RunStore, read_history
 from testkit.standin_owner import Owner, ServedRig
 
-ARMS = ("rpe", "rge-efr", "sae-twin", "sae-arm", "online", "warm")
+ARMS = ("rpe", "rge-efr", "sae-twin", "sae-arm", "online", "warm", "warm-efr")
 STRATEGY = {"rpe": "rpe", "rge-efr": "rge-efr", "sae-twin": "rge-sae", "sae-arm": "rge-sae",
-            "online": "rge-online", "warm": "rge-sae"}  # fmt: skip
+            "online": "rge-online", "warm": "rge-sae", "warm-efr": "rge-efr"}  # fmt: skip
 AT = (100, 300, 600)  # the checkpoints of the table (issue's)
 DYNAMICS_BOUND_S = 3600.0  # as experiments/rehearse_real_arm.py
 TRAIN_BOUND_S = 7200.0  # the arm's autoencoder, several seeds on 2 shared cores (a bound)
@@ -83,18 +85,19 @@ def arm_model(owner: Owner, rpe: Path, work: Path, args: argparse.Namespace) -> 
     return model
 
 
-def warm_prior(owner: Owner, rig_id: str, work: Path, args: argparse.Namespace) -> Path:
-    """The fitted twin's rge-sae run with the twin-trained model (fitting the servos first)."""
+def warm_prior(owner: Owner, rig_id: str, work: Path, args: argparse.Namespace, arm: str) -> Path:
+    """The fitted twin's run of ``arm``'s strategy (``warm``: rge-sae with the twin-trained
+    model; ``warm-efr``: rge-efr), fitting the servos first."""
     if not (owner.calibration_dir / rig_id / "dynamics.json").is_file():
         owner.run("calibrate", "dynamics", "--rig-id", rig_id, *owner.rig.bus_flags(),
                   "--no-report", "--repeats", str(args.dynamics_repeats),
                   timeout=DYNAMICS_BOUND_S)  # fmt: skip
-    twin = work / "twin-warm"
+    twin = work / ("twin-warm" if arm == "warm" else f"twin-{arm}")
+    model = ["--strategy-option", f"sae={args.twin_sae}"] if arm == "warm" else []
     if stored(twin) < args.twin_episodes:
-        owner.run("explore", "--rig", "sim", "--rig-id", rig_id, "--strategy", "rge-sae",
-                  "--strategy-option", f"sae={args.twin_sae}", "--episodes",
-                  str(args.twin_episodes), "--seed", str(args.twin_seed), "--out", str(twin),
-                  "--resume-or-new", "--no-progress")  # fmt: skip
+        owner.run("explore", "--rig", "sim", "--rig-id", rig_id, "--strategy", STRATEGY[arm],
+                  *model, "--episodes", str(args.twin_episodes), "--seed", str(args.twin_seed),
+                  "--out", str(twin), "--resume-or-new", "--no-progress")  # fmt: skip
     return twin
 
 
@@ -123,8 +126,8 @@ def one_rig(bus: str, seed: int, args: argparse.Namespace) -> dict[str, object]:
                 extra += ["--strategy-option", f"sae={model}"]
             if arm == "online":
                 extra += ["--strategy-option", f"bootstrap={args.online_bootstrap}"]
-            if arm == "warm":
-                extra += ["--warm-start", str(warm_prior(owner, rig_id, work, args))]
+            if arm in ("warm", "warm-efr"):
+                extra += ["--warm-start", str(warm_prior(owner, rig_id, work, args, arm))]
             t = time.monotonic()
             if stored(run) < args.episodes:
                 owner.explore(run, args.episodes, args.explore_seed, STRATEGY[arm], extra,
