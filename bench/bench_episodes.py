@@ -17,6 +17,12 @@ Targets: >= 40 rge-efr episodes/s on an idle core, episode cost <= 1.15x the bou
     .venv/bin/python bench/bench_episodes.py [--episodes 300] [--block 20] [--mujoco-defaults]
         [--vae MODEL]   # rge-vae's model (default: an untrained VAE of the paper's
                         # architecture: encoding costs the same)
+        [--phases]      # also where an episode's time goes beyond its physics, per phase
+
+``--phases``: one more run of each strategy (no bound), each phase of ``Explorer.step`` timed
+around its call (the phases of ``EpisodeRunner`` and the store, strategy, metrics and
+fingerprint calls), the physics steps inside a phase subtracted (MuJoCo's ``mj_step`` timed on
+its own): milliseconds an episode, wall. The timers cost about 1 us a call.
 
 rge-vae's first ``bootstrap`` (100) episodes are random, as in a run; the figure covers both.
 """
@@ -182,6 +188,90 @@ def measure(strategy: str, quality: str, episodes: int, block: int, vae: Path) -
     return out
 
 
+class PhaseTimer:
+    """Wall time of named calls, less the physics steps made inside them (``mj_step``, timed
+    apart through a proxy of ``sim.twin``'s ``mujoco``)."""
+
+    def __init__(self) -> None:
+        self.seconds: dict[str, float] = {}
+        self._open: list[list[float]] = []  # per open call: the physics inside it, s
+
+    def physics(self) -> object:
+        """A stand-in for the ``mujoco`` module whose ``mj_step`` is timed as "physics"."""
+        timer, step = self, mujoco.mj_step
+
+        class Mujoco:
+            def __getattr__(self, name: str) -> object:
+                return getattr(mujoco, name)
+
+            @staticmethod
+            def mj_step(model: object, data: object, nstep: int = 1) -> None:
+                t = time.perf_counter()
+                step(model, data, nstep=nstep)
+                dt = time.perf_counter() - t
+                timer.seconds["physics (mj_step)"] = timer.seconds.get("physics (mj_step)", 0) + dt
+                for inside in timer._open:
+                    inside[0] += dt
+
+        return Mujoco()
+
+    def wrap(self, obj: object, method: str) -> None:
+        """Time ``obj.method`` as "Class.method" (nested calls count in both)."""
+        call, label = getattr(obj, method), f"{type(obj).__name__}.{method}"
+
+        def timed(*args: object, **kwargs: object) -> object:
+            inside = [0.0]
+            self._open.append(inside)
+            t = time.perf_counter()
+            try:
+                return call(*args, **kwargs)
+            finally:
+                self._open.remove(inside)
+                spent = time.perf_counter() - t - inside[0]
+                self.seconds[label] = self.seconds.get(label, 0.0) + spent
+
+        setattr(obj, method, timed)
+
+
+def phases(strategy: str, episodes: int, vae: Path) -> tuple[dict[str, float], float]:
+    """Milliseconds an episode per phase (physics apart) and in all, over ``episodes``
+    episodes after 20 unmeasured ones."""
+    import sim.twin
+
+    timer = PhaseTimer()
+    options = {"vae": str(vae)} if strategy == "rge-vae" else {}
+    config = RunConfig(strategy=StrategyConfig(strategy, options), episodes=episodes + 20)
+    rig = make_rig(config.rig)
+    real_mujoco = sim.twin.mujoco
+    sim.twin.mujoco = timer.physics()  # type: ignore[assignment]
+    try:
+        with tempfile.TemporaryDirectory() as tmp, rig:
+            run = open_run(Path(tmp) / "run", config, mode="new", rig=rig)
+            explorer = run.explorer()
+            runner = explorer.runner
+            for obj, names in [
+                (runner, ("go_rest", "play", "settle", "observe")),
+                (explorer.store, ("append",)),
+                (explorer.strategy, ("propose", "update")),
+                (explorer.metrics, ("update", "append_last")),
+                (explorer.fingerprint, ("add",)),
+            ]:
+                for name in names:
+                    timer.wrap(obj, name)
+            for k in range(20):
+                explorer.step(k)
+            timer.seconds.clear()
+            t = time.perf_counter()
+            for k in range(20, episodes + 20):
+                explorer.step(k)
+            total = time.perf_counter() - t
+            run.close()
+    finally:
+        sim.twin.mujoco = real_mujoco
+    per = {k: 1e3 * v / episodes for k, v in timer.seconds.items()}
+    return per, 1e3 * total / episodes
+
+
 def spread(ratios: np.ndarray) -> str:
     """``median [low, q1-q3, high]`` of the rounds' ratios."""
     q1, med, q3 = np.percentile(ratios, [25, 50, 75])
@@ -197,6 +287,7 @@ def main() -> None:
     )
     ap.add_argument("--strategies", default=",".join(STRATEGIES))
     ap.add_argument("--vae", type=Path, default=None, help="rge-vae's model (default: untrained)")
+    ap.add_argument("--phases", action="store_true", help="also each phase's time an episode")
     args = ap.parse_args()
 
     qualities = QUALITIES if args.mujoco_defaults else QUALITIES[:1]
@@ -217,6 +308,16 @@ def main() -> None:
                     f"{spread(r.ratios(True)):>32s} {sum(r.steps) / sum(r.episodes):6.0f}",
                     flush=True,
                 )
+        if args.phases:
+            for strategy in args.strategies.split(","):
+                per, total = phases(strategy, args.episodes, vae)
+                listed = sum(per.values())
+                print(
+                    f"{strategy}: {total:.2f} ms an episode, wall; each phase beyond its physics:"
+                )
+                for name, ms in sorted(per.items(), key=lambda kv: -kv[1]):
+                    print(f"  {name:28s} {ms:6.3f} ms")
+                print(f"  {'the rest of Explorer.step':28s} {total - listed:6.3f} ms")
     if args.mujoco_defaults:
         for strategy in args.strategies.split(","):
             gain = rates[strategy, "chosen"] / rates[strategy, "mujoco"]
