@@ -14,6 +14,12 @@ The rule (docs/warm_start.md says why):
    joins the arm's database).
 3. **Where the arm has been, its own outcomes rule.** A prior entry within ``REACH_FRACTION``
    of the diagonal of the prior's points (per module) of an outcome the arm produced is retired.
+5. **A prior entry answers only from a scene like its own.** Only entries whose context lies
+   within ``prior_context`` (the strategy's option: a fraction of the diagonal of the prior's
+   contexts) of the query's context take part in rule 1: a twin episode's parameters push a
+   ball where the twin's ball was, and played with the arm's ball elsewhere they mostly miss it
+   (docs/warm_start.md, "Where the prior costs"). 0, or a prior whose contexts are all the
+   same: any context.
 4. **Goals are drawn over the prior's reach too**: the strategy's outcome bounds start at the
    prior's (they only grow with the arm's own), and **the prior's episodes count towards the
    bootstrap** (random episodes before goal exploration): a prior of at least ``bootstrap``
@@ -70,26 +76,35 @@ class PriorAnswer:
 class _ModulePrior:
     """One module's prior entries: points (n, context_dim + d) in the policy's (weighted)
     coordinates, their parameters (n, n_params), which prior record each came from (n,), and
-    which are still in play (n,)."""
+    which are still in play (n,); ``context_dim`` and ``context_fraction`` (rule 5: 0, none)."""
 
     points: np.ndarray
     thetas: np.ndarray
     source: np.ndarray
+    context_dim: int = 0
+    context_fraction: float = 0.0
     alive: np.ndarray = field(init=False)
     radius: float = field(init=False)
+    context_radius: float = field(init=False)
 
     def __post_init__(self) -> None:
         self.alive = np.ones(len(self.points), dtype=bool)
+        self.radius = self.context_radius = 0.0
         if len(self.points):
             span = self.points.max(axis=0) - self.points.min(axis=0)
             self.radius = REACH_FRACTION * norm(span)
-        else:
-            self.radius = 0.0
+            self.context_radius = self.context_fraction * norm(span[: self.context_dim])
 
     def nearest_sq(self, q: np.ndarray) -> tuple[int, float]:
-        """The nearest entry in play to ``q`` (lowest index of ties) and its squared distance
-        (fixed order, as the arm's index measures it); (-1, inf) when none is."""
+        """The nearest entry in play to ``q`` among those whose context is within
+        ``context_radius`` of ``q``'s (rule 5; all when it is 0), lowest index of ties, and its
+        squared distance (fixed order, as the arm's index measures it); (-1, inf) when none
+        is."""
         live = np.flatnonzero(self.alive)
+        if len(live) and self.context_radius > 0:
+            c = self.context_dim
+            near = np.sqrt(sq_distances(self.points[live, :c], q[:c])) <= self.context_radius
+            live = live[near]
         if not len(live):
             return -1, np.inf
         sq = sq_distances(self.points[live], q)
@@ -269,7 +284,15 @@ def warm_start(
         index = twin.policy.indexes[k]
         assert len(index) == len(sources[k])
         thetas = np.array(twin.policy.thetas[k]).reshape(len(index), strategy.n_params)
-        modules.append(_ModulePrior(index.points.copy(), thetas, np.array(sources[k], dtype=int)))
+        modules.append(
+            _ModulePrior(
+                index.points.copy(),
+                thetas,
+                np.array(sources[k], dtype=int),
+                context_dim=twin.policy.context_dim,
+                context_fraction=float(getattr(settings, "prior_context", 0.0)),
+            )
+        )
     prior = Prior(strategy, records, modules, len(records))
     for k in range(dims):  # rule 4: the goals' bounds start at the prior's reach
         strategy.low[k] = np.minimum(strategy.low[k], twin.low[k])  # type: ignore[attr-defined]

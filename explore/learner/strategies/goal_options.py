@@ -45,6 +45,14 @@ STILL_FRACTION = 0.01
 # rge-sae runs (8 of 16 without), 11-24% of the episodes after the bootstrap played random
 # parameters (9-11% without).
 STALL_WINDOW = 10
+# Option ``prior_context``'s default (rule 5 of explore/learner/prior.py): a prior entry answers
+# only a query whose context lies within this fraction of the diagonal of the prior's contexts
+# from its own. Chosen from the warm runs in one process on development stand-ins 340-347
+# (rge-efr, nominal prior, exploration seed 1; docs/warm_start.md, "Where the prior costs"): of
+# the episodes the prior answered, those whose twin episode started its ball within 0.1 of that
+# diagonal of the arm's (about 60 mm on the ring) moved the ball in 56-70 %, those beyond 0.15
+# in 20-27 %, the arm's own goal episodes in 33-49 %.
+PRIOR_CONTEXT = 0.1
 
 
 @dataclass(frozen=True)
@@ -102,6 +110,10 @@ class GoalExplorationOptions:
             candidate).
         goal_misses: "density"'s reachability guard: a reached outcome aimed at and missed
             this many times is no longer a candidate (default 3; 0: no guard).
+        prior_context: with a prior (``--warm-start``), an entry of it answers only a query
+            whose context lies within this fraction of the diagonal of the prior's contexts
+            from its own (default ``PRIOR_CONTEXT``, 0.1; 0: any context, the setting of every
+            warmed run made before the option).
     """
 
     bootstrap: int = BOOTSTRAP
@@ -124,6 +136,7 @@ class GoalExplorationOptions:
     stall_random: float = 1.0
     goal_sampling: GoalSampling = "uniform"
     goal_misses: int = GOAL_MISSES
+    prior_context: float = PRIOR_CONTEXT
 
     def __post_init__(self) -> None:
         if not self.interest_start >= 0:
@@ -132,6 +145,8 @@ class GoalExplorationOptions:
             raise BadOption("interest_start", 'acts only with interest="exponential"')
         if not self.context_weight > 0:
             raise BadOption("context_weight", f"must be > 0, got {self.context_weight}")
+        if not 0.0 <= self.prior_context < float("inf"):
+            raise BadOption("prior_context", f"must be >= 0 and finite, got {self.prior_context}")
         for key in ("bootstrap", "sigma", "stall_window", "goal_misses"):
             if getattr(self, key) < 0:
                 raise BadOption(key, f"must be >= 0, got {getattr(self, key)}")

@@ -1,7 +1,8 @@
 """The prior's rule (explore/learner/prior.py) on hand-made records: the nearer of the arm's own
 and the prior's entries answers, a prior entry answers once, the arm's reach retires the prior
-near it, goals are drawn over the prior's reach, the prior stands for the bootstrap; strategies
-and records that cannot take a prior are refused in one line."""
+near it, goals are drawn over the prior's reach, the prior stands for the bootstrap, a prior
+entry answers only from a context near its own; strategies and records that cannot take a prior
+are refused in one line."""
 
 from __future__ import annotations
 
@@ -139,3 +140,47 @@ def test_an_arm_entry_as_near_as_the_prior_s_wins_whatever_the_index_s_schedule(
     queries[:, 0] = 0.0
     answers = [policy.prior_answer(0, q[:4], q[4:]) for q in queries]
     assert answers == [-1] * len(queries)  # a tie: the arm's own answers
+
+
+def _two_scenes() -> list[Rec]:
+    """Prior episodes from two scenes: 0-3 with the ball at angle 0, 4-7 with it at 0.6 rad
+    (10 cm further along the ring: the twin's ball where the last episode left it), each
+    leaving it somewhere on the ring."""
+    return [
+        Rec(i, np.full(N_PARAMS, i / 10), _at(2 * np.pi * i / 8), context_ball=_at(0.6 * (i > 3)))
+        for i in range(8)
+    ]
+
+
+@pytest.mark.parametrize("fraction", [None, 0.0])
+def test_a_prior_entry_answers_only_from_a_context_near_its_own(fraction):
+    options = {} if fraction is None else {"prior_context": fraction}
+    s, prior = _warm(_two_scenes(), random_episodes=0.0, sigma=0.0, stall_window=0, **options)
+    assert s.settings.prior_context == (0.1 if fraction is None else 0.0)
+    # the arm's ball at angle 0, a goal where prior episode 5 (ball at 0.6) left its ball
+    ctx = s._propose_context(Observation(ball=_at(0.0)))
+    goal = _goal_at(s, _at(2 * np.pi * 5 / 8))
+    j = prior.policy.prior_answer(0, ctx, goal)
+    source = int(prior.policy.prior[0].source[j])
+    if fraction == 0.0:  # any context: the nearest in (context, outcome), episode 5
+        assert source == 5
+    else:  # episode 5 pushed a ball at 0.6: of the scenes like the arm's, the nearest outcome
+        assert source in range(4) and source == 3
+    # what the proposal played is what the update works out again (rule 2 retires it)
+    theta = s.policy.nearest_theta(0, ctx, goal)
+    rec = Rec(0, theta, _at(1.0), context_ball=_at(0.0), goal=goal, module=0, kind="exploit")
+    answer = prior.before_update(rec)
+    assert answer is not None and answer.prior_episode == source
+    np.testing.assert_array_equal(theta, np.full(N_PARAMS, source / 10))
+
+
+def test_with_no_prior_entry_near_the_arms_scene_the_arm_answers_itself():
+    s, prior = _warm(_two_scenes(), random_episodes=0.0, sigma=0.0, stall_window=0)
+    # the arm's ball at pi / 2: no prior scene within 0.1 of the contexts' diagonal (but with
+    # any context, the nearest prior entry would answer: the arm has no entry yet)
+    ctx = s._propose_context(Observation(ball=_at(np.pi / 2)))
+    assert prior.policy.prior_answer(0, ctx, _goal_at(s, _at(0.3))) == -1
+    _, anywhere = _warm(_two_scenes(), prior_context=0.0)
+    assert anywhere.policy.prior_answer(0, ctx, _goal_at(s, _at(0.3))) >= 0
+    with pytest.raises(StrategyError, match="prior_context"):
+        _strategy(prior_context=-0.1)
