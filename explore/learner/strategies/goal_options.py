@@ -48,10 +48,11 @@ STALL_WINDOW = 10
 # Option ``prior_context``'s default (rule 5 of explore/learner/prior.py): a prior entry answers
 # only a query whose context lies within this fraction of the diagonal of the prior's contexts
 # from its own. Chosen from the warm runs in one process on development stand-ins 340-347
-# (rge-efr, nominal prior, exploration seed 1; docs/warm_start.md, "Where the prior costs"): of
-# the episodes the prior answered, those whose twin episode started its ball within 0.1 of that
-# diagonal of the arm's (about 60 mm on the ring) moved the ball in 56-70 %, those beyond 0.15
-# in 20-27 %, the arm's own goal episodes in 33-49 %.
+# (rge-efr, nominal prior, exploration seed 1; experiments/prior_context.py, docs/warm_start.md
+# "Where the prior costs"): of the episodes the prior answered, those whose twin episode started
+# its ball within 0.05 and 0.05-0.1 of that diagonal from the arm's (0.1: about 60 mm along the
+# ring) moved the ball in 64 % and 56 %, 0.1-0.15 in 40 %, 0.15-0.3 in 20-27 %; the arm's own
+# goal episodes in 32-49 % (38 % over all).
 PRIOR_CONTEXT = 0.1
 
 
