@@ -128,6 +128,8 @@ def one_rig(bus: str, seed: int, args: argparse.Namespace) -> dict[str, object]:
                 extra += ["--strategy-option", f"bootstrap={args.online_bootstrap}"]
             if arm in ("warm", "warm-efr"):
                 extra += ["--warm-start", str(warm_prior(owner, rig_id, work, args, arm))]
+                if args.prior_context is not None:
+                    extra += ["--strategy-option", f"prior_context={args.prior_context}"]
             t = time.monotonic()
             if stored(run) < args.episodes:
                 owner.explore(run, args.episodes, args.explore_seed, STRATEGY[arm], extra,
@@ -199,6 +201,8 @@ def main() -> None:
     p.add_argument("--online-bootstrap", type=int, default=300, help="rge-online's switch")
     p.add_argument("--twin-episodes", type=int, default=1000, help="the warm arm's twin run")
     p.add_argument("--twin-seed", type=int, default=0)
+    p.add_argument("--prior-context", type=float, default=None,
+                   help="the warmed arms' option prior_context (default: its default)")  # fmt: skip
     p.add_argument(
         "--dynamics-repeats", type=int, default=REPEATS,
         help=f"ergo calibrate dynamics --repeats (default {REPEATS}; the results pages: 1)",

@@ -52,6 +52,13 @@ ARMS = ("scratch", "nominal", "fitted")
 DYNAMICS_BOUND_S = 3600.0  # as experiments/rehearse_real_arm.py
 
 
+def prior_option(args: argparse.Namespace) -> list[str]:
+    """The warmed runs' ``prior_context`` (rule 5 of explore/learner/prior.py), when given."""
+    if args.prior_context is None:
+        return []
+    return ["--strategy-option", f"prior_context={args.prior_context}"]
+
+
 def cells_of(run: Path) -> tuple[int, int, float]:
     """(episodes, ball cells after the last, share of episodes that moved the ball)."""
     records = read_history(run).records
@@ -109,7 +116,7 @@ def in_process(seed: int, args: argparse.Namespace, work: Path) -> dict[str, obj
         if arm == "nominal":
             twin = work / f"twin-nominal-hidden-{seed}"
             row["nominal twin s"] = round(twin_run(twin, args, None, cal), 1)
-            extra = ["--warm-start", str(twin)]
+            extra = ["--warm-start", str(twin), *prior_option(args)]
         run = work / f"run-{arm}-hidden-{seed}-e{args.explore_seed}"
         t = time.monotonic()
         if not finished(run, args.episodes):
@@ -156,7 +163,7 @@ def one_rig(bus: str, seed: int, args: argparse.Namespace, work: Path) -> dict[s
                 row[f"{arm} twin s"] = round(
                     twin_run(twin, args, rig_id if arm == "fitted" else None, cal), 1
                 )
-                extra += ["--warm-start", str(twin)]
+                extra += ["--warm-start", str(twin), *prior_option(args)]
             run = work / f"run-{arm}-{bus}-{seed}-e{args.explore_seed}"
             t = time.monotonic()
             if not finished(run, args.episodes):
@@ -192,6 +199,8 @@ def main() -> None:
     p.add_argument("--arms", nargs="+", choices=ARMS, default=list(ARMS))
     p.add_argument("--episodes", type=int, default=300, help="episodes of each bus run")
     p.add_argument("--explore-seed", type=int, default=0)
+    p.add_argument("--prior-context", type=float, default=None,
+                   help="the warmed runs' option prior_context (default: its default)")  # fmt: skip
     p.add_argument("--strategy", default=TWIN_STRATEGY)
     p.add_argument("--twin-episodes", type=int, default=TWIN_EPISODES)
     p.add_argument("--twin-seed", type=int, default=0)

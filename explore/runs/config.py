@@ -51,9 +51,6 @@ CHANGED_STRATEGY_DEFAULTS: dict[str, Any] = {
     # 10 since 2026-12-03 (goal exploration's random parameters in a stall, docs/results.md
     # F8); the runs before had no such behaviour, which stall_window 0 is
     "stall_window": 0,
-    # 0.1 since the prior's rule 5 (explore/learner/prior.py): the warmed runs before let a prior
-    # entry answer whatever the context
-    "prior_context": 0.0,
 }
 
 

@@ -45,15 +45,13 @@ STILL_FRACTION = 0.01
 # rge-sae runs (8 of 16 without), 11-24% of the episodes after the bootstrap played random
 # parameters (9-11% without).
 STALL_WINDOW = 10
-# Option ``prior_context``'s default (rule 5 of explore/learner/prior.py): a prior entry answers
-# only a query whose context lies within this fraction of the diagonal of the prior's contexts
-# from its own. Chosen from the warm runs in one process on development stand-ins 340-347
-# (rge-efr, nominal prior, exploration seed 1; experiments/prior_context.py, docs/warm_start.md
-# "Where the prior costs"): of the episodes the prior answered, those whose twin episode started
-# its ball within 0.05 and 0.05-0.1 of that diagonal from the arm's (0.1: about 60 mm along the
-# ring) moved the ball in 64 % and 56 %, 0.1-0.15 in 40 %, 0.15-0.3 in 20-27 %; the arm's own
-# goal episodes in 32-49 % (38 % over all).
-PRIOR_CONTEXT = 0.1
+# Option ``prior_context`` (rule 5 of explore/learner/prior.py): a prior entry answers only a
+# query whose context lies within this fraction of the diagonal of the prior's contexts from its
+# own; 0 (the default): any context. Off by default: measured on development stand-ins 340-347
+# in one process and 378-379 over the bus, and on final stand-ins 210-212 over the bus, 0.1 kept
+# out the prior's answers that mostly miss the ball (docs/warm_start.md, "Where the prior
+# costs") but did not give more ball cells at 300 episodes, and fewer at 100 over the bus.
+PRIOR_CONTEXT = 0.0
 
 
 @dataclass(frozen=True)
@@ -113,8 +111,7 @@ class GoalExplorationOptions:
             this many times is no longer a candidate (default 3; 0: no guard).
         prior_context: with a prior (``--warm-start``), an entry of it answers only a query
             whose context lies within this fraction of the diagonal of the prior's contexts
-            from its own (default ``PRIOR_CONTEXT``, 0.1; 0: any context, the setting of every
-            warmed run made before the option).
+            from its own (rule 5 of ``explore.learner.prior``; default 0: any context).
     """
 
     bootstrap: int = BOOTSTRAP

@@ -1,8 +1,8 @@
 """The prior's rule (explore/learner/prior.py) on hand-made records: the nearer of the arm's own
 and the prior's entries answers, a prior entry answers once, the arm's reach retires the prior
-near it, goals are drawn over the prior's reach, the prior stands for the bootstrap, a prior
-entry answers only from a context near its own; strategies and records that cannot take a prior
-are refused in one line."""
+near it, goals are drawn over the prior's reach, the prior stands for the bootstrap, with
+``prior_context`` a prior entry answers only from a context near its own; strategies and records
+that cannot take a prior are refused in one line."""
 
 from __future__ import annotations
 
@@ -152,17 +152,17 @@ def _two_scenes() -> list[Rec]:
     ]
 
 
-@pytest.mark.parametrize("fraction", [None, 0.0])
+@pytest.mark.parametrize("fraction", [0.1, None])
 def test_a_prior_entry_answers_only_from_a_context_near_its_own(fraction):
     options = {} if fraction is None else {"prior_context": fraction}
     s, prior = _warm(_two_scenes(), random_episodes=0.0, sigma=0.0, stall_window=0, **options)
-    assert s.settings.prior_context == (0.1 if fraction is None else 0.0)
+    assert s.settings.prior_context == (0.0 if fraction is None else 0.1)
     # the arm's ball at angle 0, a goal where prior episode 5 (ball at 0.6) left its ball
     ctx = s._propose_context(Observation(ball=_at(0.0)))
     goal = _goal_at(s, _at(2 * np.pi * 5 / 8))
     j = prior.policy.prior_answer(0, ctx, goal)
     source = int(prior.policy.prior[0].source[j])
-    if fraction == 0.0:  # any context: the nearest in (context, outcome), episode 5
+    if fraction is None:  # by default any context: the nearest in (context, outcome), episode 5
         assert source == 5
     else:  # episode 5 pushed a ball at 0.6: of the scenes like the arm's, the nearest outcome
         assert source in range(4) and source == 3
@@ -175,12 +175,14 @@ def test_a_prior_entry_answers_only_from_a_context_near_its_own(fraction):
 
 
 def test_with_no_prior_entry_near_the_arms_scene_the_arm_answers_itself():
-    s, prior = _warm(_two_scenes(), random_episodes=0.0, sigma=0.0, stall_window=0)
+    s, prior = _warm(
+        _two_scenes(), random_episodes=0.0, sigma=0.0, stall_window=0, prior_context=0.1
+    )
     # the arm's ball at pi / 2: no prior scene within 0.1 of the contexts' diagonal (but with
     # any context, the nearest prior entry would answer: the arm has no entry yet)
     ctx = s._propose_context(Observation(ball=_at(np.pi / 2)))
     assert prior.policy.prior_answer(0, ctx, _goal_at(s, _at(0.3))) == -1
-    _, anywhere = _warm(_two_scenes(), prior_context=0.0)
+    _, anywhere = _warm(_two_scenes())
     assert anywhere.policy.prior_answer(0, ctx, _goal_at(s, _at(0.3))) >= 0
     with pytest.raises(StrategyError, match="prior_context"):
         _strategy(prior_context=-0.1)

@@ -1,8 +1,7 @@
 """A strategy option whose default changed (``runs.config.CHANGED_STRATEGY_DEFAULTS``: goal
-exploration's ``stall_window``, 0 before 2026-12-03, 10 since; ``prior_context``, 0 before the
-prior's rule 5, 0.1 since) never changes a made run: a new run writes today's default into its
-run.json, and a run.json made before, without the key, resumes (and is replayed, exported) with
-the value it was made with."""
+exploration's ``stall_window``, 0 before 2026-12-03, 10 since) never changes a made run: a new
+run writes today's default into its run.json, and a run.json made before, without the key,
+resumes (and is replayed, exported) with the value it was made with."""
 
 from __future__ import annotations
 
@@ -10,7 +9,6 @@ import json
 
 from explore.cli import main
 from explore.learner.strategies.goal_exploration import STALL_WINDOW
-from explore.learner.strategies.goal_options import PRIOR_CONTEXT
 from explore.runs.config import RunConfig, StrategyConfig
 from explore.runs.layout import RUN_FILE
 from explore.runs.open_run import open_run
@@ -21,14 +19,14 @@ RGE = RunConfig(strategy=StrategyConfig("rge-efr", {"bootstrap": 2}), episodes=3
 
 def test_today_default_differs_from_the_old_one():
     """The test below means something only while the two values differ."""
-    assert STALL_WINDOW != 0 and PRIOR_CONTEXT != 0
+    assert STALL_WINDOW != 0
 
 
 def test_a_new_run_writes_the_changed_default_out(tmp_path):
     with open_run(tmp_path / "run", RGE) as opened:
         assert opened.strategy.stall_window == STALL_WINDOW
     held = RunStore.read_meta(tmp_path / "run")["config"]["strategy"]["options"]
-    assert held == {"bootstrap": 2, "stall_window": STALL_WINDOW, "prior_context": PRIOR_CONTEXT}
+    assert held == {"bootstrap": 2, "stall_window": STALL_WINDOW}
 
 
 def test_a_run_made_before_the_change_resumes_with_the_old_value(tmp_path):
@@ -36,14 +34,11 @@ def test_a_run_made_before_the_change_resumes_with_the_old_value(tmp_path):
     with open_run(run, RGE):
         pass
     meta = json.loads((run / RUN_FILE).read_text())
-    options = meta["config"]["strategy"]["options"]
-    del options["stall_window"], options["prior_context"]  # as a run of 2026-12-02 holds
+    del meta["config"]["strategy"]["options"]["stall_window"]  # as a run of 2026-12-02 holds
     (run / RUN_FILE).write_text(json.dumps(meta))
     with open_run(run, mode="resume") as opened:
         assert opened.config.strategy.options["stall_window"] == 0
-        assert opened.config.strategy.options["prior_context"] == 0
         assert opened.strategy.stall_window == 0
-        assert opened.strategy.settings.prior_context == 0
     assert RunConfig.of_run(meta["config"]).strategy.options["stall_window"] == 0
     # the file is left as it was: the old value is read, never written back
     assert (
@@ -53,7 +48,7 @@ def test_a_run_made_before_the_change_resumes_with_the_old_value(tmp_path):
 
 
 def test_a_given_value_is_kept_and_a_strategy_without_the_option_is_left_alone():
-    given = RunConfig(strategy=StrategyConfig("rge-efr", {"stall_window": 4, "prior_context": 0.2}))
+    given = RunConfig(strategy=StrategyConfig("rge-efr", {"stall_window": 4}))
     assert given.with_defaults_pinned() == given == given.as_made()
     rpe = RunConfig(strategy=StrategyConfig("rpe", {}))
     assert rpe.with_defaults_pinned() == rpe == rpe.as_made()

@@ -9,7 +9,6 @@ import pytest
 
 from explore.cli import main
 from explore.learner.strategies.goal_exploration import STALL_WINDOW
-from explore.learner.strategies.goal_options import PRIOR_CONTEXT
 from explore.rigs.arena import TWIN_ARENA
 from explore.runs.layout import COVERAGE_FILE, FAULTS_FILE, HISTORY_FILE, METRICS_FILE
 from explore.runs.metrics import CellCounter, read_metrics
@@ -84,9 +83,7 @@ def test_strategy_options_are_stored_and_kept_on_resume(tmp_path, capsys):
     assert ergo(*args, "--strategy-option", "bootstrap=2", "--rerun", "off") == 0
     store = RunStore.open(out)
     # as given, and the option whose default changed written out (test_changed_defaults.py)
-    assert store.config["strategy"]["options"] == {
-        "bootstrap": 2, "stall_window": STALL_WINDOW, "prior_context": PRIOR_CONTEXT,
-    }  # fmt: skip
+    assert store.config["strategy"]["options"] == {"bootstrap": 2, "stall_window": STALL_WINDOW}
     kinds = [r.kind for r in store.records]
     assert kinds[:2] == ["random", "random"] and set(kinds[2:]) - {"random"}, kinds
     assert ergo(*args, "--strategy-option", "bootstrap=2", "--resume-or-new") == 0  # the same
