@@ -14,6 +14,10 @@ The rule (docs/warm_start.md says why):
    joins the arm's database).
 3. **Where the arm has been, its own outcomes rule.** A prior entry within ``REACH_FRACTION``
    of the diagonal of the prior's points (per module) of an outcome the arm produced is retired.
+4. **Goals are drawn over the prior's reach too**: the strategy's outcome bounds start at the
+   prior's (they only grow with the arm's own), and **the prior's episodes count towards the
+   bootstrap** (random episodes before goal exploration): a prior of at least ``bootstrap``
+   episodes starts the arm on goals from its first episode.
 5. **Optionally, a prior entry answers only from a scene like its own.** With the strategy's
    option ``prior_context`` > 0, only entries whose context lies within that fraction of the
    diagonal of the prior's contexts of the query's context take part in rule 1: a twin
@@ -21,10 +25,6 @@ The rule (docs/warm_start.md says why):
    elsewhere they mostly miss it (docs/warm_start.md, "Where the prior costs", which also says
    why it is off by default). 0 (default), or a prior whose contexts are all the same: any
    context.
-4. **Goals are drawn over the prior's reach too**: the strategy's outcome bounds start at the
-   prior's (they only grow with the arm's own), and **the prior's episodes count towards the
-   bootstrap** (random episodes before goal exploration): a prior of at least ``bootstrap``
-   episodes starts the arm on goals from its first episode.
 
 The prior never enters the strategy's interests (the arm's own progress only), its stall count,
 nor any count of episodes seen. All of it is a deterministic function of the prior and of the

@@ -47,10 +47,10 @@ STILL_FRACTION = 0.01
 STALL_WINDOW = 10
 # Option ``prior_context`` (rule 5 of explore/learner/prior.py): a prior entry answers only a
 # query whose context lies within this fraction of the diagonal of the prior's contexts from its
-# own; 0 (the default): any context. Off by default: measured on development stand-ins 340-347
-# in one process and 378-379 over the bus, and on final stand-ins 210-212 over the bus, 0.1 kept
-# out the prior's answers that mostly miss the ball (docs/warm_start.md, "Where the prior
-# costs") but did not give more ball cells at 300 episodes, and fewer at 100 over the bus.
+# own; 0 (the default): any context. Off by default: in one process on development stand-ins
+# 340-347 and over the bus on final stand-ins 210-212, 0.1 kept out the prior's answers that
+# mostly miss the ball (docs/warm_start.md, "Where the prior costs") but gave no more ball cells
+# at 300 episodes, and fewer at 100 over the bus.
 PRIOR_CONTEXT = 0.0
 
 
