@@ -41,6 +41,7 @@ Entity paths (units: metres, radians, seconds; shapes are per log call):
 
 from __future__ import annotations
 
+import ctypes
 import logging
 import os
 import re
@@ -81,6 +82,11 @@ BATCH_FLUSH_S = 1.0  # latency of a live viewer, s
 # a live viewer on loopback takes a run's backlog in well under a second). rerun's default
 # waits forever: a viewer that never came up (no display) kept `ergo explore` from ending.
 VIEWER_FLUSH_S = 10.0
+# How long closing waits for the .rrd file to take the last data, s (a guess: the batcher holds
+# at most about a second of a run, written in well under a second on any disk). rerun's default
+# waits forever: on a full disk the file sink never drains, and `ergo explore` hung after its
+# one-line error in 1 run in 4 to 8 (tests/system/test_disk_full.py, a real full disk).
+SAVE_FLUSH_S = 10.0
 JPEG_QUALITY = 80  # 64x64 frames: about 2 kB each
 
 # Entity paths every recording has (the documented layout; docs/viewing.md).
@@ -414,18 +420,23 @@ class Recorder:
         self.rec.log(f"series/{name}", self._rr.Scalars(float(value)))
 
     def close(self) -> None:
-        """Flush and close the sink (the ``.rrd`` is complete afterwards; a viewer gets
-        ``VIEWER_FLUSH_S`` to take the last data, after which rerun raises)."""
+        """Flush and close the sink (the ``.rrd`` is complete afterwards; a file gets
+        ``SAVE_FLUSH_S`` and a viewer ``VIEWER_FLUSH_S`` to take the last data, after which
+        rerun raises: a full disk never takes it)."""
         if self._closed:
             return
         self._closed = True
         try:
-            if self.sink == "save":
-                self.rec.flush()
-            else:
-                self.rec.flush(timeout_sec=VIEWER_FLUSH_S)
-        finally:
-            self.rec.disconnect()
+            self.rec.flush(timeout_sec=SAVE_FLUSH_S if self.sink == "save" else VIEWER_FLUSH_S)
+        except BaseException:
+            # A sink that did not drain (a full disk, a viewer gone): rerun's disconnect, its exit
+            # hook and the stream's own __del__ (which disconnects it) would each wait for it
+            # again, for ever. The stream is kept alive to the end of the process (one reference
+            # never given back) and the exit hook removed, so the process can end.
+            self._rr.unregister_shutdown()
+            ctypes.pythonapi.Py_IncRef(ctypes.py_object(self.rec))
+            raise
+        self.rec.disconnect()
 
     def __enter__(self) -> Recorder:
         return self
