@@ -226,7 +226,7 @@ class PhaseTimer:
             try:
                 return call(*args, **kwargs)
             finally:
-                self._open.remove(inside)
+                self._open.pop()  # calls nest: the innermost is the last
                 spent = time.perf_counter() - t - inside[0]
                 self.seconds[label] = self.seconds.get(label, 0.0) + spent
 

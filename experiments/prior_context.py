@@ -2,10 +2,11 @@
 prior answered in warmed runs, the share that moved the ball, by how far the twin episode's ball
 started from the arm's, against the arm's own goal episodes in the same runs.
 
-For each warmed run (its ``reality_gap.csv``: the prior episode's ball before and after, the
-arm's), the distance between the two starting balls, in mm and, for the engineered goal space,
-as a fraction of the diagonal of the prior's contexts in the space's coordinates (what the
-option ``prior_context`` of rule 5 measures, ``explore/learner/prior.py``); the episode moved
+For each warmed run (its ``reality_gap.csv``, read by ``explore.report.reality_gap``: the
+prior episode's ball before and after, the arm's), the distance between the two starting balls,
+in mm and, for the engineered goal space, as a fraction of the diagonal of the prior's contexts
+in the space's coordinates (what the option ``prior_context`` of rule 5 measures,
+``explore/learner/prior.py``); the episode moved
 the ball when its ``metrics.csv`` says so (a move over 1 cm). The arm's own goal episodes are
 the explore and exploit episodes the prior did not answer.
 
@@ -15,7 +16,6 @@ the explore and exploit episodes the prior did not answer.
 from __future__ import annotations
 
 import argparse
-import csv
 import itertools
 import sys
 from pathlib import Path
@@ -25,9 +25,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from explore.learner.strategies import make_strategy
+from explore.report.reality_gap import read_gap
 from explore.rigs.rig import RigConfig, rig_scene
 from explore.runs.config import RunConfig
-from explore.runs.layout import PRIOR_KEY, REALITY_GAP_FILE, RUN_FILE
+from explore.runs.layout import PRIOR_KEY, RUN_FILE
 from explore.runs.metrics import read_metrics
 from explore.runs.store import RunStore, read_history
 
@@ -43,17 +44,12 @@ def one_run(run: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     metrics = read_metrics(run / "metrics.csv")
     moved = np.asarray(metrics["ball_moved"], dtype=int).astype(bool)
     kinds = np.asarray(metrics["kind"])
-    rows = list(csv.DictReader((run / REALITY_GAP_FILE).open()))
-    answered = np.array([int(r["episode"]) for r in rows], dtype=int)
-    keep = answered < len(moved)
-    rows = [r for r, k in zip(rows, keep, strict=True) if k]
-    answered = answered[keep]
-    prior_start = np.array(
-        [[float(r["prior_context_x"]), float(r["prior_context_y"])] for r in rows]
-    )
-    arm_start = np.array([[float(r["arm_context_x"]), float(r["arm_context_y"])] for r in rows])
+    gap = read_gap(run)
+    keep = gap.episode < len(moved)
+    answered = gap.episode[keep]
+    prior_start, arm_start = gap.prior_start[keep], gap.arm_start[keep]
     mm = 1e3 * np.sqrt(((prior_start - arm_start) ** 2).sum(axis=1))
-    fraction = np.full(len(rows), np.nan)
+    fraction = np.full(len(answered), np.nan)
     scene = rig_scene(RigConfig(config.rig.name, config.rig.rig_id, dict(config.rig.options)))
     strategy = make_strategy(config.strategy.name, 1, scene=scene, **config.strategy.options)
     space = strategy.space
