@@ -19,7 +19,9 @@ class JointState:
         loads: shape (n,), signed fraction of the maximum torque (NaN if unknown).
         temperatures: shape (n,), degrees C (NaN if unknown).
         errors: shape (n,), backend error flags per joint, 0 when healthy.
-        timestamp: seconds.
+        timestamp: when the positions were sampled, as near as the backend knows, s on the
+            arm's clock: the twin's time; over Dynamixel when the read request left the
+            host; over CANopen when the SYNC the drives sampled them at did.
     """
 
     positions: np.ndarray

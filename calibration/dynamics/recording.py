@@ -20,7 +20,9 @@ A servo holds its goal in the same raw units it reports its position in (an XL-3
 register, a drive's increments): ``servo_goals`` gives the commands as the servos held them.
 
 Times are seconds from the first command, on the arm's clock (the twin's simulated time, or
-``time.monotonic`` of the host); joint angles are the calibrated joint angles (rad).
+``time.monotonic`` of the host); a reading's is when the servos sampled it
+(``JointState.timestamp``: a Dynamixel read's request, a CANopen SYNC), a command's when it was
+sent; joint angles are the calibrated joint angles (rad).
 """
 
 from __future__ import annotations

@@ -369,7 +369,10 @@ class CanArm(Arm):
             q = self.scaling.to_rad(net.counts)
             vel = net.velocity.copy()
             errors = np.array([a[0] if a else 0 for a in net.emcy_active], dtype=int)
-        return JointState.from_positions(q, time.monotonic(), velocities=vel, errors=errors)
+        # stamped with their SYNC, at which the drives sampled them (a read that follows a
+        # command reads the command's SYNC, up to a control period before the read)
+        stamp = net.sync_at
+        return JointState.from_positions(q, stamp, velocities=vel, errors=errors)
 
     def _send(self, positions: np.ndarray) -> None:
         net = self.net

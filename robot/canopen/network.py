@@ -13,10 +13,10 @@ heartbeat), never hand-written SDO/PDO frames. ``DriveNetwork`` owns:
 - what the notifier thread hears, under ``cond``: each node's last TPDO (statusword, position
   in increments, the SYNC it answered, its speed), heartbeat times and NMT states, active EMCY
   errors; ``on_alarm`` is called when a heartbeat leaves OPERATIONAL or an EMCY arrives;
-- the control cycle (``cycle``): RPDO1 to every node, a SYNC, then the wait for the TPDOs that
-  answer it (at most ``pdo_timeout_s``), late ones counted in ``stats``. One exchange at a time
-  (``guard``, ``robot.bus_guard.BusGuard``): a torque-off from another thread preempts a cycle
-  in progress, which gives up at once with ``CyclePreemptedError``.
+- the control cycle (``cycle``): RPDO1 to every node, a SYNC (``sync_at``: the drives sample
+  the positions of synchronous TPDOs at it, CiA 301), then the wait for the TPDOs that answer
+  it (at most ``pdo_timeout_s``), late ones counted in ``stats``. One exchange at a time
+  (``guard``): a torque-off from another thread preempts a cycle, which gives up at once.
 
 An adapter that fails under the network (unplugged, bus off, a serial error, the notifier
 thread ended by one) raises ``CanLinkLost``, a ``robot.errors.LinkLost``, from every exchange
@@ -199,7 +199,7 @@ class DriveNetwork:
         # What the next cycle sends: controlword and target of each node, the SYNC counter.
         self.cw = np.zeros(n, dtype=np.int64)
         self.target = np.zeros(n, dtype=np.int64)
-        self.seq = 0
+        self.seq, self.sync_at = 0, 0.0  # the last SYNC's number and monotonic time, s
         self.sync_since_read = False
         # cycles run, cycles where a node's TPDO missed pdo_timeout_s, TPDOs missing in them
         self.stats = {"cycles": 0, "late_cycles": 0, "missing_tpdos": 0}
@@ -538,7 +538,6 @@ class DriveNetwork:
         with self.cond:
             self.seq += 1
             seq = self.seq
-        sent_at = time.monotonic()
         with link_errors(self.bus_spec, "a bus cycle"):
             if send_rpdo:
                 for i, node in enumerate(self.nodes):
@@ -547,6 +546,7 @@ class DriveNetwork:
                     pdo[0x607A].raw = int(self.target[i])
                     pdo.transmit()
             self.network.sync.transmit()
+            self.sync_at = time.monotonic()
             if on_sent is not None:
                 on_sent()
         self.stats["cycles"] += 1
@@ -561,7 +561,7 @@ class DriveNetwork:
                 self.stats["late_cycles"] += 1
                 self.stats["missing_tpdos"] += int(late.sum())
             self.missed[late] += 1
-            self.late_since[late & np.isnan(self.late_since)] = sent_at
+            self.late_since[late & np.isnan(self.late_since)] = self.sync_at
         self.sync_since_read = True
 
     def first_positions(self, timeout_s: float) -> None:

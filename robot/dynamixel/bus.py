@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
@@ -158,6 +159,9 @@ class DynamixelBus:
         self.status_return_level = 2  # 2: every instruction gets a status (e-manual default)
         self.counters = BusCounters()
         self.last_call_retries = 0
+        #: when the last request left the host (after its write was flushed), ``time.monotonic``
+        #: s; NaN before the first: a servo samples what it reports as it reads the request
+        self.last_sent_at = math.nan
         self._serial: SerialLike | None = connection
         self._decoder = proto.Decoder()
         # one call at a time; a torque-off from another thread preempts it (robot/bus_guard.py)
@@ -263,7 +267,7 @@ class DynamixelBus:
             replies.take(ser.read(ser.in_waiting) if ser.in_waiting else b"")
             ser.write(wire)
             ser.flush()
-            sent_at = time.monotonic()
+            sent_at = self.last_sent_at = time.monotonic()
             if not expect:
                 return {}, 0
             deadline = sent_at + self.timeout_for(len(wire), list(expect.values()), attempt)

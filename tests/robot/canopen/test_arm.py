@@ -270,3 +270,21 @@ def test_adapter_failure_is_a_clear_one_line_stop_and_reconnect_works(rig) -> No
 def test_bad_heartbeat_settings() -> None:
     with pytest.raises(ValueError, match="heartbeat_ms must be >= 1"):
         CanArm("virtual:x", config=CanArmConfig(heartbeat_ms=0))
+
+
+def test_a_reading_is_stamped_with_the_sync_its_positions_were_sampled_at(rig) -> None:
+    """The drives sample the positions of their TPDOs at the SYNC: a read just after a command
+    returns the command's SYNC and its time, one after a read its own."""
+    _, _, can = rig
+    with make_arm(can) as arm:
+        arm.set_torque(True)
+        q = arm.read().positions
+        before = time.monotonic()
+        arm.command(q)
+        sent = time.monotonic()
+        time.sleep(0.05)
+        state = arm.read()  # no SYNC of its own: the command's, sampled 50 ms ago
+        assert before <= state.timestamp <= sent, (before, state.timestamp, sent)
+        before = time.monotonic()
+        state = arm.read()  # a SYNC of its own
+        assert before <= state.timestamp <= time.monotonic()

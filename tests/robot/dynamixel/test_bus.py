@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import time
 
 import numpy as np
 import pytest
@@ -198,3 +199,17 @@ def test_arm_on_xl330_servos_round_trips_positions() -> None:
         assert np.allclose(state.positions, sent, atol=XL330_M288.rad_per_step)
         assert np.all(np.isfinite(state.loads))
     assert not any(emulator.torque_states().values())
+
+
+def test_a_reading_is_stamped_when_its_request_left_not_when_its_replies_came() -> None:
+    """A servo samples what it reports as it reads the request; the replies then wait in the
+    adapter (here 30 ms, an FTDI's latency timer): the reading's time is the request's."""
+    delay = 0.03
+    emulator = DynamixelEmulator(None, faults=FaultConfig(extra_delay_s=delay))
+    arm = DynamixelArm("fake", connection=EmulatedSerial(emulator), latency_s=0.05)
+    with arm:
+        for _ in range(3):
+            before = time.monotonic()
+            state = arm.read()
+            after = time.monotonic()
+            assert before <= state.timestamp <= after - delay, (before, state.timestamp, after)
