@@ -175,6 +175,7 @@ def judge(data: dict, hidden_path: Path) -> dict:
             "width": ((hi - lo) / v).tolist(),
             "within": (np.abs(err) <= TOLERANCE).tolist(),
             "identified": list(identifiable.get(f, [True] * len(t))),
+            "jackknife_sd": data.get("jackknife_sd", {}).get(f),
         }
     td, vd = truth.delay_s, fitted["delay_s"]
     lo, hi = intervals["delay_s"]
@@ -218,23 +219,47 @@ def refit(bus: str, seed: int, work: Path, label: str, code: Path | None) -> dic
     return out
 
 
+def excess_sd(err: np.ndarray, sd: np.ndarray) -> float:
+    """The sd ``m`` of an error shared beyond each value's own sd: ``m >= 0`` with
+    ``mean(err^2 / (sd^2 + m^2)) = 1`` (0 when the values' own sds explain the errors), the
+    Paule-Mandel estimate of a random effect (J. Res. NBS 87, 377 (1982)) with its mean known
+    (0: the mismatch is an error, not a correction). Shapes (K,), log-ratios."""
+    err, var = np.square(np.asarray(err, float)), np.square(np.asarray(sd, float))
+    if not len(err) or np.mean(err / np.maximum(var, 1e-300)) <= 1.0:
+        return 0.0
+    lo, hi = 0.0, float(np.sqrt(np.max(err))) + 1.0
+    for _ in range(200):  # the left side falls as m grows: bisection
+        m = 0.5 * (lo + hi)
+        lo, hi = (m, hi) if np.mean(err / (var + m * m)) > 1.0 else (lo, m)
+    return 0.5 * (lo + hi)
+
+
 def mismatch(results: list[dict]) -> str:
-    """Per bus and field, the RMS of the log errors (fitted / hidden) over the rigs' joints
-    whose value the fit calls identified: ``calibration.dynamics.uncertainty.MISMATCH_SD``'s
-    measurement (a value the recording does not pin is off by more than the model's mismatch,
-    and its interval is already wide)."""
-    lines = ["| bus | parameter | RMS log error | joints |", "|---|---|---|---|"]
+    """Per bus and field, over the rigs' joints whose value the fit calls identified: the RMS of
+    the log errors (fitted / hidden), and the error beyond what the jackknife's own sd explains
+    (``excess_sd``; results whose files hold the jackknife's sd): the measurement of
+    ``calibration.dynamics.uncertainty.MISMATCH_SD``, which the intervals add in quadrature to
+    the jackknife's (a value the recording does not pin is off by more, and its interval is
+    already wide)."""
+    lines = [
+        "| bus | parameter | RMS log error | beyond the jackknife | joints |",
+        "|---|---|---|---|---|",
+    ]
     good = [r for r in results if "params" in r]
     for bus in sorted({r["bus"] for r in good}):
         for f in FIELDS:
             p = [r["params"][f] for r in good if r["bus"] == bus]
-            err = [
-                math.log1p(e)
+            pairs = [
+                (math.log1p(e), (v.get("jackknife_sd") or [None] * len(v["rel_err"]))[j])
                 for v in p
-                for e, known in zip(v["rel_err"], v["identified"], strict=True)
+                for j, (e, known) in enumerate(zip(v["rel_err"], v["identified"], strict=True))
                 if known
             ]
-            lines.append(f"| {bus} | {f} | {math.sqrt(np.mean(np.square(err))):.4f} | {len(err)} |")
+            err = np.array([e for e, _ in pairs])
+            rms = math.sqrt(np.mean(np.square(err)))
+            sds = [s for _, s in pairs]
+            beyond = "" if None in sds else f"{excess_sd(err, np.array(sds, float)):.4f}"
+            lines.append(f"| {bus} | {f} | {rms:.4f} | {beyond} | {len(err)} |")
     return "\n".join(lines)
 
 

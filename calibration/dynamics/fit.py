@@ -83,6 +83,8 @@ class FitResult:
             (``calibration.dynamics.uncertainty``: a block jackknife; within the fit's bounds).
         identified: per fitted field, (6,) one line each: "" for a parameter the recording
             identifies, else why it does not (a joint not recorded: "not recorded").
+        jackknife_sd: per fitted field, (6,) the jackknife's sd of the log-ratio to nominal,
+            what the recording alone says before the model's mismatch (None: not recorded).
         held_out_rms_nominal, held_out_rms_fitted: RMS over the held-out segment of all
             joints, rad.
         held_out_rms_per_joint: {"nominal": (6,), "fitted": (6,)}, rad.
@@ -102,6 +104,7 @@ class FitResult:
     iterations: int
     fit_s: float
     notes: list[str] = field(default_factory=list)
+    jackknife_sd: dict[str, list[float | None]] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         """The payload of ``dynamics.json`` (without the recording's reference)."""
@@ -109,6 +112,7 @@ class FitResult:
             "servos": self.servos.to_dict(),
             "intervals_95": {k: np.asarray(v).tolist() for k, v in self.intervals.items()},
             "identifiable": {k: [not why for why in v] for k, v in self.identified.items()},
+            "jackknife_sd": dict(self.jackknife_sd),
             "unidentified": {
                 f"{joint}.{k}": why
                 for k, v in self.identified.items()
@@ -450,7 +454,9 @@ def fit(rec: Recording, max_iters: int = MAX_ITERS, verbose: bool = False) -> Fi
             "show the servos' dynamics (an arm blocked, loose, or not this model)"
         )
     # the intervals last: a fit refused above needs none (their rollouts cost a fit's third)
-    out.intervals, out.identified = _intervals(values, delay, rec, segments, spec, excited)
+    out.intervals, out.identified, out.jackknife_sd = _intervals(
+        values, delay, rec, segments, spec, excited
+    )
     out.fit_s = time.monotonic() - t_start
     if len(excited) < len(JOINTS):
         kept = [j for j in JOINTS if j not in excited]
@@ -471,10 +477,11 @@ def _intervals(
     segments: list[str],
     spec: Any,
     excited: list[str],
-) -> tuple[dict[str, np.ndarray], dict[str, list[str]]]:
-    """The 95 % intervals of the fitted values (per field (6, 2), the delay (2,)) and, per
-    field, why each joint's value is not identified ("" where it is); the block jackknife of
-    ``calibration.dynamics.uncertainty`` on the fit's own weighted residuals."""
+) -> tuple[dict[str, np.ndarray], dict[str, list[str]], dict[str, list[float | None]]]:
+    """The 95 % intervals of the fitted values (per field (6, 2), the delay (2,)), per field
+    why each joint's value is not identified ("" where it is) and the jackknife's sd of its
+    log-ratio (None: not recorded); the block jackknife of ``calibration.dynamics.uncertainty``
+    on the fit's own weighted residuals."""
     from sim.twin import JOINTS
 
     names = [f"{j}.{f}" for f in FITTED for j in excited] + ["delay"]
@@ -515,9 +522,11 @@ def _intervals(
     why = uncertainty.identification(iv, bounds)
     intervals: dict[str, np.ndarray] = {}
     identified: dict[str, list[str]] = {}
+    sd: dict[str, list[float | None]] = {}
     for f in FITTED:
         lo, hi = values[f].copy(), values[f].copy()
         identified[f] = ["not recorded: the nominal servo kept"] * len(JOINTS)
+        sd[f] = [None] * len(JOINTS)
         # no wider than the fit's bounds: the fit cannot put a value beyond them
         floor, ceiling = (nominal[f] * r for r in RATIO_BOUNDS[f])
         for j in excited:
@@ -526,10 +535,11 @@ def _intervals(
             lo[k] = max(values[f][k] * math.exp(-half), floor[k])
             hi[k] = min(values[f][k] * math.exp(half), ceiling[k])
             identified[f][k] = why[f"{j}.{f}"].reason
+            sd[f][k] = float(np.sqrt(max(iv.cov[i, i], 0.0)))
         intervals[f] = np.stack([lo, hi], axis=1)
     dh = iv.half[-1] * DELAY_UNIT_S
     intervals["delay_s"] = np.array([max(0.0, delay - dh), delay + dh])
-    return intervals, identified
+    return intervals, identified, sd
 
 
 def _values(opt_params: Any) -> dict[str, np.ndarray]:

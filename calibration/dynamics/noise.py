@@ -32,9 +32,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import log_ndtr
 
-# The time stamps' error over a bus, sd: 1.9-2.6 ms measured on the served stand-ins over both
-# buses (the time shift per reading that explains the hidden servos' error,
-# experiments/standin_floor.py, docs/dynamics.md); a guess for a physical link.
+# The time stamps' error over a bus, sd: 0.5-2.2 ms measured on the served stand-ins over both
+# buses with the readings stamped when sampled (the time shift per reading that explains the
+# hidden servos' error, experiments/standin_floor.py, docs/results_dynamics.md); 1.9-2.6 ms
+# when they were stamped at the reply. Kept at the upper value; a guess for a physical link.
 TIMING_SD_S = 0.0025
 # Beyond this many sigmas a residual counts as a reading stamped long after it was taken (a
 # host that stalled between the exchange and the stamp: readings 65-280 ms apart and 0.7-2.9 deg

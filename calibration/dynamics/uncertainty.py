@@ -30,8 +30,8 @@ optimum:
 6. the model's mismatch, an error every block of one recording shares and so no block shows
    (the bus's timing, the XL-320's rounding, CANopen's SYNC: the fit's estimate is off by it
    however long the recording), added in quadrature: ``sqrt(half^2 + (z m)^2)``, ``m`` the
-   RMS log error measured on development stand-ins per bus and parameter (``MISMATCH_SD``,
-   ``with_mismatch``);
+   log error beyond the jackknife's own measured on development stand-ins per bus and
+   parameter (``MISMATCH_SD``, ``with_mismatch``);
 7. the interval on the log-ratio, turned back into values (not symmetric).
 
 A parameter is *not identified* (``Identification``) when its jackknife interval (what the
@@ -68,15 +68,17 @@ LOG_STEP = 0.02
 DELAY_STEP = 0.05
 ALPHA = 0.05  # 95 % intervals
 # The model's mismatch (item 6 above), 1 sd of a fitted log-ratio, per bus and parameter: the
-# RMS of the log errors (fitted / hidden) of the joints the fit called identified, on
-# development stand-ins 303-305 recorded with 3 repeats (9-18 joints each; measured with
-# ``experiments/standin_dynamics.py --seeds 303 304 305 --repeats 3 --keep DIR``, then
-# ``--table "" --mismatch``). Measured on served stand-ins; for a physical arm a lower bound
-# (guess: its servos hold more than the twin models). The twin in process: none (it is the
-# model). Another bus: the larger of the two.
+# error beyond what each value's own jackknife sd explains, over the joints the fit called
+# identified (``m`` with mean(e^2 / (sd^2 + m^2)) = 1, e the log error fitted / hidden: the
+# Paule-Mandel estimate of a random effect, J. Res. NBS 87, 377 (1982)), on development
+# stand-ins 303-305 recorded with 3 repeats (12-18 joints each; measured with
+# ``experiments/standin_dynamics.py --seeds 303 304 305 --repeats 3 --keep DIR
+# --record-only``, ``--refit LABEL``, then ``--table LABEL --mismatch``). Measured on served
+# stand-ins; for a physical arm a lower bound (guess: its servos hold more than the twin
+# models). The twin in process: none (it is the model). Another bus: the larger of the two.
 MISMATCH_SD: dict[str, dict[str, float]] = {
-    "dynamixel": {"kp": 0.064, "damping": 0.012, "armature": 0.109, "frictionloss": 0.085},
-    "canopen": {"kp": 0.046, "damping": 0.008, "armature": 0.133, "frictionloss": 0.061},
+    "dynamixel": {"kp": 0.034, "damping": 0.018, "armature": 0.041, "frictionloss": 0.102},
+    "canopen": {"kp": 0.020, "damping": 0.0045, "armature": 0.052, "frictionloss": 0.055},
 }
 
 

@@ -44,6 +44,10 @@ def test_the_command_records_fits_and_saves(calibrated, capsys):
     assert not any(k.startswith("m3.") for k in data["unidentified"])
     lo, hi = np.asarray(data["intervals_95"]["kp"])[2]
     assert lo <= data["servos"]["kp"][2] <= hi
+    # what the recording alone says (the jackknife's sd of the log-ratio): plain JSON numbers,
+    # None for a joint not recorded; on the twin in process (no mismatch) the interval is t sd
+    sd = data["jackknife_sd"]["kp"]
+    assert sd[0] is None and 0.0 < sd[2] < math.log(hi / data["servos"]["kp"][2])
     assert main(["calibrate", "show", "--rig-id", "tw", "--dir", str(calibrated)]) == 0
     line = capsys.readouterr().out.strip().splitlines()[-1]
     assert line.startswith("dynamics: delay ") and "m3 kp 3.5" in line and "sha256 " in line
