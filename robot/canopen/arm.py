@@ -360,6 +360,9 @@ class CanArm(Arm):
                 if not net.sync_since_read:
                     net.cycle(send_rpdo=False)
                 net.sync_since_read = False
+                # stamped with their SYNC, at which the drives sampled them (a read that follows
+                # a command reads the command's SYNC, up to a control period before the read)
+                stamp = net.sync_at
         except CyclePreemptedError:
             self._check()  # a safety stop preempted us: say so (SafetyStop)
             raise
@@ -369,9 +372,6 @@ class CanArm(Arm):
             q = self.scaling.to_rad(net.counts)
             vel = net.velocity.copy()
             errors = np.array([a[0] if a else 0 for a in net.emcy_active], dtype=int)
-        # stamped with their SYNC, at which the drives sampled them (a read that follows a
-        # command reads the command's SYNC, up to a control period before the read)
-        stamp = net.sync_at
         return JointState.from_positions(q, stamp, velocities=vel, errors=errors)
 
     def _send(self, positions: np.ndarray) -> None:
