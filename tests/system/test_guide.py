@@ -38,9 +38,10 @@ CENTRE_BOUND_PX = 3.0
 # experiments/rehearse_real_arm.py)
 ARENA_BOUND_MM = 4.0
 EPISODES = 4
-# The owner's hands turn joints at 4 rad/s, not a careful person's 1 (sim.standin.hands): the
-# joint calibration reads the same stops, a few times sooner.
-HAND_SPEED_RAD_S = 4.0
+# The owner's hands turn joints at 6 rad/s (the most sim.standin.hands allows), not a careful
+# person's 1: the joint calibration reads the same stops, a few times sooner (4 rad/s took 4-6 s
+# more a bus).
+HAND_SPEED_RAD_S = 6.0
 # Step 9 (the arm warmed by its twin): the warmed bus run's episodes
 WARM_EPISODES = 2
 # Step 10 (learned goal spaces), a few episodes each: the autoencoder's training iterations (the
