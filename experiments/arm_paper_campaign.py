@@ -48,6 +48,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # testkit/, not installed
 
+from script_helpers import add_prior_context, prior_option, save_figure
+
 from calibration.dynamics.excitation import REPEATS
 from explore.runs.metrics import read_metrics
 from explore.runs.store import RunStore, read_history
@@ -128,8 +130,7 @@ def one_rig(bus: str, seed: int, args: argparse.Namespace) -> dict[str, object]:
                 extra += ["--strategy-option", f"bootstrap={args.online_bootstrap}"]
             if arm in ("warm", "warm-efr"):
                 extra += ["--warm-start", str(warm_prior(owner, rig_id, work, args, arm))]
-                if args.prior_context is not None:
-                    extra += ["--strategy-option", f"prior_context={args.prior_context}"]
+                extra += prior_option(args)
             t = time.monotonic()
             if stored(run) < args.episodes:
                 owner.explore(run, args.episodes, args.explore_seed, STRATEGY[arm], extra,
@@ -165,7 +166,6 @@ def figure(args: argparse.Namespace) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from script_helpers import save_figure
 
     rigs = rig_folders(args)
     fig, axes = plt.subplots(1, max(len(rigs), 1), figsize=(4.2 * max(len(rigs), 1), 3.6),
@@ -201,8 +201,7 @@ def main() -> None:
     p.add_argument("--online-bootstrap", type=int, default=300, help="rge-online's switch")
     p.add_argument("--twin-episodes", type=int, default=1000, help="the warm arm's twin run")
     p.add_argument("--twin-seed", type=int, default=0)
-    p.add_argument("--prior-context", type=float, default=None,
-                   help="the warmed arms' option prior_context (default: its default)")  # fmt: skip
+    add_prior_context(p)
     p.add_argument(
         "--dynamics-repeats", type=int, default=REPEATS,
         help=f"ergo calibrate dynamics --repeats (default {REPEATS}; the results pages: 1)",

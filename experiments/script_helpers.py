@@ -1,11 +1,13 @@
 """What the scripts of experiments/ (and two of bench/) share: the R^2 of a linear probe, a
-figure written to a file, a server subprocess stopped. Not a script: imported by the scripts
+figure written to a file, a server subprocess stopped, the warm-start campaigns' flag
+``--prior-context``. Not a script: imported by the scripts
 beside it (a script's own folder is first on ``sys.path``); bench/bench_vae.py and
 bench/bench_canopen.py put this folder on ``sys.path`` to import it.
 """
 
 from __future__ import annotations
 
+import argparse
 import subprocess
 from pathlib import Path
 from typing import Any
@@ -63,3 +65,19 @@ def stop_process(proc: subprocess.Popen, timeout_s: float) -> None:
     except subprocess.TimeoutExpired:
         proc.kill()
         proc.wait()
+
+
+def add_prior_context(parser: argparse.ArgumentParser) -> None:
+    """``--prior-context F``: the warmed runs' strategy option ``prior_context`` (rule 5 of
+    explore/learner/prior.py); absent, the option's default."""
+    parser.add_argument(
+        "--prior-context", type=float, default=None,
+        help="the warmed runs' option prior_context (default: its default)",
+    )  # fmt: skip
+
+
+def prior_option(args: argparse.Namespace) -> list[str]:
+    """The ``ergo explore`` words for ``args.prior_context`` (``add_prior_context``), if given."""
+    if args.prior_context is None:
+        return []
+    return ["--strategy-option", f"prior_context={args.prior_context}"]

@@ -40,6 +40,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # testkit/, not installed
 
+from script_helpers import add_prior_context, prior_option
+
 from calibration.dynamics.excitation import REPEATS
 from explore.runs.layout import METRICS_FILE
 from explore.runs.store import RunStore, read_history
@@ -50,13 +52,6 @@ TWIN_STRATEGY = "rge-efr"
 TWIN_EPISODES = 1000  # the recipe's (docs/warm_start.md)
 ARMS = ("scratch", "nominal", "fitted")
 DYNAMICS_BOUND_S = 3600.0  # as experiments/rehearse_real_arm.py
-
-
-def prior_option(args: argparse.Namespace) -> list[str]:
-    """The warmed runs' ``prior_context`` (rule 5 of explore/learner/prior.py), when given."""
-    if args.prior_context is None:
-        return []
-    return ["--strategy-option", f"prior_context={args.prior_context}"]
 
 
 def cells_of(run: Path) -> tuple[int, int, float]:
@@ -199,8 +194,7 @@ def main() -> None:
     p.add_argument("--arms", nargs="+", choices=ARMS, default=list(ARMS))
     p.add_argument("--episodes", type=int, default=300, help="episodes of each bus run")
     p.add_argument("--explore-seed", type=int, default=0)
-    p.add_argument("--prior-context", type=float, default=None,
-                   help="the warmed runs' option prior_context (default: its default)")  # fmt: skip
+    add_prior_context(p)
     p.add_argument("--strategy", default=TWIN_STRATEGY)
     p.add_argument("--twin-episodes", type=int, default=TWIN_EPISODES)
     p.add_argument("--twin-seed", type=int, default=0)
