@@ -224,14 +224,16 @@ def excess_sd(err: np.ndarray, sd: np.ndarray) -> float:
     ``mean(err^2 / (sd^2 + m^2)) = 1`` (0 when the values' own sds explain the errors), the
     Paule-Mandel estimate of a random effect (J. Res. NBS 87, 377 (1982)) with its mean known
     (0: the mismatch is an error, not a correction). Shapes (K,), log-ratios."""
+    from scipy.optimize import brentq
+
     err, var = np.square(np.asarray(err, float)), np.square(np.asarray(sd, float))
-    if not len(err) or np.mean(err / np.maximum(var, 1e-300)) <= 1.0:
+
+    def excess(m: float) -> float:  # falls as m grows; positive at 0, negative at the top
+        return float(np.mean(err / np.maximum(var + m * m, 1e-300))) - 1.0
+
+    if not len(err) or excess(0.0) <= 0.0:
         return 0.0
-    lo, hi = 0.0, float(np.sqrt(np.max(err))) + 1.0
-    for _ in range(200):  # the left side falls as m grows: bisection
-        m = 0.5 * (lo + hi)
-        lo, hi = (m, hi) if np.mean(err / (var + m * m)) > 1.0 else (lo, m)
-    return 0.5 * (lo + hi)
+    return float(brentq(excess, 0.0, float(np.sqrt(np.max(err))) + 1.0, xtol=1e-12))
 
 
 def mismatch(results: list[dict]) -> str:
